@@ -1,0 +1,421 @@
+"""Typed, validated scenario configuration (pydantic v2, loaded from TOML).
+
+A scenario file describes an array of seabed sensors, the medium, a nominal
+ship passage, optionally a prior over random passages, the noise model, the
+signal chains and the tracker.  Everything is checked once, here; the physics
+kernels below trust their inputs.  A bad file raises :class:`ScenarioError`
+with one message that names the field and the reason.
+
+Units are SI throughout (m, s, T, V/m, A·m², A·m, S/m, rad) except where a
+field name ends in ``_deg`` or ``_hz``.  The file format is documented in
+README.md ("Scenario files").
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from importlib import resources
+from pathlib import Path
+from typing import Annotated, Literal
+
+import numpy as np
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from shipsense.physics.array import CHANNELS, KINDS, SensorArray
+from shipsense.physics.electric import Medium
+from shipsense.physics.magnetic import earth_field_direction
+
+__all__ = ["Scenario", "ScenarioError", "load_scenario", "shipped_scenarios"]
+
+MIN_SENSOR_SPACING = 0.01
+"""Sensors closer than this (m) are taken to coincide."""
+MIN_SOURCE_DISTANCE = 1.0
+"""A passage may not come closer than this (m) to a sensor: the point-dipole fields are singular there."""
+
+
+class ScenarioError(ValueError):
+    """A scenario file or value is invalid; the message names the field and the reason."""
+
+
+def _finite(x: float) -> float:
+    if not math.isfinite(x):
+        raise ValueError(f"must be a finite number, got {x}")
+    return x
+
+
+def _positive(x: float) -> float:
+    if not x > 0:
+        raise ValueError(f"must be > 0, got {x}")
+    return x
+
+
+def _range(r: tuple[float, float]) -> tuple[float, float]:
+    if r[0] > r[1]:
+        raise ValueError(f"must be [min, max] with min <= max, got {list(r)}")
+    return r
+
+
+Finite = Annotated[float, AfterValidator(_finite)]
+Positive = Annotated[float, AfterValidator(_finite), AfterValidator(_positive)]
+Vec2 = tuple[Finite, Finite]
+Vec3 = tuple[Finite, Finite, Finite]
+Range = Annotated[tuple[Finite, Finite], AfterValidator(_range)]
+PositiveRange = Annotated[tuple[Positive, Positive], AfterValidator(_range)]
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class SensorConfig(_Model):
+    """One seabed sensor."""
+
+    id: str = Field(min_length=1, description="Unique sensor name.")
+    type: Literal["magnetometer", "electrode", "accelerometer"]
+    kind: str = Field(description="Measurement kind; see shipsense.physics.array.KINDS.")
+    position: Vec3 = Field(description="World position (x east, y north, z up; z = 0 at the surface), m.")
+    noise_std: Positive | list[Positive] | None = Field(
+        default=None, description="Per-component noise std, SI units (T, V/m, rad); scalar or one per component.")
+    noise_var: Positive | list[Positive] | None = Field(
+        default=None, description="Per-component noise variance, SI units squared (alternative to noise_std).")
+    orientation: tuple[Vec3, Vec3, Vec3] | None = Field(
+        default=None, description="Rotation matrix whose columns are the sensor axes in world coordinates.")
+
+    @model_validator(mode="after")
+    def _check(self):
+        if self.kind not in KINDS[self.type]:
+            raise ValueError(f"kind: unknown measurement kind {self.kind!r} for a {self.type} "
+                             f"(expected one of: {', '.join(KINDS[self.type])})")
+        if (self.noise_std is None) == (self.noise_var is None):
+            raise ValueError("give exactly one of noise_std or noise_var")
+        n = len(CHANNELS[(self.type, self.kind)])
+        given = self.noise_std if self.noise_std is not None else self.noise_var
+        if isinstance(given, list) and len(given) != n:
+            name = "noise_std" if self.noise_std is not None else "noise_var"
+            raise ValueError(f"{name}: a {self.kind} {self.type} has {n} components, got {len(given)} values")
+        if self.orientation is not None:
+            R = np.array(self.orientation)
+            if not (np.allclose(R.T @ R, np.eye(3), atol=1e-6) and np.linalg.det(R) > 0):
+                raise ValueError("orientation: must be a rotation matrix (orthonormal, det +1)")
+        return self
+
+    @property
+    def channel_std(self) -> tuple[float, ...]:
+        """Noise standard deviation of each component (SI)."""
+        n = len(CHANNELS[(self.type, self.kind)])
+        if self.noise_std is not None:
+            v = self.noise_std if isinstance(self.noise_std, list) else [self.noise_std] * n
+            return tuple(float(x) for x in v)
+        v = self.noise_var if isinstance(self.noise_var, list) else [self.noise_var] * n
+        return tuple(math.sqrt(x) for x in v)
+
+
+class MediumConfig(_Model):
+    """Sea water over a seabed half-space (physics.md §2)."""
+
+    sigma_water: Positive = 4.0
+    sigma_seabed: Positive = 0.04
+    water_depth: Positive = 15.0
+
+    def physics(self) -> Medium:
+        return Medium(self.sigma_water, self.sigma_seabed, self.water_depth)
+
+
+class EarthConfig(_Model):
+    """Direction of the Earth's field, for ``tmi`` magnetometers."""
+
+    inclination_deg: Annotated[Finite, Field(ge=-90, le=90)] = 60.0
+    declination_deg: Annotated[Finite, Field(ge=-180, le=360)] = 0.0
+
+
+class PassageConfig(_Model):
+    """The nominal passage: a straight, constant-velocity track."""
+
+    start: Vec2 = Field(description="Source (x, y) at t = 0, m.")
+    velocity: Vec2 = Field(description="(v_x, v_y), m/s.")
+    z: Annotated[Finite, Field(le=0)] = Field(0.0, description="Source height (world z, <= 0), m.")
+    moment: Vec3 | None = Field(None, description="Magnetic moment, A·m² (needed by magnetometers).")
+    p: Positive | None = Field(None, description="Electric dipole moment along the keel, A·m (needed by electrodes).")
+
+
+class PriorConfig(_Model):
+    """A prior over random passages past the array (used with ``random=True``).
+
+    The start is drawn at a range and bearing from the array centroid; the
+    course is the heading towards the centroid plus an offset; the moment
+    magnitude (and ``p``) is log-uniform, the moment direction uniform.
+    """
+
+    range: PositiveRange = (150.0, 400.0)
+    bearing_deg: Range = (0.0, 360.0)
+    course_offset_deg: Range = (-20.0, 20.0)
+    speed: PositiveRange = (3.0, 10.0)
+    moment: PositiveRange | None = None
+    p: PositiveRange | None = None
+
+
+class NoiseConfig(_Model):
+    """Measurement noise model (physics.md §5)."""
+
+    model: Literal["gaussian", "contaminated"] = "gaussian"
+    eps: Annotated[Finite, Field(ge=0, lt=1)] = 0.1
+    outlier_scale: Positive = 10.0
+    dropout: Annotated[Finite, Field(ge=0, lt=1)] = 0.0
+
+
+class EnvelopeChainConfig(_Model):
+    """How electrode envelopes are made: ideal ``|E| + noise``, or the raw shaft-rate chain."""
+
+    mode: Literal["ideal", "raw"] = "ideal"
+    raw_rate_hz: Positive = 100.0
+    shaft_hz: Positive = 3.0
+    lowpass_hz: Positive = 0.5
+    raw_noise_std: Annotated[Finite, Field(ge=0)] = 1e-7
+    pad_s: Annotated[Finite, Field(ge=0)] = 10.0
+
+    @model_validator(mode="after")
+    def _check(self):
+        if not self.shaft_hz < self.raw_rate_hz / 2:
+            raise ValueError(f"shaft_hz: must be below the Nyquist rate raw_rate_hz/2 = {self.raw_rate_hz / 2:g}")
+        if not self.lowpass_hz < self.shaft_hz:
+            raise ValueError("lowpass_hz: must be below shaft_hz")
+        return self
+
+
+class SeismicConfig(_Model):
+    """Bearing from accelerometers: the shortcut (bearing + error) or the eigenvector chain."""
+
+    mode: Literal["shortcut", "chain"] = "shortcut"
+    bias_deg: Finite = 0.0
+    sample_rate_hz: Positive = 200.0
+    amplitude: Positive = 1.0
+    range_ref: Positive = 100.0
+    range_exponent: Annotated[Finite, Field(ge=0)] = 1.0
+    sensor_noise: Annotated[Finite, Field(ge=0)] = 0.05
+    multipath_gain: Annotated[Finite, Field(ge=0)] = 0.0
+    multipath_bias_deg: Finite = 0.0
+    noise_dof: Annotated[Finite, Field(gt=2)] | None = None
+
+
+class ProcessNoiseConfig(_Model):
+    """Process noise of the tracker's motion model (physics.md §4)."""
+
+    model: Literal["identity", "dwna", "diagonal"] = "dwna"
+    sigma_q: Positive = 0.1
+    q_diag: list[Annotated[Finite, Field(ge=0)]] | None = None
+    sigma_a: tuple[Positive, Positive] = (0.1, 0.1)
+    param_var: list[Annotated[Finite, Field(ge=0)]] | None = None
+
+
+class BankConfig(_Model):
+    """Multiple-initial-value bank: K moment (or p) levels times l bearings."""
+
+    levels: list[Positive] = Field(min_length=1)
+    bearings_deg: list[Finite] = Field(min_length=1)
+    initial_velocity: Vec2 = (6.0, 6.0)
+
+
+class TrackerConfig(_Model):
+    """The tracker the scenario's source study used."""
+
+    filter: Literal["ekf", "ukf", "ckf", "cdkf", "srcdkf", "puekf", "huber_ukf"] = "ukf"
+    n_pu: Annotated[int, Field(ge=1)] = 1
+    process_noise: ProcessNoiseConfig = ProcessNoiseConfig()
+    bank: BankConfig | None = None
+
+
+class Scenario(_Model):
+    """A complete scenario: array, medium, passage, noise, chains, tracker."""
+
+    name: str = "scenario"
+    description: str = ""
+    period: Positive = Field(description="Tracker period T, s.")
+    steps: Annotated[int, Field(ge=2)]
+    runs: Annotated[int, Field(ge=1)] = 1
+    seed: Annotated[int, Field(ge=0)] = 0
+    sensors: list[SensorConfig] = Field(min_length=1)
+    medium: MediumConfig | None = None
+    earth: EarthConfig = EarthConfig()
+    passage: PassageConfig
+    prior: PriorConfig | None = None
+    noise: NoiseConfig = NoiseConfig()
+    envelope_chain: EnvelopeChainConfig = EnvelopeChainConfig()
+    seismic: SeismicConfig = SeismicConfig()
+    tracker: TrackerConfig | None = None
+
+    @model_validator(mode="after")
+    def _check(self):
+        ids = [s.id for s in self.sensors]
+        for i, sid in enumerate(ids):
+            if sid in ids[:i]:
+                raise ValueError(f"sensors[{i}].id: duplicate sensor id {sid!r}")
+        pos = np.array([s.position for s in self.sensors])
+        d = np.linalg.norm(pos[:, None, :] - pos[None, :, :], axis=-1)
+        for i in range(len(ids)):
+            for j in range(i):
+                # a node may carry sensors of different types at one point
+                if d[i, j] < MIN_SENSOR_SPACING and self.sensors[i].type == self.sensors[j].type:
+                    raise ValueError(f"sensors[{i}].position: {self.sensors[i].type} {ids[i]!r} coincides with "
+                                     f"{ids[j]!r} at {list(pos[i])} (closer than {MIN_SENSOR_SPACING} m)")
+        types = {s.type for s in self.sensors}
+        depth = self.medium.water_depth if self.medium is not None else math.inf
+        for i, s in enumerate(self.sensors):
+            z = s.position[2]
+            if z > 0 or z < -depth:
+                where = "above the sea surface (z > 0)" if z > 0 else f"below the seabed (z < -{depth:g})"
+                raise ValueError(f"sensors[{i}].position: sensor {s.id!r} is outside the water: {where}")
+        if "electrode" in types and self.medium is None:
+            raise ValueError("medium: electrode sensors need a [medium] section")
+        zt = self.passage.z
+        if zt < -depth:
+            raise ValueError(f"passage.z: the source is below the seabed (z < -{depth:g})")
+        if "electrode" in types and not -depth < zt < 0:
+            raise ValueError(f"passage.z: an electric source must be strictly inside the water (-{depth:g} < z < 0)")
+        if "magnetometer" in types and self.passage.moment is None:
+            raise ValueError("passage.moment: magnetometers need the source's magnetic moment [mx, my, mz]")
+        if "electrode" in types and self.passage.p is None:
+            raise ValueError("passage.p: electrode sensors need the source's dipole moment p (A·m)")
+        if math.hypot(*self.passage.velocity) == 0 and "electrode" in types:
+            raise ValueError("passage.velocity: the electric dipole lies along the keel, so the speed must be > 0")
+        # closest approach of the nominal passage to every sensor
+        start = np.array([*self.passage.start, zt])
+        vel = np.array([*self.passage.velocity, 0.0])
+        duration = self.period * (self.steps - 1)
+        vv = vel @ vel
+        for i, s in enumerate(self.sensors):
+            rel = np.array(s.position) - start
+            t = 0.0 if vv == 0 else float(np.clip(rel @ vel / vv, 0.0, duration))
+            gap = np.linalg.norm(rel - t * vel)
+            if gap < MIN_SOURCE_DISTANCE:
+                raise ValueError(f"passage: the source passes {gap:.3g} m from sensor {s.id!r} (closer than "
+                                 f"{MIN_SOURCE_DISTANCE} m: the source would be inside the sensor)")
+        if self.prior is not None:
+            for i, s in enumerate(self.sensors):
+                if abs(s.position[2] - zt) < MIN_SOURCE_DISTANCE:
+                    raise ValueError(f"prior: random passages at z = {zt:g} can pass through sensor {s.id!r} "
+                                     f"(z = {s.position[2]:g}); keep the source plane {MIN_SOURCE_DISTANCE} m away")
+            if "magnetometer" in types and self.prior.moment is None:
+                raise ValueError("prior.moment: magnetometers need a moment magnitude range [min, max]")
+            if "electrode" in types and self.prior.p is None:
+                raise ValueError("prior.p: electrode sensors need a dipole moment range [min, max]")
+        if self.tracker is not None:
+            pn = self.tracker.process_noise
+            n = self.n_params
+            if pn.param_var is not None and len(pn.param_var) != n:
+                raise ValueError(f"tracker.process_noise.param_var: the state has {n} parameters, "
+                                 f"got {len(pn.param_var)} values")
+            if pn.model == "diagonal" and (pn.q_diag is None or len(pn.q_diag) != 4 + n):
+                raise ValueError(f"tracker.process_noise.q_diag: the diagonal model needs {4 + n} values "
+                                 f"(x, y, vx, vy and {n} parameters)")
+        return self
+
+    # -- derived -----------------------------------------------------------
+    @property
+    def times(self) -> np.ndarray:
+        """Sample times ``k T``, k = 0..steps-1, s."""
+        return self.period * np.arange(self.steps)
+
+    @property
+    def sensor_types(self) -> set[str]:
+        return {s.type for s in self.sensors}
+
+    @property
+    def n_params(self) -> int:
+        """Parameters after (x, y, vx, vy) in the tracker state: moment (3) and/or (z, p) (2)."""
+        types = self.sensor_types
+        return 3 * ("magnetometer" in types) + 2 * ("electrode" in types)
+
+    def array(self, electric_method: str = "fast") -> SensorArray:
+        """The physics-level :class:`~shipsense.physics.array.SensorArray` of this scenario."""
+        return SensorArray(
+            ids=[s.id for s in self.sensors],
+            types=[s.type for s in self.sensors],
+            kinds=[s.kind for s in self.sensors],
+            positions=np.array([s.position for s in self.sensors], dtype=float),
+            orientations=np.array([s.orientation if s.orientation is not None else np.eye(3)
+                                   for s in self.sensors], dtype=float),
+            medium=self.medium.physics() if self.medium is not None else None,
+            earth_direction=earth_field_direction(self.earth.inclination_deg, self.earth.declination_deg),
+            electric_method=electric_method,
+        )
+
+    @property
+    def channel_std(self) -> np.ndarray:
+        """Noise standard deviation of every channel, in the array's channel order, shape (m,)."""
+        return np.array([v for s in self.sensors for v in s.channel_std])
+
+    def with_updates(self, **changes) -> Scenario:
+        """A validated copy with top-level fields replaced (e.g. ``runs=10``)."""
+        return _validate({**self.model_dump(), **changes}, source=f"scenario {self.name!r}")
+
+
+def _format_error(err: ValidationError, source: str) -> str:
+    lines = []
+    for e in err.errors():
+        loc = ""
+        for part in e["loc"]:
+            loc += f"[{part}]" if isinstance(part, int) else (f".{part}" if loc else str(part))
+        msg = e["msg"]
+        msg = msg[len("Value error, "):] if msg.startswith("Value error, ") else msg
+        if e["type"] == "missing":
+            msg = "required field is missing"
+        elif e["type"] == "extra_forbidden":
+            msg = "unknown field (check the spelling)"
+        lines.append(f"{loc}: {msg}" if loc else msg)
+    lines = list(dict.fromkeys(lines))
+    return f"{source}: " + "; ".join(lines)
+
+
+def _validate(data: dict, source: str) -> Scenario:
+    try:
+        return Scenario.model_validate(data)
+    except ValidationError as err:
+        raise ScenarioError(_format_error(err, source)) from None
+
+
+def _shipped_dir():
+    return resources.files("shipsense") / "scenarios"
+
+
+def shipped_scenarios() -> dict[str, str]:
+    """Names of the scenarios shipped with the package and their one-line descriptions."""
+    out = {}
+    for entry in sorted(_shipped_dir().iterdir(), key=lambda e: e.name):
+        if entry.name.endswith(".toml"):
+            data = tomllib.loads(entry.read_text())
+            out[entry.name[:-5]] = data.get("description", "").strip().splitlines()[0] if data.get("description") else ""
+    return out
+
+
+def load_scenario(name_or_path: str | Path) -> Scenario:
+    """Load and validate a scenario: a shipped name (``S0``, ``S1-P2``, ...) or a TOML path.
+
+    Raises
+    ------
+    ScenarioError
+        With one message naming the file, the field and the reason.
+    """
+    if isinstance(name_or_path, Scenario):
+        return name_or_path
+    text = None
+    path = Path(name_or_path)
+    lookup = {n.lower(): n for n in shipped_scenarios()}
+    if str(name_or_path).lower() in lookup and not path.is_file():
+        name = lookup[str(name_or_path).lower()]
+        text = (_shipped_dir() / f"{name}.toml").read_text()
+        source = f"shipped scenario {name!r}"
+    elif path.is_file():
+        try:
+            text = path.read_text()
+        except (OSError, UnicodeDecodeError) as err:
+            raise ScenarioError(f"{path}: cannot read the file ({err})") from None
+        source = str(path)
+    else:
+        raise ScenarioError(f"{name_or_path}: no such file, and not a shipped scenario "
+                            f"(shipped: {', '.join(shipped_scenarios())})")
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as err:
+        raise ScenarioError(f"{source}: not valid TOML ({err})") from None
+    return _validate(data, source)

@@ -1,0 +1,1 @@
+"""Gymnasium environments of ship passages past a sensor array (shared/spec/design.md section 4)."""

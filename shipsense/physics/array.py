@@ -1,0 +1,177 @@
+"""A sensor array as a measurement function: source state -> stacked channels.
+
+This is the one place where the field kernels are turned into what a set of
+sensors reports.  The simulator, the trackers' measurement models and the
+design tools all call :meth:`SensorArray.measure`, vectorised over any leading
+batch axes and over sensors (no Python loop over sensors).
+
+Channel layout: sensors in order, each contributing its measurement kind's
+components (see :data:`CHANNELS`).  Units are SI: tesla, V/m, radians.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from shipsense.physics.electric import Medium, hed_field
+from shipsense.physics.magnetic import dipole_field
+from shipsense.physics.seismic import bearing
+
+CHANNELS: dict[tuple[str, str], tuple[str, ...]] = {
+    ("magnetometer", "vector"): ("bx", "by", "bz"),
+    ("magnetometer", "magnitude"): ("b",),
+    ("magnetometer", "tmi"): ("tmi",),
+    ("electrode", "vector"): ("ex", "ey", "ez"),
+    ("electrode", "envelope"): ("ex", "ey", "ez"),
+    ("accelerometer", "bearing"): ("bearing",),
+}
+"""Channel names of each (sensor type, measurement kind)."""
+
+UNITS = {"magnetometer": "T", "electrode": "V/m", "accelerometer": "rad"}
+KINDS = {t: tuple(k for (tt, k) in CHANNELS if tt == t) for t in UNITS}
+"""Measurement kinds allowed for each sensor type."""
+
+_SCALAR_KIND_CODE = {"magnitude": 1, "tmi": 2}
+
+
+@dataclass(frozen=True, eq=False)
+class SensorArray:
+    """Positions, types and measurement kinds of an array of seabed sensors.
+
+    Parameters
+    ----------
+    ids : sequence of str
+    types : sequence of {"magnetometer", "electrode", "accelerometer"}
+    kinds : sequence of str
+        Measurement kind of each sensor (``KINDS[type]``).
+    positions : array_like, shape (S, 3)
+        World coordinates, m.
+    orientations : array_like, shape (S, 3, 3), optional
+        Columns are the sensor axes in world coordinates (identity if omitted);
+        applies to vector and envelope readings.
+    medium : Medium, optional
+        Required when the array has electrodes.
+    earth_direction : array_like, shape (3,), optional
+        Unit Earth-field vector for ``tmi`` readings.
+    electric_method : {"fast", "series"}
+        Which HED path :meth:`measure` uses.
+    """
+
+    ids: tuple
+    types: tuple
+    kinds: tuple
+    positions: np.ndarray
+    orientations: np.ndarray | None = None
+    medium: Medium | None = None
+    earth_direction: np.ndarray | None = None
+    electric_method: str = "fast"
+    _index: dict = field(init=False, repr=False)
+
+    def __post_init__(self):
+        S = len(self.ids)
+        pos = np.asarray(self.positions, dtype=float).reshape(S, 3)
+        R = np.broadcast_to(np.eye(3), (S, 3, 3)) if self.orientations is None else np.asarray(self.orientations, float)
+        object.__setattr__(self, "positions", pos)
+        object.__setattr__(self, "orientations", np.array(R))
+        object.__setattr__(self, "ids", tuple(self.ids))
+        object.__setattr__(self, "types", tuple(self.types))
+        object.__setattr__(self, "kinds", tuple(self.kinds))
+        gather, channels = [], []
+        for s, (sid, t, k) in enumerate(zip(self.ids, self.types, self.kinds)):
+            if (t, k) not in CHANNELS:
+                raise ValueError(f"sensor {sid!r}: unknown measurement kind {k!r} for a {t}")
+            for c, name in enumerate(CHANNELS[(t, k)]):
+                gather.append(3 * s + c)
+                channels.append((sid, name))
+        groups = {t: np.array([i for i, tt in enumerate(self.types) if tt == t], dtype=int) for t in UNITS}
+        if groups["electrode"].size and self.medium is None:
+            raise ValueError("an array with electrode sensors needs a medium")
+        if self.earth_direction is None and "tmi" in self.kinds:
+            raise ValueError("an array with tmi magnetometers needs earth_direction")
+        mag_code = np.array([_SCALAR_KIND_CODE.get(self.kinds[i], 0) for i in groups["magnetometer"]], dtype=int)
+        env = np.array([self.kinds[i] == "envelope" for i in groups["electrode"]], dtype=bool)
+        object.__setattr__(self, "_index", {
+            "gather": np.array(gather, dtype=int), "channels": tuple(channels), "groups": groups,
+            "mag_code": mag_code, "envelope": env,
+        })
+
+    @property
+    def channels(self) -> tuple[tuple[str, str], ...]:
+        """(sensor id, channel name) of every stacked measurement component."""
+        return self._index["channels"]
+
+    @property
+    def n_channels(self) -> int:
+        return len(self.channels)
+
+    @property
+    def channel_sensor(self) -> np.ndarray:
+        """Index of the sensor of each channel, shape (m,)."""
+        return self._index["gather"] // 3
+
+    @property
+    def channel_units(self) -> tuple[str, ...]:
+        return tuple(UNITS[self.types[s]] for s in self.channel_sensor)
+
+    @property
+    def axial(self) -> np.ndarray:
+        """Boolean (m,): channels that are axial angles (residuals wrap modulo pi)."""
+        return np.array([self.kinds[s] == "bearing" for s in self.channel_sensor], dtype=bool)
+
+    def group(self, sensor_type: str) -> np.ndarray:
+        """Indices of the sensors of one type."""
+        return self._index["groups"][sensor_type]
+
+    def electric_field(self, sources, dipoles):
+        """Oriented electric field ``R^T E`` at the electrodes, shape (..., S_e, 3), V/m."""
+        idx = self.group("electrode")
+        E = hed_field(self.positions[idx], np.asarray(sources, float)[..., None, :],
+                      np.asarray(dipoles, float)[..., None, :], self.medium, method=self.electric_method)
+        return np.einsum("sji,...sj->...si", self.orientations[idx], E)
+
+    def measure(self, sources, moments=None, dipoles=None):
+        """Noise-free measurements of every channel.
+
+        Parameters
+        ----------
+        sources : array_like, shape (..., 3)
+            Source position (world, m).
+        moments : array_like, shape (..., 3), optional
+            Magnetic moment, A·m² (needed if the array has magnetometers).
+        dipoles : array_like, shape (..., 3), optional
+            Horizontal electric dipole moment, A·m (needed for electrodes).
+
+        Returns
+        -------
+        y : ndarray, shape (..., m)
+            Stacked channels in :attr:`channels` order, SI units.
+        """
+        sources = np.asarray(sources, dtype=float)
+        groups = self._index["groups"]
+        batch = np.broadcast_shapes(sources.shape[:-1],
+                                    *(np.shape(a)[:-1] for a in (moments, dipoles) if a is not None))
+        slots = np.zeros(batch + (len(self.ids), 3))
+        idx = groups["magnetometer"]
+        if idx.size:
+            if moments is None:
+                raise ValueError("this array has magnetometers: moments are required")
+            B = dipole_field(self.positions[idx], sources[..., None, :], np.asarray(moments, float)[..., None, :])
+            vec = np.einsum("sji,...sj->...si", self.orientations[idx], B)
+            code = self._index["mag_code"]
+            scalar = np.linalg.norm(B, axis=-1)
+            if np.any(code == 2):
+                scalar = np.where(code == 2, B @ self.earth_direction, scalar)
+            slots[..., idx, :] = np.where((code == 0)[:, None], vec,
+                                          np.stack([scalar, 0 * scalar, 0 * scalar], axis=-1))
+        idx = groups["electrode"]
+        if idx.size:
+            if dipoles is None:
+                raise ValueError("this array has electrodes: dipoles are required")
+            E = self.electric_field(sources, dipoles)
+            slots[..., idx, :] = np.where(self._index["envelope"][:, None], np.abs(E), E)
+        idx = groups["accelerometer"]
+        if idx.size:
+            slots[..., idx, 0] = bearing(self.positions[idx], sources[..., None, :])
+        return slots.reshape(batch + (3 * len(self.ids),))[..., self._index["gather"]]
