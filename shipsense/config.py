@@ -283,7 +283,7 @@ class Scenario(_Model):
         vel = np.array([*self.passage.velocity, 0.0])
         duration = self.period * (self.steps - 1)
         vv = vel @ vel
-        for i, s in enumerate(self.sensors):
+        for s in self.sensors:
             rel = np.array(s.position) - start
             t = 0.0 if vv == 0 else float(np.clip(rel @ vel / vv, 0.0, duration))
             gap = np.linalg.norm(rel - t * vel)
@@ -291,7 +291,7 @@ class Scenario(_Model):
                 raise ValueError(f"passage: the source passes {gap:.3g} m from sensor {s.id!r} (closer than "
                                  f"{MIN_SOURCE_DISTANCE} m: the source would be inside the sensor)")
         if self.prior is not None:
-            for i, s in enumerate(self.sensors):
+            for s in self.sensors:
                 if abs(s.position[2] - zt) < MIN_SOURCE_DISTANCE:
                     raise ValueError(f"prior: random passages at z = {zt:g} can pass through sensor {s.id!r} "
                                      f"(z = {s.position[2]:g}); keep the source plane {MIN_SOURCE_DISTANCE} m away")
@@ -383,8 +383,8 @@ def shipped_scenarios() -> dict[str, str]:
     out = {}
     for entry in sorted(_shipped_dir().iterdir(), key=lambda e: e.name):
         if entry.name.endswith(".toml"):
-            data = tomllib.loads(entry.read_text())
-            out[entry.name[:-5]] = data.get("description", "").strip().splitlines()[0] if data.get("description") else ""
+            desc = tomllib.loads(entry.read_text()).get("description", "").strip()
+            out[entry.name[:-5]] = desc.splitlines()[0] if desc else ""
     return out
 
 

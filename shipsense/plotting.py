@@ -46,7 +46,8 @@ def plot_simulation(sim, path, max_runs=20, max_sensors=8):
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("x east [m]")
     ax.set_ylabel("y north [m]")
-    ax.set_title(f"{sim.scenario.name}: array and {'passage' if sim.runs == 1 else f'{min(sim.runs, max_runs)} passages'}")
+    shown = "passage" if sim.runs == 1 else f"{min(sim.runs, max_runs)} passages"
+    ax.set_title(f"{sim.scenario.name}: array and {shown}")
     ax.grid(alpha=0.3)
     ax.legend(loc="best", fontsize=8)
 

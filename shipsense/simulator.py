@@ -129,7 +129,8 @@ def _passages(sc: Scenario, runs: int, random: bool, streams) -> np.ndarray:
     rng_ = pr.range[0] + (pr.range[1] - pr.range[0]) * u[:, 0]
     brg = np.deg2rad(pr.bearing_deg[0] + (pr.bearing_deg[1] - pr.bearing_deg[0]) * u[:, 1])
     start = centre + rng_[:, None] * np.stack([np.cos(brg), np.sin(brg)], axis=-1)
-    course = brg + np.pi + np.deg2rad(pr.course_offset_deg[0] + (pr.course_offset_deg[1] - pr.course_offset_deg[0]) * u[:, 2])
+    offset = pr.course_offset_deg[0] + (pr.course_offset_deg[1] - pr.course_offset_deg[0]) * u[:, 2]
+    course = brg + np.pi + np.deg2rad(offset)
     speed = pr.speed[0] + (pr.speed[1] - pr.speed[0]) * u[:, 3]
     x0[:, 0:2] = start
     x0[:, 2:4] = speed[:, None] * np.stack([np.cos(course), np.sin(course)], axis=-1)
@@ -179,7 +180,8 @@ def simulate(scenario, runs: int | None = None, seed: int | None = None, *, rand
     if runs < 1:
         raise ValueError(f"runs must be >= 1, got {runs}")
     seed = sc.seed if seed is None else int(seed)
-    streams = dict(zip(_STREAMS, (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(len(_STREAMS)))))
+    seeds = np.random.SeedSequence(seed).spawn(len(_STREAMS))
+    streams = {name: np.random.default_rng(s) for name, s in zip(_STREAMS, seeds)}
     array = sc.array()
     times = sc.times
     x0 = _passages(sc, runs, random, streams)

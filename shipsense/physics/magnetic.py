@@ -43,8 +43,9 @@ def dipole_field(sensors, sources, moments):
     --------
     On the dipole axis the field is ``2 m / r^3`` (times 1e-7):
 
-    >>> dipole_field([0, 0, 10.0], [0, 0, 0], [0, 0, 1e6])
-    array([0.e+00, 0.e+00, 2.e-04])
+    >>> B = dipole_field([0, 0, 10.0], [0, 0, 0], [0, 0, 1e6])
+    >>> bool(np.allclose(B, [0, 0, 2e-7 * 1e6 / 10.0**3]))
+    True
     """
     r = np.asarray(sensors, dtype=float) - np.asarray(sources, dtype=float)
     m = np.asarray(moments, dtype=float)

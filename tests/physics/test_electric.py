@@ -1,0 +1,162 @@
+"""HED in a layered sea: image limits, potential, tolerance, tail bound, fast path."""
+
+import numpy as np
+import pytest
+
+from shipsense.physics.electric import FastHED, Medium, hed_field, hed_potential
+
+SIG1 = 4.0
+
+
+def fullspace(s, q, p, sigma):
+    """Textbook dipole in a homogeneous full space, written independently of the kernel."""
+    r = np.asarray(s, float) - np.asarray(q, float)
+    R = np.linalg.norm(r, axis=-1, keepdims=True)
+    pr = np.sum(p * r, axis=-1, keepdims=True)
+    return (3 * pr * r - R**2 * p) / (4 * np.pi * sigma * R**5)
+
+
+def _geometry(rng, n, depth=15.0):
+    rho = np.exp(rng.uniform(np.log(1.0), np.log(2000.0), n))
+    az = rng.uniform(0, 2 * np.pi, n)
+    sens = np.stack([rho * np.cos(az), rho * np.sin(az), rng.uniform(-depth, 0, n)], axis=-1)
+    src = np.stack([np.zeros(n), np.zeros(n), rng.uniform(-depth + 0.2, -0.2, n)], axis=-1)
+    th = rng.uniform(0, 2 * np.pi, n)
+    p = np.stack([100 * np.cos(th), 100 * np.sin(th), np.zeros(n)], axis=-1)
+    return sens, src, p
+
+
+def test_equal_conductivities_leave_source_and_surface_image():
+    rng = np.random.default_rng(0)
+    medium = Medium(SIG1, SIG1, 15.0)
+    assert medium.eta == 0
+    s, q, p = _geometry(rng, 200)
+    image = q * np.array([1, 1, -1])
+    expected = fullspace(s, q, p, SIG1) + fullspace(s, image, p, SIG1)
+    np.testing.assert_allclose(hed_field(s, q, p, medium), expected, rtol=1e-12, atol=1e-25)
+    np.testing.assert_allclose(hed_field(s, q, p, medium, method="fast"), expected, rtol=1e-12, atol=1e-25)
+
+
+def test_deep_water_tends_to_the_full_space_dipole():
+    # far from the surface and the seabed, every image is far away: the full-space dipole remains
+    medium = Medium(SIG1, 0.04, 20_000.0)
+    q = np.array([0.0, 0.0, -10_000.0])
+    s = q + np.array([[3.0, 4.0, 1.0], [-2.0, 0.5, -3.0]])
+    p = np.array([50.0, -20.0, 0.0])
+    E0 = fullspace(s, q, p, SIG1)
+    np.testing.assert_allclose(hed_field(s, q, p, medium), E0, rtol=0, atol=1e-9 * np.abs(E0).max())
+
+
+def test_conductive_seabed_reflects_with_negative_eta():
+    # seabed more conductive than the water: eta < 0 and the series still converges to its tolerance
+    medium = Medium(1.0, 10.0, 15.0)
+    assert medium.eta < 0
+    s = np.array([40.0, 10.0, -15.0])
+    q = np.array([0.0, 0.0, -5.0])
+    p = np.array([100.0, 0.0, 0.0])
+    a = hed_field(s, q, p, medium, rtol=1e-6)
+    b = hed_field(s, q, p, medium, rtol=1e-13)
+    scale = 100.0 / (4 * np.pi * 1.0 * np.linalg.norm(s - q) ** 3)
+    assert np.abs(a - b).max() <= 1e-6 * scale
+
+
+@pytest.mark.parametrize("sigma2", [0.04, 1.0])
+def test_field_is_minus_gradient_of_potential(sigma2):
+    medium = Medium(SIG1, sigma2, 15.0)
+    rng = np.random.default_rng(1)
+    q = np.array([0.0, 0.0, -6.8])
+    p = np.array([70.0, 70.0, 0.0])
+    for _ in range(4):
+        s = np.array([*rng.uniform(-120, 120, 2), rng.uniform(-14.5, -0.5)])
+        h = 1e-3
+        grad = np.array([(hed_potential(s + h * e, q, p, medium, rtol=1e-14)
+                          - hed_potential(s - h * e, q, p, medium, rtol=1e-14)) / (2 * h) for e in np.eye(3)])
+        E = hed_field(s, q, p, medium, rtol=1e-14)
+        np.testing.assert_allclose(E, -grad, rtol=1e-5, atol=1e-6 * np.abs(E).max())
+
+
+@pytest.mark.parametrize("sigma2", [0.04, 1.0])
+def test_tolerance_is_a_proven_bound(sigma2):
+    """Stopping at rtol leaves an error below rtol times the direct-field scale, everywhere."""
+    medium = Medium(SIG1, sigma2, 15.0)
+    s, q, p = _geometry(np.random.default_rng(2), 400)
+    ref, n_ref = hed_field(s, q, p, medium, rtol=1e-14, return_shells=True)
+    scale = np.linalg.norm(p, axis=-1) / (4 * np.pi * SIG1 * np.linalg.norm(s - q, axis=-1) ** 3)
+    previous = 0
+    for rtol in (1e-2, 1e-4, 1e-6, 1e-9):
+        E, n = hed_field(s, q, p, medium, rtol=rtol, return_shells=True)
+        err = np.linalg.norm(E - ref, axis=-1)
+        assert np.all(err <= rtol * scale), (rtol, (err / scale).max())
+        assert previous <= n <= n_ref
+        previous = n
+
+
+def test_tightening_the_tolerance_changes_the_field_by_less_than_it():
+    medium = Medium(SIG1, 0.04, 15.0)
+    s, q, p = _geometry(np.random.default_rng(3), 300)
+    a = hed_field(s, q, p, medium, rtol=1e-7)
+    b = hed_field(s, q, p, medium, rtol=1e-8)
+    scale = 100.0 / (4 * np.pi * SIG1 * np.linalg.norm(s - q, axis=-1) ** 3)
+    assert np.all(np.linalg.norm(a - b, axis=-1) <= 1e-7 * scale)
+
+
+def test_resistive_seabed_needs_many_shells_and_typical_magnitudes():
+    # physics.md: p = 100 A m, seabed sensor, sigma2 = 0.04: ~1e-4 V/m at 50 m and ~3e-6 V/m at 300 m
+    medium = Medium(SIG1, 0.04, 15.0)
+    q = np.array([0.0, 0.0, -6.8])
+    p = np.array([100.0, 0.0, 0.0])
+    E50, n = hed_field([50.0, 0, -15], q, p, medium, rtol=1e-13, return_shells=True)
+    E300 = hed_field([300.0, 0, -15], q, p, medium, rtol=1e-13)
+    assert 3e-5 < np.linalg.norm(E50) < 3e-4
+    assert 1e-6 < np.linalg.norm(E300) < 1e-5
+    assert n > 300  # eta = 0.98: hundreds of shells, as the spec warns
+    ten = hed_field([300.0, 0, -15], q, p, medium, rtol=1e-13, max_shells=10_000)
+    assert np.allclose(ten, E300)
+
+
+def test_linear_in_the_moment_and_vertical_moment_ignored():
+    medium = Medium(SIG1, 0.04, 15.0)
+    s, q, _ = _geometry(np.random.default_rng(4), 50)
+    p1 = np.array([30.0, -10.0, 0.0])
+    p2 = np.array([-5.0, 80.0, 0.0])
+    for method in ("series", "fast"):
+        def f(p, method=method):
+            return hed_field(s, q, p, medium, method=method)
+
+        np.testing.assert_allclose(f(p1 + 2 * p2), f(p1) + 2 * f(p2), rtol=1e-9, atol=1e-22)
+        np.testing.assert_allclose(f(p1 + [0, 0, 5.0]), f(p1), rtol=0, atol=0)
+
+
+@pytest.mark.parametrize("sigma2", [0.04, 1.0])
+def test_fast_path_matches_series_on_a_grid(sigma2):
+    """The fast path's error is below 1e-6 relative for offsets from 1 m to 2 km."""
+    medium = Medium(SIG1, sigma2, 15.0)
+    rho = np.geomspace(1.0, 2000.0, 60)
+    az = np.linspace(0, 2 * np.pi, 7, endpoint=False)
+    zs = np.array([-15.0, -10.0, -0.5])
+    zt = np.array([-14.0, -6.8, -1.0])
+    R, A, Zs, Zt = np.meshgrid(rho, az, zs, zt, indexing="ij")
+    s = np.stack([R * np.cos(A), R * np.sin(A), Zs], axis=-1)
+    q = np.stack([0 * R, 0 * R, Zt], axis=-1)
+    p = np.array([60.0, 80.0, 0.0])
+    ref = hed_field(s, q, p, medium, rtol=1e-13)
+    fast = hed_field(s, q, p, medium, method="fast")
+    rel = np.linalg.norm(fast - ref, axis=-1) / np.linalg.norm(ref, axis=-1)
+    assert rel.max() <= 1e-6, rel.max()
+
+
+def test_fast_path_falls_back_to_series_beyond_its_table():
+    medium = Medium(SIG1, 0.3, 15.0)
+    kernel = FastHED(medium, rho_max=100.0)
+    s = np.array([[50.0, 0, -15], [600.0, 100.0, -15]])
+    q = np.array([0.0, 0.0, -6.8])
+    p = np.array([100.0, 0.0, 0.0])
+    ref = hed_field(s, q, p, medium, rtol=1e-12)
+    np.testing.assert_allclose(kernel(s, q, p), ref, rtol=1e-6)
+
+
+def test_medium_rejects_non_positive_values():
+    with pytest.raises(ValueError, match="sigma_seabed"):
+        Medium(4.0, -0.1, 15.0)
+    with pytest.raises(ValueError, match="water_depth"):
+        Medium(4.0, 0.1, float("nan"))
