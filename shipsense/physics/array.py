@@ -15,9 +15,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from shipsense.physics.electric import Medium, hed_field
-from shipsense.physics.magnetic import dipole_field
-from shipsense.physics.seismic import bearing
+from shipsense.physics.electric import Medium, fast_hed, hed_field
+from shipsense.physics.magnetic import dipole_field, dipole_field_jacobian
+from shipsense.physics.seismic import bearing, bearing_jacobian
 
 CHANNELS: dict[tuple[str, str], tuple[str, ...]] = {
     ("magnetometer", "vector"): ("bx", "by", "bz"),
@@ -148,19 +148,21 @@ class SensorArray:
         y : ndarray, shape (..., m)
             Stacked channels in :attr:`channels` order, SI units.
         """
-        sources = np.asarray(sources, dtype=float)
+        # complex inputs pass through the magnetic and bearing paths (complex-step derivatives)
+        dtype = np.result_type(np.asarray(sources), *(np.asarray(a) for a in (moments,) if a is not None), float)
+        sources = np.asarray(sources, dtype=dtype)
         groups = self._index["groups"]
         batch = np.broadcast_shapes(sources.shape[:-1],
                                     *(np.shape(a)[:-1] for a in (moments, dipoles) if a is not None))
-        slots = np.zeros(batch + (len(self.ids), 3))
+        slots = np.zeros(batch + (len(self.ids), 3), dtype=dtype)
         idx = groups["magnetometer"]
         if idx.size:
             if moments is None:
                 raise ValueError("this array has magnetometers: moments are required")
-            B = dipole_field(self.positions[idx], sources[..., None, :], np.asarray(moments, float)[..., None, :])
+            B = dipole_field(self.positions[idx], sources[..., None, :], np.asarray(moments)[..., None, :])
             vec = np.einsum("sji,...sj->...si", self.orientations[idx], B)
             code = self._index["mag_code"]
-            scalar = np.linalg.norm(B, axis=-1)
+            scalar = np.sqrt(np.sum(B * B, axis=-1))
             if np.any(code == 2):
                 scalar = np.where(code == 2, B @ self.earth_direction, scalar)
             slots[..., idx, :] = np.where((code == 0)[:, None], vec,
@@ -175,3 +177,69 @@ class SensorArray:
         if idx.size:
             slots[..., idx, 0] = bearing(self.positions[idx], sources[..., None, :])
         return slots.reshape(batch + (3 * len(self.ids),))[..., self._index["gather"]]
+
+    def measure_jacobian(self, sources, moments=None, dipoles=None):
+        """Measurements and their derivatives with respect to the source's position and moments.
+
+        Same arguments as :meth:`measure`.  Returns ``(y, dy_dq, dy_dm, dy_dp)``
+        with shapes (..., m), (..., m, 3) (source position), (..., m, 3)
+        (magnetic moment) and (..., m, 2) (horizontal electric dipole).  The
+        electric derivatives come from the fast HED path
+        (:meth:`~shipsense.physics.electric.FastHED.field_jacobian`).  An
+        envelope channel's derivative is ``sign(E)`` times the field's (it has
+        a kink where the field changes sign).
+        """
+        sources = np.asarray(sources, dtype=float)
+        groups = self._index["groups"]
+        batch = np.broadcast_shapes(sources.shape[:-1],
+                                    *(np.shape(a)[:-1] for a in (moments, dipoles) if a is not None))
+        S = len(self.ids)
+        val = np.zeros(batch + (S, 3))
+        dq = np.zeros(batch + (S, 3, 3))
+        dm = np.zeros(batch + (S, 3, 3))
+        dp = np.zeros(batch + (S, 3, 2))
+        idx = groups["magnetometer"]
+        if idx.size:
+            if moments is None:
+                raise ValueError("this array has magnetometers: moments are required")
+            B, dBq, dBm = dipole_field_jacobian(self.positions[idx], sources[..., None, :],
+                                                np.asarray(moments, float)[..., None, :])
+            R = self.orientations[idx]
+            code = self._index["mag_code"]
+            vec = np.einsum("sji,...sj->...si", R, B)
+            # row vector of the scalar reading: b-hat for magnitude, b_E for tmi
+            norm = np.sqrt(np.sum(B * B, axis=-1, keepdims=True))
+            w = B / np.where(norm > 0, norm, 1.0)
+            if np.any(code == 2):
+                w = np.where((code == 2)[:, None], self.earth_direction, w)
+            scalar = np.sum(w * B, axis=-1)
+            is_vec = (code == 0)[:, None]
+            val[..., idx, :] = np.where(is_vec, vec, np.stack([scalar, 0 * scalar, 0 * scalar], axis=-1))
+            for target, dB in ((dq, dBq), (dm, dBm)):
+                rows = np.einsum("sji,...sjk->...sik", R, dB)
+                srow = np.einsum("...sj,...sjk->...sk", w, dB)
+                first = np.concatenate([srow[..., None, :], np.zeros_like(rows[..., 1:, :])], axis=-2)
+                target[..., idx, :, :] = np.where(is_vec[..., None], rows, first)
+        idx = groups["electrode"]
+        if idx.size:
+            if dipoles is None:
+                raise ValueError("this array has electrodes: dipoles are required")
+            E, dEq, G = fast_hed(self.medium).field_jacobian(
+                self.positions[idx], sources[..., None, :], np.asarray(dipoles, float)[..., None, :])
+            R = self.orientations[idx]
+            E = np.einsum("sji,...sj->...si", R, E)
+            dEq = np.einsum("sji,...sjk->...sik", R, dEq)
+            G = np.einsum("sji,...sjk->...sik", R, G)
+            env = self._index["envelope"][:, None]
+            sign = np.where(env, np.sign(E), 1.0)
+            val[..., idx, :] = np.where(env, np.abs(E), E)
+            dq[..., idx, :, :] = sign[..., None] * dEq
+            dp[..., idx, :, :] = sign[..., None] * G
+        idx = groups["accelerometer"]
+        if idx.size:
+            val[..., idx, 0] = bearing(self.positions[idx], sources[..., None, :])
+            dq[..., idx, 0, :] = bearing_jacobian(self.positions[idx], sources[..., None, :])
+        g = self._index["gather"]
+        flat = batch + (3 * S,)
+        return (val.reshape(flat)[..., g], dq.reshape(flat + (3,))[..., g, :],
+                dm.reshape(flat + (3,))[..., g, :], dp.reshape(flat + (2,))[..., g, :])

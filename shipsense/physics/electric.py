@@ -156,18 +156,18 @@ def _series(rx, ry, zs, zt, px, py, medium, rtol, max_shells, potential):
     eta = medium.eta
     u = zs - zt
     v = zs + zt
-    rho = np.hypot(rx, ry)
+    rho = np.hypot(np.real(rx), np.real(ry))  # real parts: the sum itself is complex-step safe
     if potential:
         total = _dipole_potential(rx, ry, u, px, py) + _dipole_potential(rx, ry, v, px, py)
     else:
-        total = np.zeros((3,) + rx.shape)
+        total = np.zeros((3,) + rx.shape, dtype=np.result_type(rx, zs, px))
         _dipole(rx, ry, u, px, py, total)
         _dipole(rx, ry, v, px, py, total)
     if eta == 0.0:
         return total, 0
     # Stopping rule: tail bound <= rtol * direct-field scale (|p| / r0^3; for the
     # potential |p| rho / r0^3 <= |p| / r0^2 scale is used with an extra rho factor).
-    r0 = np.sqrt(rho * rho + u * u)
+    r0 = np.sqrt(rho * rho + np.real(u) ** 2)
     target = rtol / r0**3
     if potential:
         target = rtol / r0**2
@@ -178,7 +178,7 @@ def _series(rx, ry, zs, zt, px, py, medium, rtol, max_shells, potential):
             if potential:
                 total = total + c * _dipole_potential(rx, ry, dz, px, py)
             else:
-                shell = np.zeros_like(total)
+                shell = np.zeros_like(total)  # complex when the inputs are
                 _dipole(rx, ry, dz, px, py, shell)
                 total += c * shell
         bound = _field_tail_bound(eta_abs, n, D, rho)
@@ -329,56 +329,162 @@ class FastHED:
         K[..., 2] *= s2**2.5 / self._a
         return K
 
-    def _interp(self, rho, w):
-        """Unscaled (K1, K2, K3), shape rho.shape + (3,), by tensor cubic Lagrange."""
-        gx = (np.arcsinh(rho / self._a) - self._x0) / self._hx
+    def _interp(self, rho, w, derivatives=False):
+        """Remainder (K1, K2, K3), shape rho.shape + (3,), by tensor cubic Lagrange.
+
+        With ``derivatives``, also their partial derivatives in ``rho`` and ``w``.
+        """
+        a = self._a
+        gx = (np.arcsinh(rho / a) - self._x0) / self._hx
         gw = (w - self._w0) / self._hw
         i = np.clip(np.floor(gx).astype(np.intp), 1, self._nx - 3)
         j = np.clip(np.floor(gw).astype(np.intp), 1, self._nw - 3)
-        tx = gx - i
-        tw = gw - j
         shape = rho.shape
-        wx = np.stack(_lagrange4(tx.ravel()), axis=-1)
-        ww = np.stack(_lagrange4(tw.ravel()), axis=-1)
-        weights = (wx[:, :, None] * ww[:, None, :]).reshape(-1, 16)
+        tx = (gx - i).ravel()
+        tw = (gw - j).ravel()
+        wx = np.stack(_lagrange4(tx), axis=-1)
+        ww = np.stack(_lagrange4(tw), axis=-1)
         base = ((i - 1) * self._nw + (j - 1)).ravel()
-        stencil = base[:, None] + self._stencil[None, :]
-        out = np.matmul(weights[:, None, :], self._table[stencil])[:, 0].reshape(shape + (3,))
-        s2 = rho * rho + self._a**2
-        out[..., 0] /= s2**1.5
-        out[..., 1] /= s2**2.5
-        out[..., 2] *= self._a / s2**2.5
-        return out
+        values = self._table[base[:, None] + self._stencil[None, :]]          # (N, 16, 3)
+        weights = [(wx[:, :, None] * ww[:, None, :]).reshape(-1, 16)]
+        if derivatives:
+            dwx = np.stack(_lagrange4_derivative(tx), axis=-1)
+            dww = np.stack(_lagrange4_derivative(tw), axis=-1)
+            weights.append((dwx[:, :, None] * ww[:, None, :]).reshape(-1, 16))
+            weights.append((wx[:, :, None] * dww[:, None, :]).reshape(-1, 16))
+        T = np.moveaxis(np.matmul(np.stack(weights, axis=1), values), 1, 0).reshape((len(weights),) + shape + (3,))
+        s2 = rho * rho + a * a
+        unscale = np.stack([s2**-1.5, s2**-2.5, a * s2**-2.5], axis=-1)
+        K = T[0] * unscale
+        if not derivatives:
+            return K
+        # d/drho of (T * s^-k): dT/dgx * dgx/drho * s^-k  -  k T rho s^-(k+2)
+        dgx = 1.0 / (self._hx * np.sqrt(s2))
+        k = np.array([3.0, 5.0, 5.0])
+        K_rho = T[1] * dgx[..., None] * unscale - k * K * (rho / s2)[..., None]
+        K_w = T[2] * unscale / self._hw
+        return K, K_rho, K_w
+
+    def _kernels(self, rho, zs, zt, derivatives=False):
+        """Total radial functions per image family (u = zs - zt, v = zs + zt).
+
+        Returns K of shape (2,) + rho.shape + (3,) (families u, v), and with
+        ``derivatives`` also dK/drho and dK/dw of the same shape.
+        """
+        D = self.medium.water_depth
+        eta = self.medium.eta
+        out = []
+        for fam in (zs - zt, zs + zt):
+            parts = [_exact_k(rho, fam, 1.0, derivatives)]
+            if eta != 0.0:
+                parts.append(_exact_k(rho, fam + 2 * D, eta, derivatives))
+                parts.append(_exact_k(rho, fam - 2 * D, eta, derivatives))
+                parts.append(self._interp(np.minimum(rho, self.rho_max), fam, derivatives))
+            out.append([sum(p[c] for p in parts) for c in range(3)] if derivatives else sum(parts))
+        if derivatives:
+            return tuple(np.stack([out[0][c], out[1][c]]) for c in range(3))
+        return np.stack(out)
+
+    def _moment_matrix(self, rx, ry, K):
+        """``G`` (..., 3, 2) with ``E = G p``, from summed (K1, K2, K3) (..., 3); without 1/(4 pi sigma1)."""
+        G = np.empty(rx.shape + (3, 2))
+        K1, K2, K3 = K[..., 0], K[..., 1], K[..., 2]
+        G[..., 0, 0] = 3 * rx * rx * K2 - K1
+        G[..., 0, 1] = G[..., 1, 0] = 3 * rx * ry * K2
+        G[..., 1, 1] = 3 * ry * ry * K2 - K1
+        G[..., 2, 0] = 3 * rx * K3
+        G[..., 2, 1] = 3 * ry * K3
+        return G
+
+    def _far_series(self, rx, ry, zs, zt, px, py, total):
+        far = np.hypot(rx, ry) > self.rho_max
+        if np.any(far):
+            ref, _ = _series(rx[far], ry[far], zs[far], zt[far], px[far], py[far],
+                             self.medium, 1e-10, 200_000, potential=False)
+            total[:, far] = ref
+        return far
 
     def __call__(self, sensors, sources, moments):
         """Electric field (V/m), shape (..., 3); same contract as :func:`hed_field`."""
         rx, ry, zs, zt, px, py = _split(sensors, sources, moments)
-        D = self.medium.water_depth
-        eta = self.medium.eta
-        u = zs - zt
-        v = zs + zt
-        total = np.zeros((3,) + rx.shape)
-        _dipole(rx, ry, u, px, py, total)
-        _dipole(rx, ry, v, px, py, total)
-        if eta != 0.0:
-            near = np.zeros_like(total)
-            for dz in (u + 2 * D, u - 2 * D, v + 2 * D, v - 2 * D):
-                _dipole(rx, ry, dz, px, py, near)
-            total += eta * near
-            rho = np.hypot(rx, ry)
-            inside = rho <= self.rho_max
-            pr3 = 3.0 * (px * rx + py * ry)
-            for fam in (u, v):
-                K = self._interp(np.minimum(rho, self.rho_max), fam)
-                total[0] += pr3 * rx * K[..., 1] - px * K[..., 0]
-                total[1] += pr3 * ry * K[..., 1] - py * K[..., 0]
-                total[2] += pr3 * K[..., 2]
-            if not np.all(inside):
-                far = ~inside
-                ref, _ = _series(rx[far], ry[far], zs[far], zt[far], px[far], py[far],
-                                 self.medium, 1e-10, 200_000, potential=False)
-                total[:, far] = ref
+        rho = np.hypot(rx, ry)
+        K = self._kernels(rho, zs, zt).sum(axis=0)
+        K1, K2, K3 = K[..., 0], K[..., 1], K[..., 2]
+        pr3 = 3.0 * (px * rx + py * ry)
+        total = np.stack([pr3 * rx * K2 - px * K1, pr3 * ry * K2 - py * K1, pr3 * K3])
+        self._far_series(rx, ry, zs, zt, px, py, total)
         return np.moveaxis(total, 0, -1) / (4.0 * np.pi * self.medium.sigma_water)
+
+    def field_jacobian(self, sensors, sources, moments):
+        """Field and its derivatives with respect to the source position and the moment.
+
+        Returns
+        -------
+        E : ndarray, shape (..., 3)
+            V/m, as :meth:`__call__`.
+        dE_dq : ndarray, shape (..., 3, 3)
+            ``dE_i / dq_j`` with respect to the source position, V/m².
+        G : ndarray, shape (..., 3, 2)
+            ``dE_i / dp_j`` for the horizontal moment components (E = G p), V/(m·A·m).
+
+        Derivation: per family ``w``, ``E_h = 3 (p.rho) rho K2 - p K1`` and
+        ``E_z = 3 (p.rho) K3``; ``d/dq_h = -d/drho`` and
+        ``d/dz_t = -d/du + d/dv``.  Offsets beyond ``rho_max`` are not
+        supported here (a ValueError): the tracker's Jacobians stay inside the table.
+        """
+        rx, ry, zs, zt, px, py = _split(sensors, sources, moments)
+        rho = np.hypot(rx, ry)
+        if np.any(rho > self.rho_max):
+            raise ValueError(f"field_jacobian: horizontal offsets beyond rho_max = {self.rho_max:g} m")
+        K, K_rho, K_w = self._kernels(rho, zs, zt, derivatives=True)
+        Ks, Ks_rho = K.sum(axis=0), K_rho.sum(axis=0)
+        Kz = K_w[1] - K_w[0]                                  # d/dz_t of each K
+        c = 1.0 / (4.0 * np.pi * self.medium.sigma_water)
+        G = self._moment_matrix(rx, ry, Ks)
+        p = np.stack([px, py], axis=-1)
+        E = c * np.einsum("...ij,...j->...i", G, p)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            ux = np.where(rho > 0, rx / rho, 0.0)
+            uy = np.where(rho > 0, ry / rho, 0.0)
+        pr = px * rx + py * ry
+        dE = np.empty(rx.shape + (3, 3))
+        K1, K2, K3 = Ks[..., 0], Ks[..., 1], Ks[..., 2]
+        for j, (pj, uj) in enumerate(((px, ux), (py, uy))):
+            dK1, dK2, dK3 = Ks_rho[..., 0] * uj, Ks_rho[..., 1] * uj, Ks_rho[..., 2] * uj
+            ej = np.zeros(2)
+            ej[j] = 1.0
+            # derivatives with respect to rho_j, then d/dq_j = -d/drho_j
+            dE[..., 0, j] = -(3 * pj * rx * K2 + 3 * pr * ej[0] * K2 + 3 * pr * rx * dK2 - px * dK1)
+            dE[..., 1, j] = -(3 * pj * ry * K2 + 3 * pr * ej[1] * K2 + 3 * pr * ry * dK2 - py * dK1)
+            dE[..., 2, j] = -(3 * pj * K3 + 3 * pr * dK3)
+        dE[..., 0, 2] = 3 * pr * rx * Kz[..., 1] - px * Kz[..., 0]
+        dE[..., 1, 2] = 3 * pr * ry * Kz[..., 1] - py * Kz[..., 0]
+        dE[..., 2, 2] = 3 * pr * Kz[..., 2]
+        return E, c * dE, c * G
+
+
+def _exact_k(rho, dz, coef, derivatives):
+    """One image per point at vertical offset dz: coef * (1/R^3, 1/R^5, dz/R^5) [and derivatives]."""
+    R2 = rho * rho + dz * dz
+    inv3 = R2**-1.5
+    inv5 = inv3 / R2
+    K = coef * np.stack([inv3, inv5, dz * inv5], axis=-1)
+    if not derivatives:
+        return K
+    inv7 = inv5 / R2
+    K_rho = coef * np.stack([-3 * rho * inv5, -5 * rho * inv7, -5 * dz * rho * inv7], axis=-1)
+    K_w = coef * np.stack([-3 * dz * inv5, -5 * dz * inv7, inv5 - 5 * dz * dz * inv7], axis=-1)
+    return K, K_rho, K_w
+
+
+def _lagrange4_derivative(t):
+    """Derivatives in t of :func:`_lagrange4`'s weights."""
+    return (
+        -(3 * t * t - 6 * t + 2) / 6.0,
+        (3 * t * t - 4 * t - 1) / 2.0,
+        -(3 * t * t - 2 * t - 2) / 2.0,
+        (3 * t * t - 1) / 6.0,
+    )
 
 
 def _lagrange4(t):

@@ -47,8 +47,9 @@ def dipole_field(sensors, sources, moments):
     >>> bool(np.allclose(B, [0, 0, 2e-7 * 1e6 / 10.0**3]))
     True
     """
-    r = np.asarray(sensors, dtype=float) - np.asarray(sources, dtype=float)
-    m = np.asarray(moments, dtype=float)
+    r = np.asarray(sensors) - np.asarray(sources)
+    r = r.astype(np.result_type(r, float), copy=False)
+    m = np.asarray(moments)
     r2 = np.sum(r * r, axis=-1)
     singular = r2 == 0.0
     r2 = np.where(singular, 1.0, r2)
@@ -100,3 +101,36 @@ def magnitude_reading(B):
 def tmi_reading(B, earth_direction):
     """Total-field anomaly ``B . b_E`` (..., 3) -> (...): what a scalar magnetometer reports."""
     return np.einsum("...i,...i->...", B, np.broadcast_to(earth_direction, np.shape(B)))
+
+
+def dipole_field_jacobian(sensors, sources, moments):
+    """Flux density and its derivatives with respect to the source position and the moment.
+
+    Returns
+    -------
+    B : ndarray, shape (..., 3)
+        As :func:`dipole_field`, tesla.
+    dB_dq : ndarray, shape (..., 3, 3)
+        ``dB_i / dq_j`` (source position), T/m.  With ``r = s - q``,
+        ``dB/dr = c [(3 r m^T + 3 (m.r) I - 2 m r^T) / r^5 - 5 (3 (m.r) r - r^2 m) r^T / r^7]``
+        and ``dB/dq = -dB/dr``.
+    dB_dm : ndarray, shape (..., 3, 3)
+        ``dB_i / dm_j = c (3 r r^T - r^2 I) / r^5``, T/(A·m²).
+    """
+    r = np.asarray(sensors, dtype=float) - np.asarray(sources, dtype=float)
+    m = np.asarray(moments, dtype=float)
+    r, m = np.broadcast_arrays(r, m)
+    r2 = np.sum(r * r, axis=-1)
+    inv5 = r2**-2.5
+    mr = np.sum(m * r, axis=-1)
+    eye = np.eye(3)
+    rrT = r[..., :, None] * r[..., None, :]
+    dB_dm = MU0_OVER_4PI * (3.0 * rrT - r2[..., None, None] * eye) * inv5[..., None, None]
+    B = np.einsum("...ij,...j->...i", dB_dm, m)
+    num = 3.0 * mr[..., None] * r - r2[..., None] * m
+    dB_dr = MU0_OVER_4PI * (
+        (3.0 * r[..., :, None] * m[..., None, :] + 3.0 * mr[..., None, None] * eye
+         - 2.0 * m[..., :, None] * r[..., None, :]) * inv5[..., None, None]
+        - 5.0 * num[..., :, None] * r[..., None, :] * (inv5 / r2)[..., None, None]
+    )
+    return B, -dB_dr, dB_dm

@@ -100,3 +100,14 @@ def eigen_bearing(L):
     _, vecs = np.linalg.eigh(C)
     u = vecs[..., :, -1]
     return wrap_axial(np.arctan2(u[..., 2], u[..., 1]))
+
+
+def bearing_jacobian(sensors, sources):
+    """Derivative of the bearing with respect to the source position, shape (..., 3) (rad/m).
+
+    ``d atan2(dy, dx) = (-dy, dx, 0) / (dx^2 + dy^2)``; the wrap modulo pi does
+    not change it.
+    """
+    d = np.asarray(sources, dtype=float) - np.asarray(sensors, dtype=float)
+    r2 = d[..., 0] ** 2 + d[..., 1] ** 2
+    return np.stack([-d[..., 1] / r2, d[..., 0] / r2, np.zeros_like(r2)], axis=-1)

@@ -1,0 +1,58 @@
+"""Filter units: one interface, batched over leading axes.
+
+>>> from shipsense.trackers.filters import get_filter
+>>> ukf = get_filter("ukf")
+>>> # belief = ukf.predict(belief, model); belief, innovation = ukf.update(belief, y, model, mask)
+
+Every unit shares :func:`~shipsense.trackers.filters._core.predict` (the
+motion models are linear) and differs in its measurement update:
+
+========== ===========================================================
+``ekf``        extended KF, analytic Jacobians
+``ukf``        unscented KF (``alpha``, ``beta``, ``kappa``; default 1, 2, 0)
+``ckf``        cubature KF, 2n equally weighted points
+``cdkf``       central-difference KF, Stirling interpolation, ``h = sqrt(3)``
+``srcdkf``     square-root CDKF (QR-propagated Cholesky factors)
+``puekf``      progressive-update EKF (``n_pu`` sub-updates with ``R n_pu``)
+``huber_ukf``  Huber-robust UKF (``gamma`` = 1.345, iterated reweighting)
+========== ===========================================================
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+from shipsense.trackers.filters import cdkf, ckf, ekf, huber_ukf, puekf, srcdkf, ukf
+from shipsense.trackers.filters._core import Belief, Innovation, predict, safe_cholesky, tria
+
+UPDATES: dict[str, Callable] = {
+    "ekf": ekf.update, "ukf": ukf.update, "ckf": ckf.update, "cdkf": cdkf.update,
+    "srcdkf": srcdkf.update, "puekf": puekf.update, "huber_ukf": huber_ukf.update,
+}
+FILTER_NAMES = tuple(UPDATES)
+
+
+@dataclass(frozen=True)
+class FilterUnit:
+    """A filter unit: a name, its update function and options (e.g. ``n_pu``, ``gamma``)."""
+
+    name: str
+    options: dict = field(default_factory=dict)
+
+    def predict(self, belief: Belief, model) -> Belief:
+        return predict(belief, model)
+
+    def update(self, belief: Belief, y, model, mask=None):
+        """Measurement update; returns ``(belief, innovation)``."""
+        return UPDATES[self.name](belief, y, model, mask, **self.options)
+
+
+def get_filter(name: str, **options) -> FilterUnit:
+    """The filter unit called ``name`` with keyword ``options`` for its update."""
+    if name not in UPDATES:
+        raise ValueError(f"unknown filter {name!r}; choose one of: {', '.join(FILTER_NAMES)}")
+    return FilterUnit(name, dict(options))
+
+
+__all__ = ["FILTER_NAMES", "Belief", "FilterUnit", "Innovation", "get_filter", "predict", "safe_cholesky", "tria"]

@@ -1,0 +1,159 @@
+"""Shared pieces of the filter units: beliefs, innovations, predict, masking, safe factorisation.
+
+Every array has leading batch axes.  A belief is a mean (..., n), a lower
+Cholesky factor (..., n, n) of its covariance and a flag (...) that turns
+False, per batch element, once that element's covariance lost positive
+definiteness or became non-finite (it is then repaired so that the rest of
+the batch is unaffected).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+LOG_2PI = float(np.log(2.0 * np.pi))
+
+
+class Belief(NamedTuple):
+    """Gaussian belief: mean (..., n), lower Cholesky factor (..., n, n), health flag (...)."""
+
+    mean: np.ndarray
+    chol: np.ndarray
+    ok: np.ndarray
+
+    @property
+    def cov(self) -> np.ndarray:
+        """Covariance ``L L^T`` (..., n, n)."""
+        return self.chol @ np.swapaxes(self.chol, -1, -2)
+
+    @classmethod
+    def from_cov(cls, mean, cov):
+        """A belief from a mean and a covariance (factorised here)."""
+        mean = np.asarray(mean, dtype=float)
+        L, ok = safe_cholesky(np.broadcast_to(cov, mean.shape + mean.shape[-1:]))
+        return cls(mean, L, ok)
+
+
+class Innovation(NamedTuple):
+    """What an update saw: innovation ``eps`` (..., m), its covariance ``S`` (..., m, m),
+    the log-likelihood ``ln N(eps; 0, S)`` over the present components (...), the
+    normalised innovation squared ``eps^T S^-1 eps`` (...) and the number of present
+    components (...).  Masked components have ``eps = 0`` and unit, uncoupled rows in ``S``."""
+
+    eps: np.ndarray
+    S: np.ndarray
+    loglik: np.ndarray
+    nis: np.ndarray
+    m: np.ndarray
+
+
+def symmetrize(P):
+    return 0.5 * (P + np.swapaxes(P, -1, -2))
+
+
+def tria(M):
+    """Lower-triangular ``S`` with ``S S^T = M M^T`` for M (..., n, k), k >= n, by QR (no covariance formed)."""
+    r = np.linalg.qr(np.swapaxes(M, -1, -2), mode="r")
+    S = np.swapaxes(r, -1, -2)
+    d = np.sign(np.diagonal(S, axis1=-2, axis2=-1))
+    return S * np.where(d == 0, 1.0, d)[..., None, :]
+
+
+def safe_cholesky(P):
+    """Batched Cholesky factor of symmetric P with per-element failure handling.
+
+    Returns ``(L, ok)``.  Elements that are non-finite or not positive
+    definite are flagged ``ok = False`` and repaired (non-finite ones replaced
+    by the identity, indefinite ones by clipping eigenvalues to a small
+    positive floor) so that one bad element never stops the batch.
+    """
+    P = symmetrize(np.asarray(P, dtype=float))
+    n = P.shape[-1]
+    finite = np.isfinite(P).all(axis=(-1, -2))
+    if not finite.all():
+        P = np.where(finite[..., None, None], P, np.eye(n))
+    try:
+        return np.linalg.cholesky(P), finite
+    except np.linalg.LinAlgError:
+        w, V = np.linalg.eigh(P)
+        scale = np.maximum(np.abs(w).max(axis=-1, keepdims=True), 1e-300)
+        floor = 1e-12 * scale
+        bad = (w <= floor).any(axis=-1)
+        w = np.maximum(w, floor)
+        P = (V * w[..., None, :]) @ np.swapaxes(V, -1, -2)
+        return np.linalg.cholesky(symmetrize(P)), finite & ~bad
+
+
+def predict(belief: Belief, model) -> Belief:
+    """Time update of the linear motion model: ``x = A x``, ``S = tria([A L, Q^(1/2)])``.
+
+    Every filter unit shares it: for a linear transition the unscented,
+    cubature and central-difference predictions equal this one exactly.
+    """
+    A = model.A
+    mean = belief.mean @ A.T
+    sq = _sqrt_psd(model.Q)
+    AL = A @ belief.chol
+    chol = tria(np.concatenate([AL, np.broadcast_to(sq, AL.shape[:-2] + sq.shape)], axis=-1))
+    ok = belief.ok & np.isfinite(chol).all(axis=(-1, -2)) & np.isfinite(mean).all(axis=-1)
+    return Belief(mean, chol, ok)
+
+
+def _sqrt_psd(Q):
+    """A square root of a PSD matrix (Cholesky, or eigen for singular Q)."""
+    try:
+        return np.linalg.cholesky(Q)
+    except np.linalg.LinAlgError:
+        w, V = np.linalg.eigh(Q)
+        return V * np.sqrt(np.clip(w, 0.0, None))
+
+
+def prepare(y, model, mask):
+    """Measurement, effective mask and masked noise variances for an update.
+
+    Missing components are those with ``mask`` False or a non-finite ``y``.
+    Returns ``(y, present, R)`` where ``y`` is zero and ``R`` is one at
+    missing components (so that they contribute exactly nothing).
+    """
+    y = np.asarray(y, dtype=float)
+    present = np.isfinite(y)
+    if mask is not None:
+        present = present & np.asarray(mask, dtype=bool)
+    y = np.where(present, y, 0.0)
+    R = np.where(present, model.R, 1.0)
+    return y, present, R
+
+
+def gain_update(belief: Belief, eps, Pxy, S, present, P=None):
+    """Kalman update from an innovation ``eps`` (..., m), cross-covariance ``Pxy`` (..., n, m) and ``S``.
+
+    ``x+ = x + K eps``, ``P+ = P - K S K^T`` with ``K = Pxy S^-1``; the new
+    covariance is symmetrised and factorised with :func:`safe_cholesky`.
+    """
+    Ls, ok_s = safe_cholesky(S)
+    Kt = _chol_solve(Ls, np.swapaxes(Pxy, -1, -2))
+    mean = belief.mean + np.einsum("...mn,...m->...n", Kt, eps)
+    if P is None:
+        P = belief.cov
+    P = P - np.swapaxes(Kt, -1, -2) @ np.swapaxes(Pxy, -1, -2)
+    L, ok = safe_cholesky(P)
+    finite = np.isfinite(mean).all(axis=-1)
+    mean = np.where(finite[..., None], mean, belief.mean)
+    inn = innovation(eps, S, Ls, present)
+    return Belief(mean, L, belief.ok & ok & ok_s & finite), inn
+
+
+def innovation(eps, S, Ls, present) -> Innovation:
+    """Innovation record with ``ln L = -1/2 (m ln 2 pi + ln det S + eps^T S^-1 eps)``."""
+    w = np.linalg.solve(Ls, eps[..., None])[..., 0]
+    nis = np.sum(w * w, axis=-1)
+    m = present.sum(axis=-1)
+    logdet = 2.0 * np.sum(np.log(np.diagonal(Ls, axis1=-2, axis2=-1)), axis=-1)
+    return Innovation(eps, S, -0.5 * (m * LOG_2PI + logdet + nis), nis, m)
+
+
+def _chol_solve(L, B):
+    """Solve ``(L L^T) X = B`` for X, batched."""
+    return np.linalg.solve(np.swapaxes(L, -1, -2), np.linalg.solve(L, B))

@@ -1,0 +1,220 @@
+"""State-space models: the physics kernels bound to tracker states.
+
+A model exposes what every filter needs, batched over leading axes:
+
+* ``n``, ``m``: state and measurement dimensions;
+* ``A`` (n, n) and ``Q`` (n, n): the linear (constant-velocity) transition;
+* ``h(x)`` (..., n) -> (..., m) and its Jacobian ``H(x)`` (..., m, n);
+* ``R`` (m,): measurement noise variances (diagonal);
+* ``residual(a, b)``: ``a - b`` with axial channels (bearings) wrapped modulo pi.
+
+Internal units.  Filters see scaled quantities so that covariances stay well
+conditioned: positions in m, velocities in m/s, magnetic moments in units of
+``moment_unit`` (1e6 A·m² by default), the electric source height in m and
+``p`` in A·m; magnetic fields in nT, electric fields in nV/m, bearings in rad.
+:meth:`FieldModel.to_internal` / :meth:`FieldModel.to_si` convert states, and
+:attr:`FieldModel.y_scale` measurements; users see SI.
+
+State layout (physics.md §4): ``(x, y, v_x, v_y)``, then the magnetic moment
+``(m_x, m_y, m_z)`` if the array has magnetometers, then ``(z, p)`` if it has
+electrodes (the source height and the scalar dipole along the keel).  A model
+over several sensor types is the fused (stacked) model: its channels are the
+array's channels.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from shipsense.physics.array import SensorArray
+from shipsense.physics.motion import cv_transition, q_dwna, q_identity
+from shipsense.physics.seismic import wrap_axial
+
+CHANNEL_UNIT = {"magnetometer": 1e-9, "electrode": 1e-9, "accelerometer": 1.0}
+"""SI value of one internal measurement unit per sensor type (nT, nV/m, rad)."""
+
+
+@dataclass(frozen=True, eq=False)
+class FieldModel:
+    """A passage seen by a sensor array: constant-velocity motion, field measurements.
+
+    Parameters
+    ----------
+    array : SensorArray
+    period : float
+        Sampling period T, s.
+    Q : array_like, shape (n, n)
+        Process noise in internal units.
+    R : array_like, shape (m,)
+        Measurement noise variances in internal units.
+    source_z : float
+        Source height (m) when the state has no ``z`` (no electrodes).
+    moment_unit : float
+        A·m² per internal moment unit.
+    """
+
+    array: SensorArray
+    period: float
+    Q: np.ndarray
+    R: np.ndarray
+    source_z: float = 0.0
+    moment_unit: float = 1e6
+    _d: dict = field(init=False, repr=False)
+
+    def __post_init__(self):
+        types = set(self.array.types)
+        labels = ["x", "y", "vx", "vy"]
+        if "magnetometer" in types:
+            labels += ["mx", "my", "mz"]
+        if "electrode" in types:
+            labels += ["z", "p"]
+        n = len(labels)
+        x_scale = np.ones(n)
+        if "mx" in labels:
+            x_scale[labels.index("mx"):labels.index("mx") + 3] = self.moment_unit
+        y_scale = np.array([CHANNEL_UNIT[self.array.types[s]] for s in self.array.channel_sensor])
+        Q = np.asarray(self.Q, dtype=float)
+        R = np.asarray(self.R, dtype=float).reshape(-1)
+        if Q.shape != (n, n):
+            raise ValueError(f"Q must be ({n}, {n}) for state {labels}, got {Q.shape}")
+        if R.shape != (self.array.n_channels,):
+            raise ValueError(f"R must have one variance per channel ({self.array.n_channels}), got {R.shape}")
+        object.__setattr__(self, "Q", Q)
+        object.__setattr__(self, "R", R)
+        object.__setattr__(self, "_d", {
+            "labels": tuple(labels), "x_scale": x_scale, "y_scale": y_scale,
+            "A": cv_transition(self.period, n - 4), "axial": self.array.axial,
+            "mom": labels.index("mx") if "mx" in labels else None,
+            "z": labels.index("z") if "z" in labels else None,
+        })
+
+    # -- dimensions and constants ---------------------------------------------
+    labels = property(lambda self: self._d["labels"], doc="State component names.")
+    n = property(lambda self: len(self._d["labels"]), doc="State dimension.")
+    m = property(lambda self: self.array.n_channels, doc="Measurement dimension.")
+    A = property(lambda self: self._d["A"], doc="Transition matrix (n, n).")
+    axial = property(lambda self: self._d["axial"], doc="Boolean (m,): bearing channels.")
+    x_scale = property(lambda self: self._d["x_scale"], doc="SI value of one internal unit per state component.")
+    y_scale = property(lambda self: self._d["y_scale"], doc="SI value of one internal unit per channel.")
+
+    def to_internal(self, x_si):
+        return np.asarray(x_si, dtype=float) / self.x_scale
+
+    def to_si(self, x):
+        return np.asarray(x) * self.x_scale
+
+    def residual(self, a, b):
+        """``a - b`` with bearing channels wrapped modulo pi."""
+        d = np.asarray(a) - np.asarray(b)
+        ax = self.axial
+        if ax.any():
+            d = np.where(ax, wrap_axial(d), d)
+        return d
+
+    # -- measurement function ---------------------------------------------------
+    def _source(self, x):
+        """Source position, moment and dipole (SI) of internal states (..., n)."""
+        d = self._d
+        z = x[..., d["z"]] if d["z"] is not None else np.full(x.shape[:-1], self.source_z)
+        q = np.stack([x[..., 0], x[..., 1], z], axis=-1)
+        moment = x[..., d["mom"]:d["mom"] + 3] * self.moment_unit if d["mom"] is not None else None
+        dipole = None
+        if d["z"] is not None:
+            v = x[..., 2:4]
+            speed = np.sqrt(np.sum(v * v, axis=-1, keepdims=True))
+            vhat = v / np.where(speed > 0, speed, 1.0)
+            dipole = np.concatenate([x[..., d["z"] + 1, None] * vhat, np.zeros(x.shape[:-1] + (1,))], axis=-1)
+        return q, moment, dipole
+
+    def h(self, x):
+        """Predicted measurements (internal units), (..., n) -> (..., m)."""
+        x = np.asarray(x)
+        q, moment, dipole = self._source(x.astype(np.result_type(x, float), copy=False))
+        return self.array.measure(q, moment, dipole) / self.y_scale
+
+    def H(self, x):
+        """Analytic Jacobian ``dh/dx`` (internal units), (..., n) -> (..., m, n)."""
+        x = np.asarray(x, dtype=float)
+        d = self._d
+        q, moment, dipole = self._source(x)
+        _, Jq, Jm, Jp = self.array.measure_jacobian(q, moment, dipole)
+        J = np.zeros(x.shape[:-1] + (self.m, self.n))
+        J[..., 0:2] = Jq[..., 0:2]
+        if d["mom"] is not None:
+            J[..., d["mom"]:d["mom"] + 3] = Jm * self.moment_unit
+        if d["z"] is not None:
+            iz = d["z"]
+            J[..., iz] = Jq[..., 2]
+            v = x[..., 2:4]
+            speed = np.sqrt(np.sum(v * v, axis=-1))
+            safe = np.where(speed > 0, speed, 1.0)
+            vhat = v / safe[..., None]
+            J[..., iz + 1] = np.einsum("...mj,...j->...m", Jp, vhat)
+            # d(p v/|v|)/dv = p (I - vhat vhat^T) / |v|
+            proj = (np.eye(2) - vhat[..., :, None] * vhat[..., None, :]) * (x[..., iz + 1] / safe)[..., None, None]
+            J[..., 2:4] = np.einsum("...mj,...jk->...mk", Jp, proj)
+        return J / self.y_scale[:, None]
+
+
+@dataclass(frozen=True, eq=False)
+class LinearModel:
+    """Linear-Gaussian model ``x_k = A x_{k-1} + w``, ``y = C x + v``: the Kalman filter's own case.
+
+    Used to check that every filter reproduces the Kalman filter.
+    """
+
+    A: np.ndarray
+    Q: np.ndarray
+    C: np.ndarray
+    R: np.ndarray
+
+    n = property(lambda self: self.A.shape[0])
+    m = property(lambda self: self.C.shape[0])
+    axial = property(lambda self: np.zeros(self.C.shape[0], dtype=bool))
+
+    def h(self, x):
+        return np.asarray(x) @ self.C.T
+
+    def H(self, x):
+        return np.broadcast_to(self.C, np.shape(x)[:-1] + self.C.shape)
+
+    def residual(self, a, b):
+        return np.asarray(a) - np.asarray(b)
+
+
+def model_from_scenario(scenario, sensors=None, *, moment_unit=1e6, process_noise=None):
+    """The tracker model of a scenario (all sensors, or the ids in ``sensors``).
+
+    Process noise comes from ``[tracker.process_noise]`` (or ``process_noise``,
+    a ProcessNoiseConfig), in internal units.  Defaults when the scenario has
+    no tracker section: DWNA with sigma_a = 0.1 m/s² and per-step random walks
+    of 1e-4 (moment, in (1e6 A·m²)²), 0 (z) and 1e-3 (p, (A·m)²).
+    """
+    from shipsense.config import ProcessNoiseConfig, load_scenario
+
+    sc = load_scenario(scenario)
+    array = sc.array()
+    keep = np.arange(len(array.ids)) if sensors is None else np.array([array.ids.index(s) for s in sensors])
+    std = sc.channel_std
+    sub = SensorArray(
+        ids=[array.ids[i] for i in keep], types=[array.types[i] for i in keep],
+        kinds=[array.kinds[i] for i in keep], positions=array.positions[keep],
+        orientations=array.orientations[keep], medium=array.medium, earth_direction=array.earth_direction,
+    )
+    cols = np.concatenate([np.flatnonzero(array.channel_sensor == i) for i in keep])
+    y_scale = np.array([CHANNEL_UNIT[sub.types[s]] for s in sub.channel_sensor])
+    R = (std[cols] / y_scale) ** 2
+    pn = process_noise or (sc.tracker.process_noise if sc.tracker is not None else ProcessNoiseConfig())
+    types = set(sub.types)
+    n_params = 3 * ("magnetometer" in types) + 2 * ("electrode" in types)
+    if pn.model == "identity":
+        Q = q_identity(n_params, pn.sigma_q)
+    elif pn.model == "diagonal":
+        Q = np.diag(np.asarray(pn.q_diag, dtype=float)[: 4 + n_params])
+    else:
+        default = [1e-4] * (3 * ("magnetometer" in types)) + [0.0, 1e-3] * ("electrode" in types)
+        param_var = pn.param_var if pn.param_var is not None and len(pn.param_var) == n_params else default
+        Q = q_dwna(sc.period, pn.sigma_a, param_var)
+    return FieldModel(sub, sc.period, Q, R, source_z=sc.passage.z, moment_unit=moment_unit)
