@@ -199,12 +199,18 @@ class SeismicConfig(_Model):
 
 
 class ProcessNoiseConfig(_Model):
-    """Process noise of the tracker's motion model (physics.md §4)."""
+    """Process noise of the tracker's motion model (physics.md §4), in the tracker's internal units.
+
+    ``identity``: ``sigma_q I``; ``dwna``: white acceleration ``sigma_a`` (m/s²) plus a per-step
+    random-walk variance ``param_var`` on each parameter (moment in (1e6 A·m²)², z in m², p in
+    (A·m)²); ``diagonal``: ``diag(q_diag)``.  The defaults (DWNA, sigma_a = 1 m/s², moment walk
+    0.6) are the consistent setting measured on S0 by ``experiments/filter_consistency.py``.
+    """
 
     model: Literal["identity", "dwna", "diagonal"] = "dwna"
     sigma_q: Positive = 0.1
     q_diag: list[Annotated[Finite, Field(ge=0)]] | None = None
-    sigma_a: tuple[Positive, Positive] = (0.1, 0.1)
+    sigma_a: tuple[Positive, Positive] = (1.0, 1.0)
     param_var: list[Annotated[Finite, Field(ge=0)]] | None = None
 
 

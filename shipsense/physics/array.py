@@ -92,9 +92,11 @@ class SensorArray:
             raise ValueError("an array with tmi magnetometers needs earth_direction")
         mag_code = np.array([_SCALAR_KIND_CODE.get(self.kinds[i], 0) for i in groups["magnetometer"]], dtype=int)
         env = np.array([self.kinds[i] == "envelope" for i in groups["electrode"]], dtype=bool)
+        identity = np.allclose(self.orientations, np.eye(3), rtol=0, atol=0)
         object.__setattr__(self, "_index", {
             "gather": np.array(gather, dtype=int), "channels": tuple(channels), "groups": groups,
-            "mag_code": mag_code, "envelope": env,
+            "mag_code": mag_code, "envelope": env, "identity": identity,
+            "mag_vector_only": bool(mag_code.size) and not mag_code.any(),
         })
 
     @property
@@ -160,7 +162,9 @@ class SensorArray:
             if moments is None:
                 raise ValueError("this array has magnetometers: moments are required")
             B = dipole_field(self.positions[idx], sources[..., None, :], np.asarray(moments)[..., None, :])
-            vec = np.einsum("sji,...sj->...si", self.orientations[idx], B)
+            vec = B if self._index["identity"] else np.einsum("sji,...sj->...si", self.orientations[idx], B)
+            if self._index["mag_vector_only"] and len(idx) == len(self.ids):   # the common hot path
+                return vec.reshape(batch + (3 * len(self.ids),))[..., self._index["gather"]]
             code = self._index["mag_code"]
             scalar = np.sqrt(np.sum(B * B, axis=-1))
             if np.any(code == 2):

@@ -50,13 +50,14 @@ def dipole_field(sensors, sources, moments):
     r = np.asarray(sensors) - np.asarray(sources)
     r = r.astype(np.result_type(r, float), copy=False)
     m = np.asarray(moments)
-    r2 = np.sum(r * r, axis=-1)
+    r2 = np.einsum("...i,...i->...", r, r)
+    m_dot_r = np.einsum("...i,...i->...", m, r)
     singular = r2 == 0.0
-    r2 = np.where(singular, 1.0, r2)
-    m_dot_r = np.sum(m * r, axis=-1)
-    inv_r5 = r2 ** -2.5
-    B = MU0_OVER_4PI * (3.0 * m_dot_r[..., None] * r - r2[..., None] * m) * inv_r5[..., None]
-    if np.any(singular):
+    if singular.any():
+        r2 = np.where(singular, 1.0, r2)
+    inv_r5 = MU0_OVER_4PI * r2**-2.5
+    B = (3.0 * m_dot_r * inv_r5)[..., None] * r - (r2 * inv_r5)[..., None] * m
+    if singular.any():
         B = np.where(singular[..., None], np.nan, B)
     return B
 

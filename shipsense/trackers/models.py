@@ -189,8 +189,10 @@ def model_from_scenario(scenario, sensors=None, *, moment_unit=1e6, process_nois
 
     Process noise comes from ``[tracker.process_noise]`` (or ``process_noise``,
     a ProcessNoiseConfig), in internal units.  Defaults when the scenario has
-    no tracker section: DWNA with sigma_a = 0.1 m/s² and per-step random walks
-    of 1e-4 (moment, in (1e6 A·m²)²), 0 (z) and 1e-3 (p, (A·m)²).
+    no tracker section, or ``param_var`` is not given: DWNA with sigma_a = 1
+    m/s² and per-step random walks of 0.6 (moment, in (1e6 A·m²)²), 0 (z) and
+    1e-3 (p, (A·m)²) -- the consistent setting measured on S0 (README,
+    "Filter consistency").
     """
     from shipsense.config import ProcessNoiseConfig, load_scenario
 
@@ -214,7 +216,7 @@ def model_from_scenario(scenario, sensors=None, *, moment_unit=1e6, process_nois
     elif pn.model == "diagonal":
         Q = np.diag(np.asarray(pn.q_diag, dtype=float)[: 4 + n_params])
     else:
-        default = [1e-4] * (3 * ("magnetometer" in types)) + [0.0, 1e-3] * ("electrode" in types)
+        default = [0.6] * (3 * ("magnetometer" in types)) + [0.0, 1e-3] * ("electrode" in types)
         param_var = pn.param_var if pn.param_var is not None and len(pn.param_var) == n_params else default
         Q = q_dwna(sc.period, pn.sigma_a, param_var)
     return FieldModel(sub, sc.period, Q, R, source_z=sc.passage.z, moment_unit=moment_unit)

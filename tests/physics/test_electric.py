@@ -160,3 +160,24 @@ def test_medium_rejects_non_positive_values():
         Medium(4.0, -0.1, 15.0)
     with pytest.raises(ValueError, match="water_depth"):
         Medium(4.0, 0.1, float("nan"))
+
+
+@pytest.mark.parametrize("sigma2", [0.04, 1.0])
+def test_fast_jacobian_matches_complex_step_of_the_series(sigma2):
+    from shipsense.physics.electric import _series
+
+    medium = Medium(SIG1, sigma2, 15.0)
+    s, q, _ = _geometry(np.random.default_rng(6), 300)
+    p = np.array([60.0, 80.0, 0.0])
+    E, dE, G = FastHED(medium).field_jacobian(s, q, p)
+    np.testing.assert_allclose(np.einsum("...ij,j->...i", G, p[:2]), E, rtol=1e-12)
+    h = 1e-20
+    for j in range(3):
+        qc = q.astype(complex)
+        qc[:, j] += 1j * h
+        rx, ry = s[:, 0] - qc[:, 0], s[:, 1] - qc[:, 1]
+        total, _ = _series(rx, ry, s[:, 2] + 0j, qc[:, 2], p[0] + 0 * rx, p[1] + 0 * rx, medium, 1e-13,
+                           200_000, potential=False)
+        cs = (total.T / (4 * np.pi * SIG1)).imag / h
+        rel = np.linalg.norm(cs - dE[..., j], axis=-1) / np.linalg.norm(dE, axis=(-1, -2))
+        assert rel.max() < 1e-5, (j, rel.max())

@@ -83,3 +83,20 @@ def test_scalar_readings():
     assert tmi_reading(np.array([0, 0, -2e-9]), b) == pytest.approx(2e-9)
     b = earth_field_direction(0.0, 90.0)  # horizontal, pointing east
     np.testing.assert_allclose(b, [1, 0, 0], atol=1e-15)
+
+
+def test_jacobian_matches_complex_step():
+    from shipsense.physics.magnetic import dipole_field_jacobian
+
+    rng = np.random.default_rng(4)
+    s = rng.uniform(-50, 50, (10, 3))
+    q = rng.uniform(-50, 50, (10, 3))
+    m = rng.standard_normal((10, 3)) * 1e6
+    B, dq, dm = dipole_field_jacobian(s, q, m)
+    np.testing.assert_allclose(B, dipole_field(s, q, m), rtol=1e-12)
+    h = 1e-20
+    for j in range(3):
+        e = np.zeros(3)
+        e[j] = h
+        np.testing.assert_allclose(dipole_field(s, q + 1j * e, m).imag / h, dq[..., j], rtol=1e-10, atol=1e-22)
+        np.testing.assert_allclose(dipole_field(s, q, m + 1j * e).imag / h, dm[..., j], rtol=1e-10, atol=1e-22)

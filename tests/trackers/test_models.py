@@ -33,7 +33,7 @@ def test_magnetic_jacobian_matches_complex_step(kind, tmp_path):
 
 def test_electric_jacobian_chain_rule_matches_finite_differences():
     # the kernel derivative itself is checked against complex-step of the series in
-    # tests/physics/test_electric_jacobian.py; here the chain rule through z, p and the keel direction
+    # tests/physics/test_electric.py; here the chain rule through z, p and the keel direction
     model = model_from_scenario("S1-P2")
     assert model.labels == ("x", "y", "vx", "vy", "z", "p")
     rng = np.random.default_rng(1)

@@ -41,7 +41,8 @@ class FilterUnit:
     options: dict = field(default_factory=dict)
 
     def predict(self, belief: Belief, model) -> Belief:
-        return predict(belief, model)
+        """Time update (shared; the SR-CDKF propagates its factor by QR)."""
+        return predict(belief, model, square_root=self.name == "srcdkf")
 
     def update(self, belief: Belief, y, model, mask=None):
         """Measurement update; returns ``(belief, innovation)``."""

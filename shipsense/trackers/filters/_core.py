@@ -64,41 +64,51 @@ def tria(M):
 def safe_cholesky(P):
     """Batched Cholesky factor of symmetric P with per-element failure handling.
 
-    Returns ``(L, ok)``.  Elements that are non-finite or not positive
-    definite are flagged ``ok = False`` and repaired (non-finite ones replaced
-    by the identity, indefinite ones by clipping eigenvalues to a small
-    positive floor) so that one bad element never stops the batch.
+    Returns ``(L, ok)``.  Only the lower triangle is read (LAPACK ``potrf``).
+    Elements that are non-finite or not positive definite are flagged
+    ``ok = False`` and repaired (non-finite ones replaced by the identity,
+    indefinite ones by clipping eigenvalues to a small positive floor) so
+    that one bad element never stops the batch.
     """
-    P = symmetrize(np.asarray(P, dtype=float))
+    P = np.asarray(P, dtype=float)
+    try:
+        L = np.linalg.cholesky(P)  # raises on an indefinite element; NaN propagates to the diagonal
+        if np.isfinite(np.diagonal(L, axis1=-2, axis2=-1)).all():
+            return L, np.ones(L.shape[:-2], dtype=bool)
+    except np.linalg.LinAlgError:
+        pass
+    P = symmetrize(P)
     n = P.shape[-1]
     finite = np.isfinite(P).all(axis=(-1, -2))
-    if not finite.all():
-        P = np.where(finite[..., None, None], P, np.eye(n))
-    try:
-        return np.linalg.cholesky(P), finite
-    except np.linalg.LinAlgError:
-        w, V = np.linalg.eigh(P)
-        scale = np.maximum(np.abs(w).max(axis=-1, keepdims=True), 1e-300)
-        floor = 1e-12 * scale
-        bad = (w <= floor).any(axis=-1)
-        w = np.maximum(w, floor)
-        P = (V * w[..., None, :]) @ np.swapaxes(V, -1, -2)
-        return np.linalg.cholesky(symmetrize(P)), finite & ~bad
+    P = np.where(finite[..., None, None], P, np.eye(n))
+    w, V = np.linalg.eigh(P)
+    scale = np.maximum(np.abs(w).max(axis=-1, keepdims=True), 1e-300)
+    floor = 1e-12 * scale
+    bad = (w <= floor).any(axis=-1)
+    w = np.maximum(w, floor)
+    P = (V * w[..., None, :]) @ np.swapaxes(V, -1, -2)
+    return np.linalg.cholesky(symmetrize(P)), finite & ~bad
 
 
-def predict(belief: Belief, model) -> Belief:
-    """Time update of the linear motion model: ``x = A x``, ``S = tria([A L, Q^(1/2)])``.
+def predict(belief: Belief, model, square_root: bool = False) -> Belief:
+    """Time update of the linear motion model, ``x = A x``, ``P = A P A^T + Q``.
 
     Every filter unit shares it: for a linear transition the unscented,
     cubature and central-difference predictions equal this one exactly.
+    With ``square_root`` the factor is propagated as ``tria([A L, Q^(1/2)])``
+    (QR, no covariance formed; the SR-CDKF's form); otherwise the covariance
+    is formed and factorised (cheaper for small states).
     """
     A = model.A
     mean = belief.mean @ A.T
-    sq = _sqrt_psd(model.Q)
     AL = A @ belief.chol
-    chol = tria(np.concatenate([AL, np.broadcast_to(sq, AL.shape[:-2] + sq.shape)], axis=-1))
-    ok = belief.ok & np.isfinite(chol).all(axis=(-1, -2)) & np.isfinite(mean).all(axis=-1)
-    return Belief(mean, chol, ok)
+    if square_root:
+        sq = _sqrt_psd(model.Q)
+        chol = tria(np.concatenate([AL, np.broadcast_to(sq, AL.shape[:-2] + sq.shape)], axis=-1))
+        ok = np.isfinite(chol).all(axis=(-1, -2))
+    else:
+        chol, ok = safe_cholesky(AL @ np.swapaxes(AL, -1, -2) + model.Q)
+    return Belief(mean, chol, belief.ok & ok)
 
 
 def _sqrt_psd(Q):
@@ -139,21 +149,51 @@ def gain_update(belief: Belief, eps, Pxy, S, present, P=None):
         P = belief.cov
     P = P - np.swapaxes(Kt, -1, -2) @ np.swapaxes(Pxy, -1, -2)
     L, ok = safe_cholesky(P)
-    finite = np.isfinite(mean).all(axis=-1)
-    mean = np.where(finite[..., None], mean, belief.mean)
+    ok = ok & ok_s
+    if not ok.all():  # a failed element keeps its prior mean
+        mean = np.where(ok[..., None], mean, np.nan_to_num(belief.mean))
     inn = innovation(eps, S, Ls, present)
-    return Belief(mean, L, belief.ok & ok & ok_s & finite), inn
+    return Belief(mean, L, belief.ok & ok), inn
 
 
 def innovation(eps, S, Ls, present) -> Innovation:
     """Innovation record with ``ln L = -1/2 (m ln 2 pi + ln det S + eps^T S^-1 eps)``."""
-    w = np.linalg.solve(Ls, eps[..., None])[..., 0]
+    w = solve_lower(Ls, eps[..., None])[..., 0]
     nis = np.sum(w * w, axis=-1)
     m = present.sum(axis=-1)
     logdet = 2.0 * np.sum(np.log(np.diagonal(Ls, axis1=-2, axis2=-1)), axis=-1)
     return Innovation(eps, S, -0.5 * (m * LOG_2PI + logdet + nis), nis, m)
 
 
+def solve_lower(L, B):
+    """Solve ``L X = B`` for lower-triangular L (..., k, k), B (..., k, c) by forward substitution.
+
+    A loop over the k rows (k is a state or measurement dimension, <= ~20) of
+    batched row operations: much faster than a batched LU for small k.
+    """
+    shape = np.broadcast_shapes(L.shape[:-2], B.shape[:-2]) + B.shape[-2:]
+    X = np.empty(shape, dtype=np.result_type(L, B))
+    for i in range(B.shape[-2]):
+        acc = B[..., i, :]
+        if i:
+            acc = acc - (L[..., i:i + 1, :i] @ X[..., :i, :])[..., 0, :]
+        X[..., i, :] = acc / L[..., i, i, None]
+    return X
+
+
+def solve_upper_t(L, B):
+    """Solve ``L^T X = B`` for lower-triangular L by back substitution."""
+    shape = np.broadcast_shapes(L.shape[:-2], B.shape[:-2]) + B.shape[-2:]
+    X = np.empty(shape, dtype=np.result_type(L, B))
+    k = B.shape[-2]
+    for i in range(k - 1, -1, -1):
+        acc = B[..., i, :]
+        if i < k - 1:
+            acc = acc - (np.swapaxes(L[..., i + 1:, i:i + 1], -1, -2) @ X[..., i + 1:, :])[..., 0, :]
+        X[..., i, :] = acc / L[..., i, i, None]
+    return X
+
+
 def _chol_solve(L, B):
     """Solve ``(L L^T) X = B`` for X, batched."""
-    return np.linalg.solve(np.swapaxes(L, -1, -2), np.linalg.solve(L, B))
+    return solve_upper_t(L, solve_lower(L, B))

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from shipsense.trackers.filters._core import Belief, _chol_solve, gain_update, prepare
+from shipsense.trackers.filters._core import Belief, _chol_solve, gain_update, prepare, safe_cholesky
 from shipsense.trackers.filters.ukf import merwe_weights, sigma_statistics
 
 GAMMA = 1.345
@@ -39,8 +39,8 @@ def update(belief: Belief, y, model, mask=None, gamma=GAMMA, iterations=10, alph
     Ht = _chol_solve(belief.chol, Pxy)                 # H^T = P^-1 Pxy, (..., n, m)
     R_eff = R
     for _ in range(int(iterations)):
-        S = Pyy + R_eff[..., :, None] * eye
-        Kt = np.linalg.solve(S, T(Pxy, -1, -2))        # K^T
+        Ls, _ = safe_cholesky(Pyy + R_eff[..., :, None] * eye)
+        Kt = _chol_solve(Ls, T(Pxy, -1, -2))           # K^T
         dx = np.einsum("...mn,...m->...n", Kt, eps)
         r = eps - np.einsum("...nm,...n->...m", Ht, dx)
         e = np.abs(r) / np.sqrt(R)

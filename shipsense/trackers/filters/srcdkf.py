@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from shipsense.trackers.filters._core import Belief, innovation, prepare, tria
+from shipsense.trackers.filters._core import Belief, innovation, prepare, solve_lower, solve_upper_t, tria
 from shipsense.trackers.filters.cdkf import H_STIRLING, difference_terms
 
 
@@ -29,8 +29,9 @@ def update(belief: Belief, y, model, mask=None, h=H_STIRLING):
     eps, Pxy, Y1, Y2 = difference_terms(belief, y, model, present, h)
     T = np.swapaxes
     sqrtR = np.sqrt(R)[..., :, None] * np.eye(R.shape[-1])
+    sqrtR = np.broadcast_to(sqrtR, np.broadcast_shapes(sqrtR.shape[:-2], Y1.shape[:-2]) + sqrtR.shape[-2:])
     Sy = tria(np.concatenate([T(Y1, -1, -2), T(Y2, -1, -2), sqrtR], axis=-1))
-    Kt = np.linalg.solve(T(Sy, -1, -2), np.linalg.solve(Sy, T(Pxy, -1, -2)))   # K^T (..., m, n)
+    Kt = solve_upper_t(Sy, solve_lower(Sy, T(Pxy, -1, -2)))   # K^T (..., m, n)
     K = T(Kt, -1, -2)
     mean = belief.mean + np.einsum("...nm,...m->...n", K, eps)
     Sx = tria(np.concatenate([belief.chol - K @ T(Y1, -1, -2), K @ T(Y2, -1, -2), K @ sqrtR], axis=-1))

@@ -29,6 +29,18 @@ def merwe_weights(n, alpha=1.0, beta=2.0, kappa=0.0):
     return np.sqrt(n + lam), Wm, Wc
 
 
+def symmetric_points(dX, center=True):
+    """Offsets ``[0,] +dX_i, -dX_i`` (..., 2n[+1], n) from rows ``dX_i`` (..., n, n), preallocated."""
+    n = dX.shape[-1]
+    c = int(center)
+    out = np.empty(dX.shape[:-2] + (2 * n + c, n))
+    if center:
+        out[..., 0, :] = 0.0
+    out[..., c:c + n, :] = dX
+    np.negative(dX, out=out[..., c + n:, :])
+    return out
+
+
 def sigma_statistics(belief: Belief, y, model, present, spread, Wm, Wc, center=True):
     """Innovation ``eps``, cross-covariance ``Pxy`` and ``Pyy`` (without R) of a symmetric point set.
 
@@ -37,15 +49,20 @@ def sigma_statistics(belief: Belief, y, model, present, spread, Wm, Wc, center=T
     prediction.  Rows of masked components are zeroed.
     """
     x = belief.mean
-    dX = spread * np.swapaxes(belief.chol, -1, -2)          # row i = spread * column i of L
-    parts = [dX, -dX] if not center else [np.zeros_like(x)[..., None, :], dX, -dX]
-    dXs = np.concatenate(parts, axis=-2)                   # (..., N, n)
+    dXs = symmetric_points(spread * np.swapaxes(belief.chol, -1, -2), center)   # (..., N, n) offsets
     Y = model.h(x[..., None, :] + dXs)                     # (..., N, m)
-    ref = Y[..., :1, :]
-    yhat = ref[..., 0, :] + np.einsum("k,...km->...m", Wm, model.residual(Y, ref))
-    dY = model.residual(Y, yhat[..., None, :]) * present[..., None, :]
-    Pyy = np.einsum("...ki,k,...kj->...ij", dY, Wc, dY)
-    Pxy = np.einsum("...ki,k,...kj->...ij", dXs, Wc, dY)
+    if model.axial.any():  # average angles as residuals about the first point's prediction
+        ref = Y[..., :1, :]
+        yhat = ref[..., 0, :] + (Wm @ model.residual(Y, ref))
+        dY = model.residual(Y, yhat[..., None, :])
+    else:
+        yhat = Wm @ Y
+        dY = Y - yhat[..., None, :]
+    if not present.all():
+        dY = dY * present[..., None, :]
+    WdY = dY * Wc[:, None]
+    Pyy = np.swapaxes(dY, -1, -2) @ WdY
+    Pxy = np.swapaxes(dXs, -1, -2) @ WdY
     eps = np.where(present, model.residual(y, yhat), 0.0)
     return eps, Pxy, Pyy
 
