@@ -448,7 +448,7 @@ class FastHED:
             uy = np.where(rho > 0, ry / rho, 0.0)
         pr = px * rx + py * ry
         dE = np.empty(rx.shape + (3, 3))
-        K1, K2, K3 = Ks[..., 0], Ks[..., 1], Ks[..., 2]
+        K2, K3 = Ks[..., 1], Ks[..., 2]
         for j, (pj, uj) in enumerate(((px, ux), (py, uy))):
             dK1, dK2, dK3 = Ks_rho[..., 0] * uj, Ks_rho[..., 1] * uj, Ks_rho[..., 2] * uj
             ej = np.zeros(2)

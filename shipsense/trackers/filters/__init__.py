@@ -20,8 +20,8 @@ motion models are linear) and differs in its measurement update:
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 from shipsense.trackers.filters import cdkf, ckf, ekf, huber_ukf, puekf, srcdkf, ukf
 from shipsense.trackers.filters._core import Belief, Innovation, predict, safe_cholesky, tria
