@@ -215,11 +215,31 @@ class ProcessNoiseConfig(_Model):
 
 
 class BankConfig(_Model):
-    """Multiple-initial-value bank: K moment (or p) levels times l bearings."""
+    """Multiple-initial-value bank: K moment (or p) levels times l bearings (trackers.md §2-3).
 
-    levels: list[Positive] = Field(min_length=1)
+    Seeds are placed at the range implied by the first measured field for each
+    level, on each bearing, around the sensor that measured the strongest
+    field.  Every hypothesis starts with ``initial_velocity``, a zero moment
+    (magnetic) or ``p`` = its level (electric), and the initial standard
+    deviations below.
+    """
+
+    levels: list[Positive] = Field(min_length=1, description="Moment magnitudes (A·m²) or p levels (A·m).")
     bearings_deg: list[Finite] = Field(min_length=1)
     initial_velocity: Vec2 = (6.0, 6.0)
+    initial_course: Literal["fixed", "towards_array"] = Field(
+        "fixed", description="fixed: every hypothesis gets initial_velocity; towards_array: the speed "
+        "|initial_velocity| on the course from the seed towards the array centroid (a passing ship).")
+    position_std: Positive = 30.0
+    velocity_std: Positive = 2.0
+    moment_std: Positive = 1e8
+    z_std: Positive = 1.0
+    p_std: Positive = 50.0
+    range_correction: Positive = Field(2.0, description="Image correction c of the electric range formula.")
+    prune_nats: Positive | None = Field(None, description="Drop hypotheses this far below the best (None: keep all).")
+    ambiguity_nats: Positive = Field(3.0, description="Near-tie threshold on the normalised log-likelihood.")
+    ambiguity_distance: Positive = Field(20.0, description="Near-ties farther apart than this (m) are ambiguous.")
+    divergence_window: Annotated[int, Field(ge=2)] = 10
 
 
 class TrackerConfig(_Model):

@@ -1,0 +1,210 @@
+r"""The multiple-initial-value (MIV) bank with maximum-likelihood selection (trackers.md §2-3).
+
+All hypotheses of all runs are one flat batch of (run, hypothesis) pairs.
+Each step is one batched predict and update; the cumulative log-likelihood
+
+.. math::  \ell_j(k) = \sum_{i \le k} \ln L_j(i)
+
+ranks the hypotheses.  Outputs: maximum-likelihood selection
+(``argmax_j ell_j``), static multiple-model fusion (weights
+``softmax(ell)``), pruning (hypotheses more than ``prune_nats`` below the best
+of their run are removed from the batch, so their compute is freed), a
+divergence flag per hypothesis (mean NIS over a window above its 99.9 %
+chi-square bound, or a lost covariance), and the **near-tie ambiguity
+report**: hypotheses far apart in position whose normalised log-likelihoods
+are within ``ambiguity_nats`` are reported, not silently resolved by the
+argmax.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import stats
+
+from shipsense.trackers.filters import Belief, FilterUnit, get_filter
+
+
+@dataclass(frozen=True)
+class BankRun:
+    """Output of :func:`run_bank` (SI units).  Axes: runs R, hypotheses H, steps K.
+
+    Attributes
+    ----------
+    seeds : (R, H, n)              initial means
+    means : (R, H, K, n)           posterior means (NaN after a hypothesis is pruned)
+    pos_cov : (R, H, K, 2, 2)      posterior position covariances
+    loglik : (R, H, K)             innovation log-likelihoods (NaN after pruning)
+    nis : (R, H, K)                normalised innovation squared
+    m : (R, H, K)                  measurement components used
+    ok : (R, H, K)                 covariance still positive definite
+    active : (R, H, K)             not yet pruned
+    labels : tuple                 state component names
+    """
+
+    seeds: np.ndarray
+    means: np.ndarray
+    pos_cov: np.ndarray
+    loglik: np.ndarray
+    nis: np.ndarray
+    m: np.ndarray
+    ok: np.ndarray
+    active: np.ndarray
+    labels: tuple
+
+    @property
+    def cum_loglik(self) -> np.ndarray:
+        """Cumulative log-likelihood (R, H, K); -inf once pruned."""
+        c = np.cumsum(np.where(self.active, self.loglik, 0.0), axis=-1)
+        return np.where(self.active, c, -np.inf)
+
+    @property
+    def normalised_loglik(self) -> np.ndarray:
+        """``ell_j - max_j ell_j`` (R, H, K)."""
+        c = self.cum_loglik
+        return c - c.max(axis=1, keepdims=True)
+
+    @property
+    def selected(self) -> np.ndarray:
+        """Index of the maximum-likelihood hypothesis at every step (R, K)."""
+        return np.argmax(self.cum_loglik, axis=1)
+
+    @property
+    def selected_means(self) -> np.ndarray:
+        """Estimate of the selected hypothesis at every step (R, K, n)."""
+        idx = self.selected[:, None, :, None]
+        return np.take_along_axis(self.means, idx, axis=1)[:, 0]
+
+    @property
+    def selected_pos_cov(self) -> np.ndarray:
+        idx = self.selected[:, None, :, None, None]
+        return np.take_along_axis(self.pos_cov, idx, axis=1)[:, 0]
+
+    @property
+    def weights(self) -> np.ndarray:
+        """Static multiple-model weights ``softmax_j(ell_j)`` (R, H, K)."""
+        w = np.exp(self.normalised_loglik)
+        return w / w.sum(axis=1, keepdims=True)
+
+    @property
+    def fused_means(self) -> np.ndarray:
+        """Fused mean ``sum_j mu_j x_j`` (R, K, n)."""
+        w = self.weights[..., None]
+        return np.sum(w * np.nan_to_num(self.means), axis=1)
+
+    @property
+    def fused_pos_cov(self) -> np.ndarray:
+        """Fused position covariance ``sum_j mu_j (P_j + d_j d_j^T)`` (R, K, 2, 2)."""
+        w = self.weights[..., None, None]
+        d = np.nan_to_num(self.means[..., :2]) - self.fused_means[:, None, :, :2]
+        spread = d[..., :, None] * d[..., None, :]
+        return np.sum(w * (np.nan_to_num(self.pos_cov) + spread), axis=1)
+
+    def diverged(self, window: int = 10, confidence: float = 0.999) -> np.ndarray:
+        """Divergence flag (R, H, K): lost covariance, or mean NIS over the last ``window`` steps
+        above its ``confidence`` chi-square bound."""
+        nis = np.where(self.active, self.nis, 0.0)
+        m = np.where(self.active, self.m, 0)
+        cs_n = np.cumsum(nis, axis=-1)
+        cs_m = np.cumsum(m, axis=-1)
+        lag = lambda a: np.concatenate([np.zeros_like(a[..., :window]), a[..., :-window]], axis=-1)  # noqa: E731
+        win_n = cs_n - lag(cs_n)
+        win_m = cs_m - lag(cs_m)
+        bound = stats.chi2.ppf(confidence, np.maximum(win_m, 1))
+        return (~self.ok) | ((win_n > bound) & (win_m > 0))
+
+    def ambiguities(self, step: int = -1, nats: float = 3.0, distance: float = 20.0):
+        """Near-ties at ``step``: per run, a list of ``(i, j, delta_nats, distance_m)``.
+
+        Pairs of hypotheses within ``nats`` of the best likelihood (both) and
+        more than ``distance`` metres apart in position.
+        """
+        norm = self.normalised_loglik[:, :, step]
+        pos = self.means[:, :, step, :2]
+        out = []
+        for r in range(norm.shape[0]):  # reporting only, not a hot path
+            near = np.flatnonzero(norm[r] > -nats)
+            pairs = []
+            for a_i, i in enumerate(near):
+                for j in near[a_i + 1:]:
+                    d = float(np.linalg.norm(pos[r, i] - pos[r, j]))
+                    if d > distance:
+                        pairs.append((int(i), int(j), float(abs(norm[r, i] - norm[r, j])), d))
+            out.append(pairs)
+        return out
+
+
+def run_bank(unit, model, measurements, seeds, P0, *, prune_nats=None, progress=False) -> BankRun:
+    """Run a bank of hypotheses over passages as one batch.
+
+    Parameters
+    ----------
+    unit : FilterUnit or str
+    model : FieldModel
+    measurements : ndarray, shape (R, K, m)
+        SI units, NaN = missing.
+    seeds : ndarray, shape (R, H, n)
+        Initial means (SI), e.g. from :func:`shipsense.trackers.init.seed_hypotheses`.
+    P0 : ndarray, shape (n, n) or (R, H, n, n)
+        Initial covariances (SI).
+    prune_nats : float, optional
+        Remove hypotheses whose cumulative log-likelihood falls this far below
+        the best of their run (checked every step).
+    progress : bool
+        Progress bar over the steps.
+    """
+    if isinstance(unit, str):
+        unit = get_filter(unit)
+    if not isinstance(unit, FilterUnit):
+        raise TypeError(f"unit must be a FilterUnit or a filter name, got {type(unit).__name__}")
+    y = np.asarray(measurements, dtype=float)
+    seeds = np.asarray(seeds, dtype=float)
+    if y.ndim != 3 or seeds.ndim != 3 or y.shape[0] != seeds.shape[0]:
+        raise ValueError(f"measurements must be (R, K, m) and seeds (R, H, n) with the same R; "
+                         f"got {y.shape} and {seeds.shape}")
+    R, K, m = y.shape
+    H, n = seeds.shape[1:]
+    xs, ys = model.x_scale, model.y_scale
+    y = y / ys
+    P0 = np.broadcast_to(np.asarray(P0, dtype=float) / np.outer(xs, xs), (R, H, n, n)).reshape(R * H, n, n)
+    belief = Belief.from_cov(seeds.reshape(R * H, n) / xs, P0)
+    run_of = np.repeat(np.arange(R), H)
+    hyp_of = np.tile(np.arange(H), R)
+    idx = np.arange(R * H)
+
+    means = np.full((R, H, K, n), np.nan)
+    pos_cov = np.full((R, H, K, 2, 2), np.nan)
+    loglik = np.full((R, H, K), np.nan)
+    nis = np.full((R, H, K), np.nan)
+    used = np.zeros((R, H, K), dtype=int)
+    ok = np.zeros((R, H, K), dtype=bool)
+    active = np.zeros((R, H, K), dtype=bool)
+    cum = np.zeros(R * H)
+    steps = range(K)
+    if progress:
+        from tqdm import tqdm
+
+        steps = tqdm(steps, desc=f"bank {unit.name} {R}x{H}", unit="step", leave=False)
+    for k in steps:
+        if k:
+            belief = unit.predict(belief, model)
+        belief, inn = unit.update(belief, y[run_of[idx], k], model)
+        r, h = run_of[idx], hyp_of[idx]
+        means[r, h, k] = belief.mean * xs
+        L = belief.chol[:, :2, :] * xs[:2, None]
+        pos_cov[r, h, k] = L @ np.swapaxes(L, -1, -2)
+        loglik[r, h, k] = inn.loglik
+        nis[r, h, k] = inn.nis
+        used[r, h, k] = inn.m
+        ok[r, h, k] = belief.ok
+        active[r, h, k] = True
+        cum[idx] += inn.loglik
+        if prune_nats is not None:
+            best = np.full(R, -np.inf)
+            np.maximum.at(best, r, cum[idx])
+            keep = cum[idx] >= best[r] - prune_nats
+            if not keep.all():
+                idx = idx[keep]
+                belief = Belief(belief.mean[keep], belief.chol[keep], belief.ok[keep])
+    return BankRun(seeds, means, pos_cov, loglik, nis, used, ok, active, tuple(model.labels))
