@@ -95,31 +95,144 @@ def _print_summary(sim):
 
 def cmd_demo(args) -> int:
     from shipsense.config import load_scenario
-    from shipsense.plotting import plot_simulation
+    from shipsense.plotting import plot_simulation, plot_track
     from shipsense.simulator import simulate
+    from shipsense.tracking import track_passage
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     sc = load_scenario("demo")
-    bar = _progress(3, "demo: simulate")
+    bar = _progress(4, "demo: simulate")
     sim = simulate(sc, runs=1)
+    bar.update(1)
+    bar.set_description("demo: track")
+    tr = track_passage(sc, sim.measurements[0])
     bar.update(1)
     bar.set_description("demo: save")
     sim.save_npz(out / "passage.npz")
     bar.update(1)
     bar.set_description("demo: plot")
-    plot_simulation(sim, out / "demo.png")
+    plot_simulation(sim, out / "measurements.png")
+    plot_track(tr, sim.times, out / "demo.png", truth=sim.truth[0, tr.start:],
+               title=f"demo: {tr.filter} bank of {tr.bank.means.shape[1]} hypotheses, fused magnetic + "
+                     "electric + bearing")
     bar.update(1)
     bar.close()
     _print_summary(sim)
-    print("tracking: no tracker is available yet in this version (filters are the next milestone);")
-    print("          the demo stops at simulated measurements.")
-    print(f"wrote {out / 'demo.png'} and {out / 'passage.npz'}")
+    bank = tr.bank
+    est = bank.selected_means[0]
+    truth = sim.truth[0, tr.start:]
+    err = np.hypot(est[:, 0] - truth[:, 0], est[:, 1] - truth[:, 1])
+    cov = bank.selected_pos_cov[0, -1]
+    print(f"tracking: {tr.filter} bank of {bank.means.shape[1]} hypotheses seeded from the first sample; "
+          f"selected hypothesis {bank.selected[0, -1]}")
+    print(f"  position error: final {err[-1]:.2f} m (2-sigma {2 * np.sqrt(cov[0, 0]):.2f} / "
+          f"{2 * np.sqrt(cov[1, 1]):.2f} m), mean {err.mean():.2f} m over {err.size} steps")
+    amb = bank.ambiguities(nats=tr.config.ambiguity_nats, distance=tr.config.ambiguity_distance)[0]
+    print("  ambiguity: " + ("none (no far-apart hypothesis is within "
+                              f"{tr.config.ambiguity_nats:g} nats)" if not amb else
+                              ", ".join(f"{i} vs {j}" for i, j, _, _ in amb)))
+    print(f"wrote {out / 'demo.png'} (tracks), {out / 'measurements.png'} (traces) and {out / 'passage.npz'}")
     return EXIT_OK
 
 
 class _BadInput(Exception):
     pass
+
+
+def cmd_track(args) -> int:
+    import csv
+
+    from shipsense.config import load_scenario
+    from shipsense.plotting import plot_track
+    from shipsense.recording import RecordingError, read_recording
+    from shipsense.simulator import simulate
+    from shipsense.trackers.filters import FILTER_NAMES
+    from shipsense.tracking import track_passage
+
+    sc = load_scenario(args.scenario)
+    if args.filter is not None and args.filter not in FILTER_NAMES:
+        raise _BadInput(f"--filter must be one of {', '.join(FILTER_NAMES)}, got {args.filter!r}")
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    truth = None
+    if args.data:
+        try:
+            times, y = read_recording(args.data, sc)
+        except RecordingError as err:
+            raise _BadInput(str(err)) from None
+        missing = np.isnan(y).mean()
+        source = f"recording {args.data} ({y.shape[0]} steps, {100 * missing:.1f} % of samples missing)"
+    else:
+        sim = simulate(sc, runs=1, seed=args.seed, random=args.random)
+        times, y, truth = sim.times, sim.measurements[0], sim.truth[0]
+        used_seed = sc.seed if args.seed is None else args.seed
+        source = f"simulated {'random' if args.random else 'nominal'} passage of {sc.name} (seed {used_seed})"
+    try:
+        tr = track_passage(sc, y, args.filter, progress=True)
+    except ValueError as err:
+        raise _BadInput(str(err)) from None
+    bank, k0 = tr.bank, tr.start
+    t = times[k0:]
+    est = bank.selected_means[0]
+    cov = bank.selected_pos_cov[0]
+    sel = bank.selected[0]
+    labels = list(tr.model.labels)
+    header = ["time", *labels, "std_x", "std_y", "selected"]
+    tcols = {"x": 0, "y": 1, "vx": 2, "vy": 3, "z": 4, "mx": 5, "my": 6, "mz": 7, "p": 8}
+    if truth is not None:
+        header += ["true_x", "true_y", "error_m"]
+    with open(out / "estimates.csv", "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(header)
+        for k in range(t.size):
+            row = [f"{t[k]:.6g}", *(f"{v:.6g}" for v in est[k]), f"{np.sqrt(cov[k, 0, 0]):.4g}",
+                   f"{np.sqrt(cov[k, 1, 1]):.4g}", int(sel[k])]
+            if truth is not None:
+                tx, ty = truth[k0 + k, tcols["x"]], truth[k0 + k, tcols["y"]]
+                row += [f"{tx:.6g}", f"{ty:.6g}", f"{np.hypot(est[k, 0] - tx, est[k, 1] - ty):.4g}"]
+            w.writerow(row)
+    cum = bank.cum_loglik[0]
+    amb_all = [bank.ambiguities(step=k, nats=tr.config.ambiguity_nats, distance=tr.config.ambiguity_distance)[0]
+               for k in range(t.size)]
+    with open(out / "selection_log.csv", "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["time", "selected", "cum_loglik", "gap_to_second_nats", "ambiguous_pairs"])
+        for k in range(t.size):
+            ranked = np.sort(cum[:, k])[::-1]
+            gap = ranked[0] - ranked[1] if ranked.size > 1 else np.inf
+            pairs = ";".join(f"{i}-{j}" for i, j, _, _ in amb_all[k])
+            w.writerow([f"{t[k]:.6g}", int(sel[k]), f"{ranked[0]:.6g}", f"{gap:.4g}", pairs])
+    plot_track(tr, times, out / "track.png", truth=None if truth is None else truth[k0:],
+               title=f"{sc.name}: {tr.filter} bank of {bank.means.shape[1]} hypotheses")
+    final = est[-1]
+    print(f"tracked {source} with a {tr.filter} bank of {bank.means.shape[1]} hypotheses")
+    print(f"  selected hypothesis {sel[-1]}; final estimate x = {final[0]:.1f} m, y = {final[1]:.1f} m, "
+          f"v = ({final[2]:.2f}, {final[3]:.2f}) m/s, 2-sigma {2 * np.sqrt(cov[-1, 0, 0]):.1f} / "
+          f"{2 * np.sqrt(cov[-1, 1, 1]):.1f} m")
+    if truth is not None:
+        err = np.hypot(est[:, 0] - truth[k0:, 0], est[:, 1] - truth[k0:, 1])
+        print(f"  position error: final {err[-1]:.2f} m, mean {err.mean():.2f} m")
+    if amb_all[-1]:
+        print("  AMBIGUOUS: near-tied hypotheses far apart at the end: "
+              + ", ".join(f"{i} and {j} ({d:.0f} m apart, {dn:.2f} nats)" for i, j, dn, d in amb_all[-1]))
+    print(f"wrote {out / 'estimates.csv'}, {out / 'selection_log.csv'} and {out / 'track.png'}")
+    return EXIT_OK
+
+
+def cmd_reproduce(args) -> int:
+    from shipsense.reproduce import EXPERIMENTS, run
+
+    if args.runs is not None and args.runs < 2:
+        raise _BadInput(f"--runs must be >= 2, got {args.runs}")
+    key = args.name.upper()
+    if key not in EXPERIMENTS:
+        raise _BadInput(f"unknown experiment set {args.name!r}; choose one of {', '.join(EXPERIMENTS)}")
+    out = Path(args.out or f"results/{key}")
+    summary = run(key, runs=args.runs, out=out, seed=args.seed)
+    print(f"{key}: {summary['runs']} runs in {summary['seconds']:.1f} s; wrote {out}/summary.json, CSV tables "
+          f"and PNG figures")
+    return EXIT_OK
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -145,6 +258,22 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("--out", default=None, help="write measurements to FILE.npz or a tidy FILE.csv")
     m.add_argument("--plot", default=None, help="write a picture of the array, passages and traces to FILE.png")
     m.set_defaults(func=cmd_simulate)
+
+    t = sub.add_parser("track", help="track a simulated passage, or a recorded one (--data), with the bank")
+    t.add_argument("scenario", help="a shipped scenario name or a TOML file (the array, medium and tracker)")
+    t.add_argument("--data", default=None, help="recorded long-format CSV: time,sensor,channel,value (SI units)")
+    t.add_argument("--filter", default=None, help="filter unit (default: the scenario's)")
+    t.add_argument("--out", default="shipsense-track", help="output directory (default: %(default)s)")
+    t.add_argument("--seed", type=int, default=None, help="seed of the simulated passage")
+    t.add_argument("--random", action="store_true", help="simulate a random passage from the [prior]")
+    t.set_defaults(func=cmd_track)
+
+    r = sub.add_parser("reproduce", help="reproduce the reference experiments of S0, S1 or S2")
+    r.add_argument("name", metavar="S0|S1|S2")
+    r.add_argument("--runs", type=int, default=None, help="Monte Carlo runs (default: 200 for S0, 100 otherwise)")
+    r.add_argument("--out", default=None, help="output directory (default: results/NAME)")
+    r.add_argument("--seed", type=int, default=0)
+    r.set_defaults(func=cmd_reproduce)
     return p
 
 

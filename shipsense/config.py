@@ -235,6 +235,7 @@ class BankConfig(_Model):
     moment_std: Positive = 1e8
     z_std: Positive = 1.0
     p_std: Positive = 50.0
+    p_initial: Positive = Field(100.0, description="Initial p (A·m) when the levels are magnetic (fused model).")
     range_correction: Positive = Field(2.0, description="Image correction c of the electric range formula.")
     prune_nats: Positive | None = Field(None, description="Drop hypotheses this far below the best (None: keep all).")
     ambiguity_nats: Positive = Field(3.0, description="Near-tie threshold on the normalised log-likelihood.")

@@ -70,3 +70,57 @@ def plot_simulation(sim, path, max_runs=20, max_sensors=8):
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def _ellipse(ax, mean, cov, color, nsig=2.0):
+    w, V = np.linalg.eigh(cov)
+    w = np.sqrt(np.clip(w, 0, None)) * nsig
+    t = np.linspace(0, 2 * np.pi, 40)
+    pts = mean[:, None] + V @ (w[:, None] * np.stack([np.cos(t), np.sin(t)]))
+    ax.plot(pts[0], pts[1], "-", color=color, lw=0.8, alpha=0.8)
+
+
+def plot_track(track, times, path, truth=None, title=None, ellipses=8):
+    """Array, truth (if known), every hypothesis, and the selected track with 2-sigma ellipses, to a PNG."""
+    bank = track.bank
+    fig, ax = plt.subplots(1, 2, figsize=(14, 6.5), layout="constrained", width_ratios=[1.3, 1])
+    a = ax[0]
+    H = bank.means.shape[1]
+    sel = bank.selected[0, -1]
+    for h in range(H):
+        xy = bank.means[0, h, :, :2]
+        a.plot(xy[:, 0], xy[:, 1], "-", lw=0.7, color="0.6", alpha=0.8,
+               label="hypotheses" if h == 0 else None)
+        a.plot(*bank.seeds[0, h, :2], "x", color="0.4", ms=5)
+    if truth is not None:
+        a.plot(truth[:, 0], truth[:, 1], "-", color="tab:red", lw=2, label="truth")
+    est = bank.selected_means[0]
+    cov = bank.selected_pos_cov[0]
+    a.plot(est[:, 0], est[:, 1], "-", color="tab:blue", lw=1.8, label=f"selected (hyp. {sel})")
+    for k in np.linspace(0, est.shape[0] - 1, ellipses).astype(int):
+        _ellipse(a, est[k, :2], cov[k], "tab:blue")
+    draw_array(a, track.model.array)
+    span = np.concatenate([est[:, :2], truth[:, :2]] if truth is not None else [est[:, :2]])
+    lo, hi = span.min(axis=0), span.max(axis=0)
+    pad = 0.15 * max(hi - lo) + 20
+    a.set_xlim(lo[0] - pad, hi[0] + pad)
+    a.set_ylim(lo[1] - pad, hi[1] + pad)
+    a.set_aspect("equal", adjustable="box")
+    a.set_xlabel("x east [m]")
+    a.set_ylabel("y north [m]")
+    a.grid(alpha=0.3)
+    a.legend(fontsize=8, loc="best")
+    a.set_title(title or f"{track.filter} bank, {H} hypotheses (2-sigma ellipses)")
+    b = ax[1]
+    t = times[track.start:]
+    norm = bank.normalised_loglik[0]
+    for h in range(H):
+        b.plot(t, np.maximum(norm[h], -1e4), lw=1.5 if h == sel else 0.8, label=f"{h}" if h == sel else None)
+    b.set_yscale("symlog", linthresh=1.0)
+    b.set_xlabel("time [s]")
+    b.set_ylabel("cumulative log-likelihood - best [nats]")
+    b.grid(alpha=0.3)
+    b.set_title("hypothesis likelihoods (selected: thick)")
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

@@ -45,3 +45,55 @@ def test_demo_writes_a_picture(tmp_path, capsys):
     assert main(["demo", "--out", str(tmp_path)]) == 0
     assert (tmp_path / "demo.png").stat().st_size > 10_000
     assert "N1-mag" in capsys.readouterr().out
+
+
+def test_track_a_simulated_and_a_recorded_passage(tmp_path, capsys):
+    assert main(["track", "S1-P2", "--filter", "ukf", "--out", str(tmp_path / "sim")]) == 0
+    out = capsys.readouterr().out
+    assert "position error" in out
+    est = list(csv.DictReader((tmp_path / "sim" / "estimates.csv").open()))
+    assert len(est) == 101 and float(est[-1]["error_m"]) < 5.0
+    assert (tmp_path / "sim" / "track.png").stat().st_size > 10_000
+    rec = tmp_path / "rec.csv"
+    assert main(["simulate", "S2", "--runs", "1", "--out", str(rec)]) == 0
+    lines = rec.read_text().splitlines()
+    rec.write_text("\n".join(lines[:1] + lines[1:60] + lines[200:]) + "\n")   # a gap of ~20 steps
+    assert main(["track", "S2", "--data", str(rec), "--out", str(tmp_path / "rec")]) == 0
+    log = list(csv.DictReader((tmp_path / "rec" / "selection_log.csv").open()))
+    assert len(log) == 80
+    assert "samples missing" in capsys.readouterr().out
+
+
+def test_track_bad_input_exits_2(tmp_path, capsys):
+    bad = tmp_path / "bad.csv"
+    bad.write_text("time,sensor,channel,value\n0.0,NOPE,bx,1e-9\n")
+    assert main(["track", "S2", "--data", str(bad)]) == 2
+    assert "unknown sensor id" in capsys.readouterr().err
+    assert main(["track", "S2", "--filter", "kalman"]) == 2
+
+
+def test_reproduce_writes_the_documented_summary_keys(tmp_path):
+    import json
+
+    keys = {
+        "S0": ["seed_ranges_m", "true_range_m", "basin_radius_m", "hypotheses", "selected_index", "selected_mrmse_m",
+               "selection_accuracy", "convergence_rate", "filter_units"],
+        "S1": ["P1", "P2", "symmetry_table", "raw_chain"],
+        "S2": ["one_vs_two", "outliers", "seismic_low_snr", "field_trial_geometry"],
+    }
+    for name, expected in keys.items():
+        assert main(["reproduce", name, "--runs", "3", "--out", str(tmp_path / name)]) == 0
+        summary = json.loads((tmp_path / name / "summary.json").read_text())
+        assert all(k in summary for k in expected), (name, set(expected) - set(summary))
+    s0 = json.loads((tmp_path / "S0" / "summary.json").read_text())
+    assert set(s0["hypotheses"][0]) == {"range_m", "bearing_rad", "trmse_m", "mean_loglik"}
+    assert set(s0["selected_mrmse_m"]) == {"x", "y", "r"}
+    assert set(s0["filter_units"]["srcdkf"]) == {"mrmse_r_m", "convergence_rate", "us_per_filter_step"}
+    s1 = json.loads((tmp_path / "S1" / "summary.json").read_text())
+    assert {"hypotheses", "selection_accuracy", "ambiguous_pairs"} <= set(s1["P1"])
+    assert set(s1["raw_chain"]) >= {"ideal_mrmse_r_m", "raw_mrmse_r_m"}
+    s2 = json.loads((tmp_path / "S2" / "summary.json").read_text())
+    assert set(s2["one_vs_two"]["ekf"]) >= {"one_mrmse_r_m", "two_mrmse_r_m"}
+    assert set(s2["outliers"]["0.1"]) == {"ukf_mrmse_r_m", "huber_ukf_mrmse_r_m"}
+    assert {"magnetic_only_mrmse_r_m", "fused_mrmse_r_m"} <= set(s2["seismic_low_snr"])
+    assert main(["reproduce", "S9"]) == 2

@@ -97,6 +97,7 @@ def seed_hypotheses(model, y, bank, source_z=None):
     if "z" in labels:
         iz = labels.index("z")
         x0[..., iz] = model.source_z if source_z is None else source_z
-        x0[..., iz + 1] = np.repeat(np.asarray(bank.levels, dtype=float), L)
+        # electric levels seed p; in a fused (magnetic + electric) model the levels are magnetic
+        x0[..., iz + 1] = bank.p_initial if "mx" in labels else np.repeat(np.asarray(bank.levels, dtype=float), L)
         std += [bank.z_std, bank.p_std]
     return x0, np.diag(np.square(std))

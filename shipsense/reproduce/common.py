@@ -1,0 +1,149 @@
+"""Shared helpers of the reference experiments: output folder, tables, figures, progress."""
+
+from __future__ import annotations
+
+import csv
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from shipsense.plotting import plt
+from shipsense.trackers.metrics import convergence_rate, mrmse, trmse
+
+MAGNETIC_TRUTH = [0, 1, 2, 3, 5, 6, 7]   # simulation truth columns of the magnetic state
+ELECTRIC_TRUTH = [0, 1, 2, 3, 4, 8]      # ... and of the electric state (x, y, vx, vy, z, p)
+
+
+class Output:
+    """An experiment's output folder: ``summary.json``, CSV tables and PNG figures."""
+
+    def __init__(self, directory):
+        self.dir = Path(directory)
+        self.dir.mkdir(parents=True, exist_ok=True)
+        self.files = []
+
+    def csv(self, name, header, rows):
+        path = self.dir / name
+        with open(path, "w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(header)
+            for row in rows:
+                w.writerow([_fmt(v) for v in row])
+        self.files.append(path)
+        return path
+
+    def figure(self, fig, name):
+        path = self.dir / name
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+        self.files.append(path)
+        return path
+
+    def summary(self, data):
+        path = self.dir / "summary.json"
+        path.write_text(json.dumps(_jsonable(data), indent=2) + "\n")
+        self.files.append(path)
+        return path
+
+
+def _fmt(v):
+    if isinstance(v, (float, np.floating)):
+        return f"{float(v):.6g}"
+    return v
+
+
+def _jsonable(x):
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return _jsonable(x.tolist())
+    if isinstance(x, (np.bool_, bool)):
+        return bool(x)
+    if isinstance(x, (np.integer,)):
+        return int(x)
+    if isinstance(x, (float, np.floating)):
+        v = float(x)
+        return v if np.isfinite(v) else None
+    return x
+
+
+class Stages:
+    """A progress bar over the named parts of an experiment (stderr)."""
+
+    def __init__(self, names, desc, enabled=True):
+        from tqdm import tqdm
+
+        self.bar = tqdm(total=len(names), desc=desc, unit="part", disable=not enabled or None, file=sys.stderr)
+        self.t0 = time.perf_counter()
+
+    def step(self, label):
+        self.bar.set_postfix_str(label)
+
+    def done(self):
+        self.bar.update(1)
+
+    def close(self):
+        self.bar.close()
+        return time.perf_counter() - self.t0
+
+
+def bank_summary(bank, truth, centre=(0.0, 0.0)):
+    """Per-hypothesis table and selection figures of a bank over runs (truth (R, K, n)).
+
+    Seed ranges and bearings are taken from ``centre`` (the array centroid)."""
+    tr = trmse(bank.means, truth[:, None])                       # (R, H)
+    final_ll = bank.cum_loglik[:, :, -1]
+    seeds = bank.seeds
+    rel = seeds[..., :2] - np.asarray(centre)
+    hyps = [{"range_m": float(np.mean(np.linalg.norm(rel[:, h], axis=-1))),
+             "bearing_rad": float(np.arctan2(rel[0, h, 1], rel[0, h, 0]) % (2 * np.pi)),
+             "trmse_m": float(np.nanmean(tr[:, h])),
+             "mean_loglik": float(np.nanmean(np.where(np.isfinite(final_ll[:, h]), final_ll[:, h], np.nan)))}
+            for h in range(seeds.shape[1])]
+    sel = bank.selected[:, -1]
+    sel_means = bank.selected_means
+    return {
+        "hypotheses": hyps,
+        "selected_index": int(np.bincount(sel, minlength=seeds.shape[1]).argmax()),
+        "selected_mrmse_m": mrmse(sel_means, truth),
+        "selection_accuracy": float(np.mean(sel == np.nanargmin(np.where(np.isnan(tr), np.inf, tr), axis=1))),
+        "convergence_rate": convergence_rate(sel_means, truth),
+    }, tr
+
+
+def bar_charts(out, name, title, hyp, labels=None):
+    """Bar charts of per-hypothesis TRMSE and mean cumulative log-likelihood."""
+    fig, ax = plt.subplots(1, 2, figsize=(12, 4), layout="constrained")
+    x = np.arange(len(hyp))
+    ax[0].bar(x, [h["trmse_m"] for h in hyp], color="tab:blue")
+    ax[0].set_yscale("log")
+    ax[0].set_ylabel("TRMSE [m] (mean over runs)")
+    ll = np.array([h["mean_loglik"] for h in hyp], dtype=float)
+    ax[1].bar(x, ll - np.nanmax(ll), color="tab:orange")
+    ax[1].set_yscale("symlog")
+    ax[1].set_ylabel("mean final log-likelihood - best [nats]")
+    for a in ax:
+        a.set_xticks(x, labels if labels is not None else [str(i) for i in x], fontsize=7)
+        a.set_xlabel("hypothesis")
+        a.grid(alpha=0.3, axis="y")
+    fig.suptitle(title)
+    return out.figure(fig, name)
+
+
+def rmse_plot(out, name, title, times, curves, ylabel="RMSE_k [m]"):
+    """Line plot of RMSE_k curves {label: (K,)}."""
+    fig, ax = plt.subplots(figsize=(8, 4.5), layout="constrained")
+    for label, c in curves.items():
+        ax.plot(times, c, label=label)
+    ax.set_yscale("log")
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel(ylabel)
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8)
+    ax.set_title(title)
+    return out.figure(fig, name)

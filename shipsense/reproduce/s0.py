@@ -1,0 +1,144 @@
+"""S0: one vector magnetometer, magnetic dipole, SRCDKF bank (scenarios.md, S0 experiments 1-4)."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from shipsense.config import ProcessNoiseConfig, load_scenario
+from shipsense.plotting import draw_array, plt
+from shipsense.reproduce.common import MAGNETIC_TRUTH, Output, Stages, bank_summary, bar_charts, rmse_plot
+from shipsense.simulator import simulate
+from shipsense.trackers.bank import run_bank
+from shipsense.trackers.driver import run_filter
+from shipsense.trackers.init import seed_hypotheses, seed_ranges
+from shipsense.trackers.metrics import convergence_rate, mrmse, position_error, rmse_k
+from shipsense.trackers.models import model_from_scenario
+
+OFFSETS = (10.0, 30.0, 50.0, 100.0, 200.0)
+UNITS = ("ekf", "ukf", "ckf", "cdkf", "srcdkf")
+BASIN_RATE = 0.9
+DENSE_BEARINGS = tuple(float(b) for b in np.arange(0.0, 360.0, 30.0))
+DENSE_NOISE = ProcessNoiseConfig(model="dwna", sigma_a=(0.01, 0.01), param_var=[1e-6] * 3)
+
+
+def run(runs=200, out="results/S0", seed=0, progress=True):
+    """Run the S0 experiment set; returns the summary dictionary (also written to ``out/summary.json``)."""
+    sc = load_scenario("S0")
+    o = Output(out)
+    st = Stages(["simulate", "basin", "seeding", "selection", "units", "dense"], "S0", progress)
+    st.step("simulate")
+    sim = simulate(sc, runs=runs, seed=seed)
+    truth = sim.truth[..., MAGNETIC_TRUTH]
+    model = model_from_scenario(sc)
+    bank = sc.tracker.bank
+    seeds, P0 = seed_hypotheses(model, sim.measurements[:, 0], bank)
+    times = sc.times
+    st.done()
+
+    # 1. convergence basin: one SRCDKF per run and offset, all in one batch
+    st.step("basin")
+    rng = np.random.default_rng(seed + 1)
+    ang = rng.uniform(0, 2 * np.pi, (len(OFFSETS), runs))
+    x0 = np.broadcast_to(truth[:, 0], (len(OFFSETS), runs, model.n)).copy()
+    dr = np.array(OFFSETS)[:, None]
+    x0[..., 0] += dr * np.cos(ang)
+    x0[..., 1] += dr * np.sin(ang)
+    x0[..., 4:] = 0.0
+    basin = run_filter(sc.tracker.filter, model, sim.measurements[None], x0, P0)
+    rows, curves, rates = [], {}, []
+    for i, d in enumerate(OFFSETS):
+        rate = convergence_rate(basin.means[i], truth)
+        final = position_error(basin.means[i], truth)[:, -1]
+        rows.append([d, rate, float(np.median(final)), float(np.sqrt(np.mean(final**2)))])
+        curves[f"dr = {d:g} m"] = rmse_k(basin.means[i], truth)
+        rates.append(rate)
+    ok = [d for d, r in zip(OFFSETS, rates) if r >= BASIN_RATE]
+    basin_radius = max(ok) if ok else 0.0
+    o.csv("basin.csv", ["offset_m", "convergence_rate", "median_final_error_m", "final_rmse_m"], rows)
+    rmse_plot(o, "basin_rmse.png", f"S0 exp. 1: single SRCDKF from an offset (basin radius {basin_radius:g} m, "
+              f"rate >= {BASIN_RATE})", times, curves)
+    st.done()
+
+    # 2. seeding
+    st.step("seeding")
+    best, slant, horiz = seed_ranges(model, sim.measurements[:, 0], bank.levels)
+    true_range = float(np.linalg.norm(sim.positions[0, 0] - model.array.positions[0]))
+    dist = np.linalg.norm(seeds[:, :, :2] - truth[:, None, 0, :2], axis=-1)     # (R, H)
+    o.csv("seeding.csv", ["level_Am2", "seed_range_m", "seed_horizontal_range_m", "true_range_m"],
+          [[lv, slant[0, i], horiz[0, i], true_range] for i, lv in enumerate(bank.levels)])
+    fig, ax = plt.subplots(figsize=(6.5, 6), layout="constrained")
+    draw_array(ax, model.array)
+    ax.plot(*truth[0, :, :2].T, "-", color="tab:red", label="true passage")
+    ax.scatter(*seeds[0, :, :2].T, color="k", marker="x", label="12 seeds (run 0)")
+    for h in range(seeds.shape[1]):
+        ax.annotate(str(h), seeds[0, h, :2], textcoords="offset points", xytext=(4, 4), fontsize=7)
+    ax.add_patch(plt.Circle(truth[0, 0, :2], max(basin_radius, 1.0), fill=False, color="tab:red", ls="--",
+                            label=f"basin radius {basin_radius:g} m"))
+    ax.set_aspect("equal")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    ax.set_title(f"S0 exp. 2: seeds vs truth (nearest seed {dist[0].min():.0f} m away)")
+    o.figure(fig, "seeding.png")
+    st.done()
+
+    # 3. selection with the scenario's bank (SRCDKF, 12 hypotheses)
+    st.step("selection")
+    b = run_bank(sc.tracker.filter, model, sim.measurements, seeds, P0)
+    summ, tr = bank_summary(b, truth)
+    bar_charts(o, "selection_bars.png", f"S0 exp. 3: {seeds.shape[1]} hypotheses, {runs} runs", summ["hypotheses"])
+    order = np.argsort([h["trmse_m"] for h in summ["hypotheses"]])[:3]
+    top = []
+    for h in order:
+        m = mrmse(b.means[:, h], truth)
+        top.append([int(h), m["x"], m["y"], m["r"], summ["hypotheses"][h]["mean_loglik"]])
+    o.csv("top3_mrmse.csv", ["hypothesis", "mrmse_x_m", "mrmse_y_m", "mrmse_r_m", "mean_loglik"], top)
+    o.csv("hypotheses.csv", ["hypothesis", "range_m", "bearing_rad", "trmse_m", "mean_loglik"],
+          [[i, h["range_m"], h["bearing_rad"], h["trmse_m"], h["mean_loglik"]]
+           for i, h in enumerate(summ["hypotheses"])])
+    st.done()
+
+    # 4. filter units in the same bank
+    st.step("units")
+    units, curves = {}, {}
+    for name in UNITS:
+        t0 = time.perf_counter()
+        bu = run_bank(name, model, sim.measurements, seeds, P0)
+        us = 1e6 * (time.perf_counter() - t0) / (runs * seeds.shape[1] * sc.steps)
+        units[name] = {"mrmse_r_m": mrmse(bu.selected_means, truth)["r"],
+                       "convergence_rate": convergence_rate(bu.selected_means, truth), "us_per_filter_step": us}
+        curves[name] = rmse_k(bu.selected_means, truth)
+    rmse_plot(o, "units_rmse.png", "S0 exp. 4: selected estimate of the bank per filter unit", times, curves)
+    o.csv("filter_units.csv", ["filter", "mrmse_r_m", "convergence_rate", "us_per_filter_step"],
+          [[k, v["mrmse_r_m"], v["convergence_rate"], v["us_per_filter_step"]] for k, v in units.items()])
+    st.done()
+
+    # beyond the source: a denser bank (l = 12) with low process noise
+    st.step("dense bank")
+    dense_bank = bank.model_copy(update={"bearings_deg": list(DENSE_BEARINGS)})
+    dense_model = model_from_scenario(sc, process_noise=DENSE_NOISE)
+    dseeds, dP0 = seed_hypotheses(dense_model, sim.measurements[:, 0], dense_bank)
+    bd = run_bank(sc.tracker.filter, dense_model, sim.measurements, dseeds, dP0)
+    dsumm, _ = bank_summary(bd, truth)
+    dense = {"hypotheses": int(dseeds.shape[1]), "bearings_deg": list(DENSE_BEARINGS),
+             "process_noise": "dwna sigma_a = 0.01 m/s^2, moment walk 1e-6",
+             "selected_mrmse_m": dsumm["selected_mrmse_m"], "selection_accuracy": dsumm["selection_accuracy"],
+             "convergence_rate": dsumm["convergence_rate"],
+             "final_error_median_m": float(np.median(position_error(bd.selected_means, truth)[:, -1]))}
+    rmse_plot(o, "bank_rmse.png", "S0: selected estimate, spec bank vs dense bank", times,
+              {"spec bank (12 hyp.)": rmse_k(b.selected_means, truth),
+               f"dense bank ({dseeds.shape[1]} hyp.)": rmse_k(bd.selected_means, truth)})
+    st.done()
+    elapsed = st.close()
+
+    summary = {
+        "scenario": "S0", "runs": runs, "seed": seed, "seconds": elapsed,
+        "seed_ranges_m": slant[0].tolist(), "seed_horizontal_ranges_m": horiz[0].tolist(),
+        "true_range_m": true_range, "basin_radius_m": basin_radius,
+        "nearest_seed_m": float(np.median(dist.min(axis=1))),
+        "seed_inside_basin_rate": float(np.mean(dist.min(axis=1) <= basin_radius)),
+        **summ, "filter_units": units, "dense_bank": dense,
+    }
+    o.summary(summary)
+    return summary

@@ -1,0 +1,143 @@
+"""S1: electrode array, shaft-rate envelope, PUEKF bank (scenarios.md, S1 experiments 1-3)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from shipsense.config import load_scenario
+from shipsense.physics.array import SensorArray
+from shipsense.physics.motion import cv_positions
+from shipsense.plotting import draw_array, plt
+from shipsense.reproduce.common import ELECTRIC_TRUTH, Output, Stages, bank_summary, bar_charts, rmse_plot
+from shipsense.simulator import simulate
+from shipsense.trackers.bank import run_bank
+from shipsense.trackers.filters import get_filter
+from shipsense.trackers.init import seed_hypotheses
+from shipsense.trackers.metrics import rmse_k
+from shipsense.trackers.models import model_from_scenario
+
+SYMMETRY_SENSORS = ((0.0, 5.0), (0.0, 0.0), (5.0, 0.0))
+SYMMETRY_BEARINGS = (np.pi / 4, 3 * np.pi / 4, 5 * np.pi / 4, 7 * np.pi / 4)
+AMBIGUOUS_RUN_FRACTION = 0.5
+
+
+def symmetry_table(sc, o):
+    """Exp. 1: which of four passages through the array centre give identical envelopes, per sensor and channel."""
+    medium = sc.medium.physics()
+    depth = -sc.medium.water_depth
+    array = SensorArray(ids=["(0,5)", "(0,0)", "(5,0)"], types=["electrode"] * 3, kinds=["envelope"] * 3,
+                        positions=[[x, y, depth] for x, y in SYMMETRY_SENSORS], medium=medium)
+    speed, start_range = 7.0, 212.0
+    T = sc.period
+    t = np.arange(0.0, 2 * start_range / speed + T / 2, T)
+    starts = start_range * np.stack([np.cos(SYMMETRY_BEARINGS), np.sin(SYMMETRY_BEARINGS)], -1)
+    vel = -speed * starts / start_range
+    xy = cv_positions(starts, vel, t)                                              # (4, K, 2)
+    src = np.concatenate([xy, np.full(xy.shape[:-1] + (1,), sc.passage.z)], -1)
+    dip = np.concatenate([sc.passage.p * vel / speed, np.zeros((4, 1))], -1)[:, None, :]
+    env = array.measure(src, dipoles=dip)                                          # (4, K, 9)
+    rows, table = [], []
+    for c, (sid, ch) in enumerate(array.channels):
+        scale = np.abs(env[..., c]).max()
+        groups, seen = [], set()
+        for i in range(4):
+            if i in seen:
+                continue
+            g = [j for j in range(4) if np.abs(env[j, :, c] - env[i, :, c]).max() <= 1e-9 * scale]
+            seen.update(g)
+            if len(g) > 1:
+                groups.append([j + 1 for j in g])
+        rows.append([sid, ch, " ".join("{" + ",".join(map(str, g)) + "}" for g in groups) or "-"])
+        table.append({"sensor": sid, "channel": ch, "identical_passages": groups})
+    o.csv("symmetry_table.csv", ["sensor", "channel", "passages with identical envelopes (1..4 = bearings "
+                                 "pi/4, 3pi/4, 5pi/4, 7pi/4)"], rows)
+    fig, ax = plt.subplots(3, 3, figsize=(12, 8), layout="constrained", sharex=True)
+    for c in range(9):
+        a = ax[c // 3, c % 3]
+        for i in range(4):
+            a.plot(t, 1e6 * env[i, :, c], ls=["-", "--", ":", "-."][i], label=f"passage {i + 1}")
+        a.set_title(f"sensor {array.channels[c][0]} |{array.channels[c][1]}|", fontsize=9)
+        a.grid(alpha=0.3)
+    ax[0, 0].legend(fontsize=7)
+    ax[2, 1].set_xlabel("time [s]")
+    ax[1, 0].set_ylabel("envelope [uV/m]")
+    fig.suptitle("S1 exp. 1: envelopes of four passages through the array centre")
+    o.figure(fig, "symmetry.png")
+    return table
+
+
+def bank_for(sc, runs, seed, unit, o=None, tag=None, chain=None):
+    """Bank over simulated passages of a scenario; returns (summary, bank, truth)."""
+    if chain is not None:
+        sc = sc.with_updates(envelope_chain={"mode": chain})
+    sim = simulate(sc, runs=runs, seed=seed)
+    truth = sim.truth[..., ELECTRIC_TRUTH]
+    model = model_from_scenario(sc)
+    seeds, P0 = seed_hypotheses(model, sim.measurements[:, 0], sc.tracker.bank)
+    b = run_bank(unit, model, sim.measurements, seeds, P0)
+    summ, _ = bank_summary(b, truth, centre=model.array.positions[:, :2].mean(axis=0))
+    amb = b.ambiguities(nats=sc.tracker.bank.ambiguity_nats, distance=sc.tracker.bank.ambiguity_distance)
+    counts = {}
+    for pairs in amb:
+        for i, j, _, _ in pairs:
+            counts[(i, j)] = counts.get((i, j), 0) + 1
+    summ["ambiguous_pairs"] = sorted([list(k) for k, v in counts.items() if v >= AMBIGUOUS_RUN_FRACTION * runs])
+    summ["ambiguous_run_fraction"] = float(np.mean([bool(p) for p in amb]))
+    if o is not None:
+        bar_charts(o, f"{tag}_bars.png", f"S1 {tag}: per-hypothesis TRMSE and likelihood ({runs} runs)",
+                   summ["hypotheses"])
+    return summ, b, truth
+
+
+def run(runs=100, out="results/S1", seed=0, progress=True):
+    """Run the S1 experiment set; returns the summary dictionary (also written to ``out/summary.json``)."""
+    o = Output(out)
+    st = Stages(["symmetry", "P1", "P2", "filters", "raw"], "S1", progress)
+    p1, p2 = load_scenario("S1-P1"), load_scenario("S1-P2")
+    unit = get_filter(p2.tracker.filter, n_pu=p2.tracker.n_pu)
+    st.step("symmetry")
+    sym = symmetry_table(p1, o)
+    st.done()
+    result, curves = {}, {}
+    for tag, sc in (("P1", p1), ("P2", p2)):
+        st.step(tag)
+        summ, b, truth = bank_for(sc, runs, seed, unit, o, tag)
+        result[tag] = summ
+        curves[f"{tag} selected"] = rmse_k(b.selected_means, truth)
+        o.csv(f"{tag}_hypotheses.csv", ["hypothesis", "range_m", "bearing_rad", "trmse_m", "mean_loglik"],
+              [[i, h["range_m"], h["bearing_rad"], h["trmse_m"], h["mean_loglik"]]
+               for i, h in enumerate(summ["hypotheses"])])
+        st.done()
+    rmse_plot(o, "P1_vs_P2_rmse.png", f"S1 exp. 2: selected estimate, {unit.name} (N_pu = {p2.tracker.n_pu})",
+              p2.times, curves)
+    st.step("filters")
+    compare = {}
+    for name, u in (("ekf (N_pu = 1)", get_filter("puekf", n_pu=1)),
+                    (f"puekf (N_pu = {p2.tracker.n_pu})", unit),
+                    ("puekf (N_pu = 10)", get_filter("puekf", n_pu=10)), ("ukf", get_filter("ukf"))):
+        summ, b, truth = bank_for(p2, runs, seed, u)
+        compare[name] = {"selected_mrmse_r_m": summ["selected_mrmse_m"]["r"],
+                         "convergence_rate": summ["convergence_rate"],
+                         "selection_accuracy": summ["selection_accuracy"]}
+    o.csv("P2_filters.csv", ["filter", "selected_mrmse_r_m", "convergence_rate", "selection_accuracy"],
+          [[k, v["selected_mrmse_r_m"], v["convergence_rate"], v["selection_accuracy"]] for k, v in compare.items()])
+    st.done()
+    st.step("raw chain")
+    raw, b_raw, truth_raw = bank_for(p2, runs, seed, unit, chain="raw")
+    raw_chain = {"ideal_mrmse_r_m": result["P2"]["selected_mrmse_m"]["r"],
+                 "raw_mrmse_r_m": raw["selected_mrmse_m"]["r"],
+                 "raw_convergence_rate": raw["convergence_rate"]}
+    st.done()
+    fig, ax = plt.subplots(1, 2, figsize=(11, 5), layout="constrained")
+    for a, tag, sc in ((ax[0], "P1", p1), (ax[1], "P2", p2)):
+        draw_array(a, sc.array())
+        a.set_title(f"{tag}: ambiguous in {100 * result[tag]['ambiguous_run_fraction']:.0f} % of runs")
+        a.set_aspect("equal")
+        a.grid(alpha=0.3)
+    o.figure(fig, "arrays.png")
+    elapsed = st.close()
+    summary = {"scenario": "S1", "runs": runs, "seed": seed, "seconds": elapsed, "filter": unit.name,
+               "n_pu": p2.tracker.n_pu, **result, "symmetry_table": sym, "raw_chain": raw_chain,
+               "P2_filters": compare}
+    o.summary(summary)
+    return summary

@@ -1,0 +1,49 @@
+"""Recorded passages: the CSV round trip, gaps, and one clear error per kind of bad file."""
+
+import numpy as np
+import pytest
+
+from shipsense import load_scenario, simulate
+from shipsense.recording import RecordingError, read_recording
+
+
+def test_round_trip_through_the_simulators_csv(tmp_path):
+    sim = simulate("S2", runs=1, seed=3)
+    path = tmp_path / "rec.csv"
+    sim.save_csv(path)
+    times, y = read_recording(path, sim.scenario)
+    np.testing.assert_allclose(times, sim.times)
+    np.testing.assert_allclose(y, sim.measurements[0], rtol=1e-12)
+
+
+def _write(tmp_path, rows, header="time,sensor,channel,value"):
+    path = tmp_path / "r.csv"
+    path.write_text(header + "\n" + "\n".join(rows) + "\n")
+    return path
+
+
+def test_gaps_and_missing_values_are_masked(tmp_path):
+    sc = load_scenario("S2")
+    rows = ["0.0,M1,bx,1e-9", "0.0,M1,by,", "1.0,M1,bx,nan", "1.5,M2,bz,2e-9"]   # 0.5 s step missing
+    times, y = read_recording(_write(tmp_path, rows), sc)
+    np.testing.assert_allclose(times, [0.0, 0.5, 1.0, 1.5])
+    assert y[0, 0] == 1e-9 and np.isnan(y[0, 1]) and np.isnan(y[1]).all() and np.isnan(y[2, 0])
+    assert y[3, 5] == 2e-9
+
+
+@pytest.mark.parametrize("rows, header, message", [
+    (["0.0,X9,bx,1e-9"], None, "unknown sensor id 'X9'"),
+    (["0.0,M1,ex,1e-9"], None, "has no channel 'ex'"),
+    (["0.5,M1,bx,1e-9", "0.0,M1,by,1e-9"], None, "time goes backwards"),
+    (["0.0,M1,bx,1e-9", "0.0,M1,bx,2e-9"], None, "duplicate sample"),
+    (["0.0,M1,bx,1e-9", "0.3,M1,bx,1e-9"], None, "not on the scenario's 0.5 s grid"),
+    (["0.0,M1,bx,abc"], None, "is not a number"),
+    (["0.0,M1,bx,1e-9"], "t,sensor,channel,value", "header must contain"),
+    (["0,0.0,M1,bx,1e-9", "1,0.0,M1,by,1e-9"], "run,time,sensor,channel,value", "several runs"),
+])
+def test_bad_recordings_give_one_clear_message(tmp_path, rows, header, message):
+    sc = load_scenario("S2")
+    path = _write(tmp_path, rows, header or "time,sensor,channel,value")
+    with pytest.raises(RecordingError, match=message) as info:
+        read_recording(path, sc)
+    assert str(path) in str(info.value)

@@ -1,0 +1,91 @@
+"""The bank: equivalence with the driver, selection, fusion, pruning, divergence, ambiguity."""
+
+import numpy as np
+import pytest
+
+from shipsense import load_scenario, simulate
+from shipsense.trackers.bank import run_bank
+from shipsense.trackers.driver import run_filter
+from shipsense.trackers.init import seed_hypotheses
+from shipsense.trackers.models import model_from_scenario
+
+MAG = [0, 1, 2, 3, 5, 6, 7]
+ELEC = [0, 1, 2, 3, 4, 8]
+
+
+@pytest.fixture(scope="module")
+def s2_bank():
+    sc = load_scenario("S2")
+    model = model_from_scenario(sc, sensors=["M1", "M2"])
+    sim = simulate(sc, runs=4, seed=2)
+    y = sim.measurements[..., ~sim.array.axial]
+    truth = sim.truth[..., MAG]
+    seeds = np.repeat(truth[:, None, 0], 6, axis=1).copy()
+    offsets = np.array([[3, -3], [60, 40], [-50, 10], [5, 5], [-80, -80], [0, 30]], dtype=float)
+    seeds[..., :2] += offsets
+    seeds[..., 4:] = 0.0
+    P0 = np.diag([100.0, 100.0, 2.0, 2.0, 1e8, 1e8, 1e8])
+    return sc, model, y, truth, seeds, P0
+
+
+def test_bank_equals_the_driver_per_hypothesis(s2_bank):
+    _, model, y, _, seeds, P0 = s2_bank
+    bank = run_bank("ukf", model, y, seeds, P0)
+    ref = run_filter("ukf", model, y[:, None], seeds, P0)
+    np.testing.assert_allclose(bank.means, ref.means, rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(bank.loglik, ref.loglik, rtol=1e-12)
+    np.testing.assert_allclose(bank.cum_loglik, np.cumsum(ref.loglik, axis=-1), rtol=1e-12)
+
+
+def test_selection_and_fusion(s2_bank):
+    _, model, y, truth, seeds, P0 = s2_bank
+    bank = run_bank("ukf", model, y, seeds, P0)
+    np.testing.assert_array_equal(bank.selected, np.argmax(bank.cum_loglik, axis=1))
+    w = bank.weights
+    np.testing.assert_allclose(w.sum(axis=1), 1.0)
+    np.testing.assert_allclose(bank.fused_means, np.einsum("rhk,rhkn->rkn", w, bank.means), atol=1e-9)
+    # the hypotheses seeded near the truth win and track it
+    err = np.hypot(*(bank.selected_means[:, -1, :2] - truth[:, -1, :2]).T)
+    assert np.all(err < 2.0), err
+    # the fused covariance is at least the selected hypothesis' weighted spread (PSD)
+    assert np.all(np.linalg.eigvalsh(bank.fused_pos_cov[:, -1]) > 0)
+
+
+def test_pruning_frees_hypotheses_without_changing_the_survivors(s2_bank):
+    _, model, y, _, seeds, P0 = s2_bank
+    full = run_bank("ukf", model, y, seeds, P0)
+    pruned = run_bank("ukf", model, y, seeds, P0, prune_nats=50.0)
+    assert (~pruned.active[:, :, -1]).sum() > 0
+    alive = pruned.active
+    np.testing.assert_allclose(pruned.means[alive], full.means[alive], rtol=1e-12, atol=1e-9)
+    assert np.isnan(pruned.means[~alive]).all()
+    np.testing.assert_array_equal(pruned.selected[:, -1], full.selected[:, -1])
+    assert np.all(pruned.cum_loglik[~alive] == -np.inf)
+
+
+def test_divergence_flags_the_far_hypotheses(s2_bank):
+    _, model, y, _, seeds, P0 = s2_bank
+    bank = run_bank("ukf", model, y, seeds, P0)
+    ever = bank.diverged(window=10).any(axis=-1)          # flagged at some step of the passage
+    assert not ever[np.arange(4), bank.selected[:, -1]].any()
+    assert ever[:, [1, 4]].all()                           # the seeds 72 m and 113 m off
+    assert not ever[:, [0, 3]].any()                       # the seeds 4 m and 7 m off
+
+
+@pytest.mark.parametrize("name, ambiguous", [("S1-P1", True), ("S1-P2", False)])
+def test_collinear_array_reports_mirror_ambiguity_and_triangle_does_not(name, ambiguous):
+    sc = load_scenario(name)
+    model = model_from_scenario(sc)
+    sim = simulate(sc, runs=4, seed=1)
+    seeds, P0 = seed_hypotheses(model, sim.measurements[:, 0], sc.tracker.bank)
+    bank = run_bank("ukf", model, sim.measurements, seeds, P0)
+    amb = bank.ambiguities(nats=sc.tracker.bank.ambiguity_nats, distance=sc.tracker.bank.ambiguity_distance)
+    assert all(bool(a) == ambiguous for a in amb), amb
+    if ambiguous:   # the pair are mirror images across the sensor line x = 0
+        i, j, _, _ = amb[0][0]
+        a, b = bank.means[0, i, -1, :2], bank.means[0, j, -1, :2]
+        assert abs(a[0] + b[0]) < 2.0 and abs(a[1] - b[1]) < 2.0
+    else:
+        truth = sim.truth[..., ELEC]
+        err = np.hypot(*(bank.selected_means[:, -1, :2] - truth[:, -1, :2]).T)
+        assert np.all(err < 5.0), err
