@@ -13,6 +13,9 @@ import numpy as np
 
 EXIT_OK = 0
 EXIT_BAD_INPUT = 2
+EXIT_AMBIGUOUS = 3
+EXIT_DEGENERATE = 4
+VERDICT_EXIT = {"observable": EXIT_OK, "ambiguous": EXIT_AMBIGUOUS, "degenerate": EXIT_DEGENERATE}
 
 
 class _Parser(argparse.ArgumentParser):
@@ -220,6 +223,145 @@ def cmd_track(args) -> int:
     return EXIT_OK
 
 
+def cmd_check(args) -> int:
+    import json
+
+    from shipsense.config import load_scenario
+    from shipsense.design.observability import check_scenario
+
+    if args.passages < 1:
+        raise _BadInput(f"--passages must be >= 1, got {args.passages}")
+    sc = load_scenario(args.layout)
+    verdict = check_scenario(sc, passages=args.passages, seed=args.seed, progress=not args.json)
+    if args.json:
+        print(json.dumps(verdict.to_json(), indent=2))
+    else:
+        print(f"{sc.name}: {verdict.verdict.upper()}  ({len(sc.sensors)} sensors, {verdict.passages} passage(s) "
+              f"{'from the prior' if sc.prior is not None else '(the nominal one)'})")
+        print(f"  Fisher information: rank {verdict.fim_rank} of {len(verdict.labels)}, "
+              f"condition number {verdict.fim_condition:.3g} (internal units)")
+        print(f"  closest far-apart passage: chi-square {verdict.min_chi2:.3g} (ambiguous below 25)")
+        for p in verdict.pairs[:5]:
+            a, b = p.passage, p.alternative
+            print(f"  ambiguous pair ({p.source}): start ({a[0]:.0f}, {a[1]:.0f}) m heading "
+                  f"{np.degrees(np.arctan2(a[3], a[2])):.0f} deg  vs  ({b[0]:.0f}, {b[1]:.0f}) m heading "
+                  f"{np.degrees(np.arctan2(b[3], b[2])):.0f} deg; chi-square {p.chi2:.3g}, {p.distance_m:.0f} m apart")
+    return VERDICT_EXIT[verdict.verdict]
+
+
+def _read_candidates(path, z_default):
+    """Candidates from a CSV (x,y[,z]) or a TOML file with a [candidates] table."""
+    import csv
+    import tomllib
+
+    from shipsense.design.placement import grid_candidates
+
+    path = Path(path)
+    if not path.is_file():
+        raise _BadInput(f"--candidates: no such file {path}")
+    if path.suffix == ".csv":
+        with open(path, newline="") as fh:
+            rows = list(csv.DictReader(fh))
+        if not rows or not {"x", "y"} <= set(rows[0]):
+            raise _BadInput(f"{path}: a candidate CSV needs a header with x,y (and optionally z)")
+        try:
+            pts = np.array([[float(r["x"]), float(r["y"]), float(r.get("z") or z_default)] for r in rows])
+        except ValueError as err:
+            raise _BadInput(f"{path}: {err}") from None
+    elif path.suffix == ".toml":
+        try:
+            c = tomllib.loads(path.read_text()).get("candidates")
+        except tomllib.TOMLDecodeError as err:
+            raise _BadInput(f"{path}: not valid TOML ({err})") from None
+        if not isinstance(c, dict) or "polygon" not in c or "spacing" not in c:
+            raise _BadInput(f"{path}: needs a [candidates] table with polygon = [[x, y], ...] and spacing")
+        pts = grid_candidates(c["polygon"], float(c["spacing"]), float(c.get("z", z_default)),
+                              c.get("exclusions", []), float(c.get("min_spacing", 0.0)))
+    else:
+        raise _BadInput(f"--candidates must be a .csv or .toml file, got {path.name!r}")
+    if not np.isfinite(pts).all() or len(pts) == 0:
+        raise _BadInput(f"{path}: candidates must be finite and at least one")
+    return pts
+
+
+def cmd_design(args) -> int:
+    import json
+
+    from shipsense.config import load_scenario, to_toml
+    from shipsense.design.placement import CRITERIA, build_problem, grid_candidates, place, place_with_cuts
+    from shipsense.plotting import plot_design
+    from shipsense.simulator import sample_passages
+    from shipsense.trackers.models import candidate_model
+    from shipsense.tracking import DEFAULT_BANK
+
+    sc = load_scenario(args.scenario)
+    if args.criterion not in CRITERIA:
+        raise _BadInput(f"--criterion must be one of {', '.join(CRITERIA)}, got {args.criterion!r}")
+    template = sc.sensors[0]
+    z = template.position[2]
+    if args.candidates:
+        cands = _read_candidates(args.candidates, z)
+    else:
+        pos = np.array([s.position[:2] for s in sc.sensors])
+        centre = pos.mean(axis=0)
+        half = max(30.0, 1.5 * np.ptp(pos, axis=0).max())
+        box = [(centre[0] - half, centre[1] - half), (centre[0] + half, centre[1] - half),
+               (centre[0] + half, centre[1] + half), (centre[0] - half, centre[1] + half)]
+        cands = grid_candidates(box, 2 * half / 10, z)
+    if not 1 <= args.k <= len(cands):
+        raise _BadInput(f"--k must be between 1 and the number of candidates ({len(cands)}), got {args.k}")
+    model = candidate_model(sc, cands)
+    truth = sample_passages(sc, args.passages if sc.prior is not None else 1, seed=args.seed,
+                            random=sc.prior is not None)
+    thetas = model.to_internal(model.state_from_truth(truth))
+    b = sc.tracker.bank if sc.tracker is not None and sc.tracker.bank is not None else DEFAULT_BANK
+    std = {"x": b.position_std, "y": b.position_std, "vx": b.velocity_std, "vy": b.velocity_std,
+           "mx": b.moment_std, "my": b.moment_std, "mz": b.moment_std, "z": b.z_std, "p": b.p_std}
+    prior_std = model.to_internal(np.array([std[c] for c in model.labels]))
+    bar = _progress(2, f"design: {len(cands)} candidates x {len(thetas)} passages")
+    problem = build_problem(model, thetas, sc.steps, args.k, prior_std)
+    bar.update(1)
+    if args.no_cuts:
+        result = place(problem, args.criterion)
+        from shipsense.design.observability import check_array
+        from shipsense.trackers.models import subset_model
+
+        result.verdict = check_array(subset_model(model, result.chosen), thetas[:4], sc.steps, starts=8)
+    else:
+        result = place_with_cuts(problem, model, thetas, sc.steps, args.criterion)
+    bar.update(1)
+    bar.close()
+    chosen = cands[result.chosen]
+    sensors = [template.model_copy(update={"id": f"D{i + 1}", "position": tuple(map(float, p))})
+               for i, p in enumerate(chosen)]
+    layout = sc.model_copy(update={"sensors": sensors, "name": f"{sc.name}-design-k{args.k}",
+                                   "description": f"{args.criterion}-optimal layout of {args.k} {template.type}s "
+                                                  f"({template.kind}) designed from {sc.name}"})
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(to_toml(layout))
+    report = {"criterion": args.criterion, "k": args.k, "candidates": len(cands), "passages": len(thetas),
+              "method": result.method, "solver_status": result.status, "relaxation_objective": result.relaxation,
+              "upper_bound": result.upper_bound, "design_objective": result.value,
+              "certified_gap": result.certified_gap, "ambiguity_cuts": len(result.cuts),
+              "verdict": result.verdict.verdict if result.verdict is not None else None,
+              "min_chi2": result.verdict.min_chi2 if result.verdict is not None else None,
+              "sensors": [list(map(float, p)) for p in chosen], "seconds": result.seconds}
+    report_path = out.with_suffix(".json")
+    report_path.write_text(json.dumps(report, indent=2) + "\n")
+    plot_design(cands, result.weights, result.chosen, truth, out.with_suffix(".png"),
+                title=f"{args.criterion}-optimal {args.k} of {len(cands)} candidates: {report['verdict']}")
+    print(f"{args.criterion}-optimal design of {args.k} {template.type}s ({template.kind}) from {len(cands)} "
+          f"candidates and {len(thetas)} prior passages ({result.method} relaxation, solver: {result.status})")
+    print(f"  objective {result.value:.4g}; relaxation {result.relaxation:.4g}; certified upper bound "
+          f"{result.upper_bound:.4g}; gap {result.certified_gap:.3g} (no {args.k}-sensor design does better by more)")
+    print(f"  ambiguity cuts added: {len(result.cuts)}; verdict: {report['verdict']}")
+    for sid, p in zip([s.id for s in sensors], chosen):
+        print(f"  {sid}: ({p[0]:.1f}, {p[1]:.1f}, {p[2]:.1f})")
+    print(f"wrote {out} (layout; check it with `shipsense check {out}`), {report_path} and {out.with_suffix('.png')}")
+    return EXIT_OK
+
+
 def cmd_reproduce(args) -> int:
     from shipsense.reproduce import EXPERIMENTS, run
 
@@ -267,6 +409,26 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--seed", type=int, default=None, help="seed of the simulated passage")
     t.add_argument("--random", action="store_true", help="simulate a random passage from the [prior]")
     t.set_defaults(func=cmd_track)
+
+    c = sub.add_parser("check", help="observability and ambiguity verdict of an array (exit 0/3/4)",
+                       description="Exit codes: 0 observable, 3 ambiguous, 4 degenerate, 2 bad input.")
+    c.add_argument("layout", metavar="SCENARIO_OR_LAYOUT", help="a shipped scenario name or a TOML file")
+    c.add_argument("--json", action="store_true", help="print {verdict, min_chi2, pairs, fim_rank, fim_condition}")
+    c.add_argument("--passages", type=int, default=8, help="passages drawn from the [prior] (default 8)")
+    c.add_argument("--seed", type=int, default=0)
+    c.set_defaults(func=cmd_check)
+
+    g = sub.add_parser("design", help="place k sensors (convex relaxation, rounding, ambiguity cuts)")
+    g.add_argument("scenario", help="a shipped scenario name or a TOML file (its first sensor is the template)")
+    g.add_argument("--k", type=int, required=True, help="number of sensors to place")
+    g.add_argument("--criterion", default="D", help="D, A or E (default D)")
+    g.add_argument("--candidates", default=None, help="candidate positions: CSV x,y[,z] or TOML [candidates] "
+                   "polygon, spacing, z, exclusions, min_spacing (default: a grid around the array)")
+    g.add_argument("--out", default="layout.toml", help="layout file to write (default: %(default)s)")
+    g.add_argument("--passages", type=int, default=8, help="prior passages to average over (default 8)")
+    g.add_argument("--seed", type=int, default=0)
+    g.add_argument("--no-cuts", action="store_true", help="skip the ambiguity cuts")
+    g.set_defaults(func=cmd_design)
 
     r = sub.add_parser("reproduce", help="reproduce the reference experiments of S0, S1 or S2")
     r.add_argument("name", metavar="S0|S1|S2")

@@ -377,6 +377,49 @@ class Scenario(_Model):
         return _validate({**self.model_dump(), **changes}, source=f"scenario {self.name!r}")
 
 
+def to_toml(scenario: Scenario) -> str:
+    """The scenario as a TOML document that :func:`load_scenario` reads back to an equal scenario."""
+    import json
+
+    data = scenario.model_dump(mode="json", exclude_none=True)
+
+    def value(v):
+        if isinstance(v, bool):
+            return "true" if v else "false"
+        if isinstance(v, (int, float)):
+            return repr(v)
+        if isinstance(v, str):
+            return json.dumps(v)
+        if isinstance(v, list):
+            return "[" + ", ".join(value(x) for x in v) + "]"
+        raise TypeError(f"cannot write {type(v).__name__} to TOML")
+
+    lines = []
+
+    def table(name, d, array=False):
+        if name:
+            lines.append("")
+            lines.append(f"[[{name}]]" if array else f"[{name}]")
+        subs = []
+        for k, v in d.items():
+            if isinstance(v, dict):
+                subs.append((k, v, False))
+            elif isinstance(v, list) and v and isinstance(v[0], dict):
+                subs.append((k, v, True))
+            else:
+                lines.append(f"{k} = {value(v)}")
+        for k, v, is_array in subs:
+            full = f"{name}.{k}" if name else k
+            if is_array:
+                for item in v:
+                    table(full, item, array=True)
+            else:
+                table(full, v)
+
+    table("", data)
+    return "\n".join(lines) + "\n"
+
+
 def _format_error(err: ValidationError, source: str) -> str:
     lines = []
     for e in err.errors():

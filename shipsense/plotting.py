@@ -124,3 +124,29 @@ def plot_track(track, times, path, truth=None, title=None, ellipses=8):
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def plot_design(candidates, weights, chosen, truth, path, title=""):
+    """Candidates coloured by relaxation weight, the chosen sensors, and the design passages."""
+    fig, ax = plt.subplots(figsize=(7.5, 6.5), layout="constrained")
+    for r in range(len(truth)):
+        t = np.linspace(0, 60, 50)
+        xy = truth[r, :2] + t[:, None] * truth[r, 2:4]
+        ax.plot(xy[:, 0], xy[:, 1], "-", color="0.7", lw=0.8, label="design passages" if r == 0 else None)
+    sc = ax.scatter(candidates[:, 0], candidates[:, 1], c=weights, cmap="viridis", vmin=0, vmax=1, s=30,
+                    edgecolor="k", linewidth=0.3)
+    ax.scatter(candidates[chosen, 0], candidates[chosen, 1], s=160, facecolor="none", edgecolor="tab:red", lw=2,
+               label="chosen")
+    fig.colorbar(sc, ax=ax, label="relaxation weight w_i")
+    pad = 0.2 * np.ptp(candidates[:, :2], axis=0).max() + 5
+    ax.set_xlim(candidates[:, 0].min() - pad, candidates[:, 0].max() + pad)
+    ax.set_ylim(candidates[:, 1].min() - pad, candidates[:, 1].max() + pad)
+    ax.set_aspect("equal", adjustable="box")
+    ax.set_xlabel("x east [m]")
+    ax.set_ylabel("y north [m]")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    ax.set_title(title, fontsize=10)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

@@ -143,6 +143,17 @@ def _passages(sc: Scenario, runs: int, random: bool, streams) -> np.ndarray:
     return x0
 
 
+def sample_passages(scenario, runs: int, seed: int = 0, random: bool = True) -> np.ndarray:
+    """Initial truth states (runs, 9) of passages: drawn from the scenario's prior (or the nominal one).
+
+    Columns :data:`STATE_LABELS`; the same draws :func:`simulate` makes for ``seed``.
+    """
+    sc = load_scenario(scenario)
+    seeds = np.random.SeedSequence(seed).spawn(len(_STREAMS))
+    streams = {name: np.random.default_rng(s) for name, s in zip(_STREAMS, seeds)}
+    return _passages(sc, runs, random, streams)
+
+
 def _keel_dipole(velocity, p):
     """Horizontal electric dipole ``p v/|v|`` along the keel, (..., 3)."""
     speed = np.linalg.norm(velocity, axis=-1, keepdims=True)

@@ -97,3 +97,29 @@ def test_reproduce_writes_the_documented_summary_keys(tmp_path):
     assert set(s2["outliers"]["0.1"]) == {"ukf_mrmse_r_m", "huber_ukf_mrmse_r_m"}
     assert {"magnetic_only_mrmse_r_m", "fused_mrmse_r_m"} <= set(s2["seismic_low_snr"])
     assert main(["reproduce", "S9"]) == 2
+
+
+def test_check_exit_codes_and_json(capsys):
+    import json
+
+    assert main(["check", "S1-P2", "--json", "--passages", "2"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert set(data) >= {"verdict", "min_chi2", "pairs", "fim_rank", "fim_condition"}
+    assert data["verdict"] == "observable"
+    assert main(["check", "S1-P1", "--json", "--passages", "2"]) == 3
+    data = json.loads(capsys.readouterr().out)
+    assert data["verdict"] == "ambiguous" and data["pairs"]
+    assert main(["check", "no-such-layout.toml"]) == 2
+
+
+def test_design_writes_a_layout_that_check_accepts(tmp_path, capsys):
+    out = tmp_path / "layout.toml"
+    assert main(["design", "S1-P2", "--k", "3", "--passages", "4", "--out", str(out)]) == 0
+    assert out.is_file() and out.with_suffix(".png").is_file()
+    import json
+
+    report = json.loads(out.with_suffix(".json").read_text())
+    assert report["certified_gap"] >= 0 and report["verdict"] == "observable" and len(report["sensors"]) == 3
+    assert main(["check", str(out), "--passages", "2"]) == 0
+    assert main(["design", "S1-P2", "--k", "0"]) == 2
+    assert main(["design", "S1-P2", "--k", "3", "--criterion", "Z"]) == 2

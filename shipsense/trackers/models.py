@@ -99,6 +99,11 @@ class FieldModel:
     x_scale = property(lambda self: self._d["x_scale"], doc="SI value of one internal unit per state component.")
     y_scale = property(lambda self: self._d["y_scale"], doc="SI value of one internal unit per channel.")
 
+    def state_from_truth(self, truth):
+        """This model's state (SI) from simulation truth columns ``x, y, vx, vy, z, mx, my, mz, p`` (..., 9)."""
+        cols = {"x": 0, "y": 1, "vx": 2, "vy": 3, "z": 4, "mx": 5, "my": 6, "mz": 7, "p": 8}
+        return np.asarray(truth)[..., [cols[c] for c in self.labels]]
+
     def to_internal(self, x_si):
         return np.asarray(x_si, dtype=float) / self.x_scale
 
@@ -184,6 +189,40 @@ class LinearModel:
         return np.asarray(a) - np.asarray(b)
 
 
+def subset_array(array: SensorArray, keep) -> SensorArray:
+    """The sensors ``keep`` (indices) of an array, in that order."""
+    keep = np.asarray(keep, dtype=int)
+    return SensorArray(
+        ids=[array.ids[i] for i in keep], types=[array.types[i] for i in keep],
+        kinds=[array.kinds[i] for i in keep], positions=array.positions[keep],
+        orientations=array.orientations[keep], medium=array.medium, earth_direction=array.earth_direction,
+        electric_method=array.electric_method,
+    )
+
+
+def _channel_columns(array: SensorArray, keep):
+    return np.concatenate([np.flatnonzero(array.channel_sensor == i) for i in keep])
+
+
+def subset_model(model: FieldModel, keep) -> FieldModel:
+    """The model of the sensors ``keep`` (indices) of ``model``'s array (same motion model and units)."""
+    keep = np.asarray(keep, dtype=int)
+    return FieldModel(subset_array(model.array, keep), model.period, model.Q,
+                      model.R[_channel_columns(model.array, keep)], source_z=model.source_z,
+                      moment_unit=model.moment_unit)
+
+
+def _process_noise(sc, pn, types, period):
+    n_params = 3 * ("magnetometer" in types) + 2 * ("electrode" in types)
+    if pn.model == "identity":
+        return q_identity(n_params, pn.sigma_q)
+    if pn.model == "diagonal":
+        return np.diag(np.asarray(pn.q_diag, dtype=float)[: 4 + n_params])
+    default = [0.6] * (3 * ("magnetometer" in types)) + [0.0, 1e-3] * ("electrode" in types)
+    param_var = pn.param_var if pn.param_var is not None and len(pn.param_var) == n_params else default
+    return q_dwna(period, pn.sigma_a, param_var)
+
+
 def model_from_scenario(scenario, sensors=None, *, moment_unit=1e6, process_noise=None):
     """The tracker model of a scenario (all sensors, or the ids in ``sensors``).
 
@@ -199,24 +238,29 @@ def model_from_scenario(scenario, sensors=None, *, moment_unit=1e6, process_nois
     sc = load_scenario(scenario)
     array = sc.array()
     keep = np.arange(len(array.ids)) if sensors is None else np.array([array.ids.index(s) for s in sensors])
-    std = sc.channel_std
-    sub = SensorArray(
-        ids=[array.ids[i] for i in keep], types=[array.types[i] for i in keep],
-        kinds=[array.kinds[i] for i in keep], positions=array.positions[keep],
-        orientations=array.orientations[keep], medium=array.medium, earth_direction=array.earth_direction,
-    )
-    cols = np.concatenate([np.flatnonzero(array.channel_sensor == i) for i in keep])
+    sub = subset_array(array, keep)
     y_scale = np.array([CHANNEL_UNIT[sub.types[s]] for s in sub.channel_sensor])
-    R = (std[cols] / y_scale) ** 2
+    R = (sc.channel_std[_channel_columns(array, keep)] / y_scale) ** 2
     pn = process_noise or (sc.tracker.process_noise if sc.tracker is not None else ProcessNoiseConfig())
-    types = set(sub.types)
-    n_params = 3 * ("magnetometer" in types) + 2 * ("electrode" in types)
-    if pn.model == "identity":
-        Q = q_identity(n_params, pn.sigma_q)
-    elif pn.model == "diagonal":
-        Q = np.diag(np.asarray(pn.q_diag, dtype=float)[: 4 + n_params])
-    else:
-        default = [0.6] * (3 * ("magnetometer" in types)) + [0.0, 1e-3] * ("electrode" in types)
-        param_var = pn.param_var if pn.param_var is not None and len(pn.param_var) == n_params else default
-        Q = q_dwna(sc.period, pn.sigma_a, param_var)
+    Q = _process_noise(sc, pn, set(sub.types), sc.period)
     return FieldModel(sub, sc.period, Q, R, source_z=sc.passage.z, moment_unit=moment_unit)
+
+
+def candidate_model(scenario, positions, template: int = 0) -> FieldModel:
+    """A model whose sensors are copies of the scenario's sensor ``template`` at ``positions`` (N, 3).
+
+    Used by placement: one candidate per sensor, so per-sensor Fisher
+    information is per-candidate information.
+    """
+    from shipsense.config import load_scenario
+
+    sc = load_scenario(scenario)
+    base = model_from_scenario(sc, sensors=[sc.sensors[template].id])
+    positions = np.asarray(positions, dtype=float).reshape(-1, 3)
+    N = len(positions)
+    a = base.array
+    array = SensorArray(ids=[f"C{i}" for i in range(N)], types=[a.types[0]] * N, kinds=[a.kinds[0]] * N,
+                        positions=positions, orientations=np.repeat(a.orientations[:1], N, axis=0),
+                        medium=a.medium, earth_direction=a.earth_direction)
+    return FieldModel(array, base.period, base.Q, np.tile(base.R, N), source_z=base.source_z,
+                      moment_unit=base.moment_unit)

@@ -1,0 +1,142 @@
+r"""Fisher information of a passage, Cramér–Rao bounds, the posterior CRLB and bound maps.
+
+A passage is its initial state :math:`\theta = x_0` (position, velocity and
+the model's parameters, in the tracker model's internal units).  With the
+deterministic constant-velocity motion :math:`x_k = A^k \theta`,
+
+.. math::  J(\theta) = \sum_k \sum_j G_{jk}^T R_j^{-1} G_{jk}, \qquad
+           G_{jk} = \frac{\partial h_j(x_k)}{\partial x}\, A^k,
+
+additive over sensors (and channels), which is what makes sensor selection
+convex.  The CRLB is :math:`J^{-1}`.  The posterior CRLB of the stochastic
+recursion (Tichavský, Muravchik & Nehorai, IEEE TSP 1998) for additive
+Gaussian noise and linear dynamics is
+
+.. math::  J_{k+1} = (Q + A J_k^{-1} A^T)^{-1} + \mathbb{E}[H_{k+1}^T R^{-1} H_{k+1}],
+
+the expectation taken over true trajectories (Monte Carlo over the given ones).
+Jacobians are the models' analytic ones.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def _powers(A, K):
+    """A^k for k = 0..K-1, shape (K, n, n)."""
+    out = np.empty((K,) + A.shape)
+    out[0] = np.eye(A.shape[0])
+    for k in range(1, K):
+        out[k] = A @ out[k - 1]
+    return out
+
+
+def trajectory(model, theta, steps):
+    """States ``A^k theta`` (..., K, n) of passages with initial states ``theta`` (..., n) (internal units)."""
+    return np.einsum("kij,...j->...ki", _powers(model.A, steps), np.asarray(theta, dtype=float))
+
+
+def passage_fim(model, theta, steps, per_sensor=False, stride=1):
+    """Fisher information of passages about their initial state (internal units).
+
+    Parameters
+    ----------
+    model : FieldModel (or any model with ``A``, ``H``, ``R``)
+    theta : ndarray, shape (..., n)
+        Initial states (internal units).
+    steps : int
+        Samples in the passage.
+    per_sensor : bool
+        Return one matrix per sensor, (..., S, n, n), instead of the sum.
+    stride : int
+        Use every ``stride``-th sample (and weight it by ``stride``): a cheaper
+        approximation for long passages.
+
+    Returns
+    -------
+    J : ndarray, shape (..., n, n) or (..., S, n, n)
+    """
+    Ak = _powers(model.A, steps)[::stride]
+    X = np.einsum("kij,...j->...ki", Ak, np.asarray(theta, dtype=float))
+    G = model.H(X) @ Ak                                        # (..., K, m, n)
+    W = G / np.sqrt(model.R)[:, None]
+    if not per_sensor:
+        return stride * np.einsum("...kcn,...kcp->...np", W, W)
+    per_channel = stride * np.einsum("...kcn,...kcp->...cnp", W, W)   # (..., m, n, n)
+    sensor = model.array.channel_sensor
+    S = len(model.array.ids)
+    onehot = (sensor[None, :] == np.arange(S)[:, None]).astype(float)  # (S, m)
+    return np.einsum("sc,...cnp->...snp", onehot, per_channel)
+
+
+def crlb(J):
+    """Cramér–Rao bound ``J^-1`` (pseudo-inverse where J is singular)."""
+    return np.linalg.pinv(J, hermitian=True)
+
+
+def pcrlb(model, states, J0):
+    """Posterior CRLB information matrices over time (Tichavský et al. 1998).
+
+    Parameters
+    ----------
+    model : model with ``A``, ``Q``, ``H``, ``R`` (internal units)
+    states : ndarray, shape (R, K, n)
+        True state trajectories (internal units) over which the measurement
+        information is averaged.
+    J0 : ndarray, shape (n, n)
+        Prior information at step 0 (inverse of the initial covariance).
+
+    Returns
+    -------
+    bounds : ndarray, shape (K, n, n)
+        The bound ``J_k^-1`` on the error covariance at every step (step 0
+        includes the first measurement, as the filters' first update does).
+    """
+    states = np.asarray(states, dtype=float)
+    H = model.H(states)                                        # (R, K, m, n)
+    Hw = H / np.sqrt(model.R)[:, None]
+    info = np.einsum("rkcn,rkcp->knp", Hw, Hw) / states.shape[0]
+    A, Q = model.A, model.Q
+    K = states.shape[1]
+    out = np.empty((K,) + A.shape)
+    J = J0 + info[0]
+    out[0] = np.linalg.inv(J)
+    for k in range(1, K):
+        J = np.linalg.inv(Q + A @ out[k - 1] @ A.T) + info[k]
+        out[k] = np.linalg.inv(J)
+    return out
+
+
+def bound_map(model, xs, ys, velocity, params, steps=21):
+    """Position bound over a grid of target positions.
+
+    For each grid point, a passage segment of ``steps`` samples with the given
+    velocity (m/s) and parameters (internal units: moment or (z, p)) centred
+    on the point; the value is ``sqrt(trace)`` of the position CRLB at the
+    centre sample, in metres (inf where the information is singular).
+
+    Returns
+    -------
+    bound : ndarray, shape (len(ys), len(xs))
+    per_sensor : ndarray, shape (S, len(ys), len(xs))
+        The bound with only that sensor.
+    """
+    X, Y = np.meshgrid(np.asarray(xs, float), np.asarray(ys, float))
+    half = (steps - 1) / 2 * model.period
+    v = np.asarray(velocity, float)
+    theta = np.zeros(X.shape + (model.n,))
+    theta[..., 0] = X - half * v[0]
+    theta[..., 1] = Y - half * v[1]
+    theta[..., 2:4] = v
+    theta[..., 4:] = params
+    Js = passage_fim(model, theta, steps, per_sensor=True)     # (ny, nx, S, n, n)
+    centre = _powers(model.A, steps)[(steps - 1) // 2]
+
+    def pos_bound(J):
+        C = centre @ crlb(J) @ centre.T
+        val = np.sqrt(np.clip(C[..., 0, 0] + C[..., 1, 1], 0, None))
+        rank = np.linalg.matrix_rank(J, hermitian=True)
+        return np.where(rank < model.n, np.inf, val)
+
+    return pos_bound(Js.sum(axis=-3)), np.moveaxis(pos_bound(Js), -1, 0)

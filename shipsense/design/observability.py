@@ -1,0 +1,282 @@
+r"""Observability and ambiguity of an array: local rank and global mirror / multi-start search.
+
+Local: rank and condition number of the passage Fisher information
+:math:`J(\theta)` (internal units) for passages drawn from a prior.  Global: a
+*different* passage :math:`\theta'`, far from :math:`\theta`, whose
+predictions match,
+
+.. math::  d(\theta, \theta') = \sum_k \| h(x_k(\theta)) - h(x_k(\theta')) \|^2_{R^{-1}}
+
+small (chi-square units).  The Fisher information can be full rank while the
+mirror passage gives identical measurements (collinear envelope sensors), so
+the search is global:
+
+1. **symmetry seeds**: the passage mirrored across vertical planes through
+   every pair of sensors and through each sensor at several angles, with the
+   moment transformed correctly -- axial for the magnetic moment
+   (:math:`m' = \det(M) M m`), polar for the electric dipole (it follows the
+   mirrored keel) -- then refined by least squares;
+2. **multi-start least squares**: batched Levenberg–Marquardt from random
+   passages far from :math:`\theta`.
+
+Far apart means a mean distance between the two tracks above ``far`` metres.
+The verdict uses the actual measurement model, so identical layouts can
+differ by measurement kind (vector vs total-field magnetometers on a line).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from shipsense.design.fisher import _powers, passage_fim
+
+DEFAULT_CHI2 = 25.0
+"""A far-apart passage closer than this (chi-square units, ~5 sigma) is an ambiguity."""
+DEFAULT_FAR = 20.0
+"""Tracks farther apart than this (mean distance, m) count as different passages."""
+DEGENERATE_CONDITION = 1e12
+
+
+@dataclass(frozen=True)
+class Ambiguity:
+    """A pair of far-apart passages with nearly identical measurements (SI states)."""
+
+    passage: np.ndarray
+    alternative: np.ndarray
+    chi2: float
+    distance_m: float
+    source: str
+
+    def to_json(self, labels):
+        return {"passage": dict(zip(labels, map(float, self.passage))),
+                "alternative": dict(zip(labels, map(float, self.alternative))),
+                "chi2": float(self.chi2), "distance_m": float(self.distance_m), "source": self.source}
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """The outcome of :func:`check_array`."""
+
+    verdict: str
+    min_chi2: float
+    pairs: list = field(default_factory=list)
+    fim_rank: int = 0
+    fim_condition: float = float("inf")
+    passages: int = 0
+    labels: tuple = ()
+
+    def to_json(self):
+        return {"verdict": self.verdict, "min_chi2": _finite_or_none(self.min_chi2),
+                "pairs": [p.to_json(self.labels) for p in self.pairs], "fim_rank": int(self.fim_rank),
+                "fim_condition": _finite_or_none(self.fim_condition), "passages": self.passages}
+
+
+def _finite_or_none(x):
+    return float(x) if np.isfinite(x) else None
+
+
+# -- discrepancy and least squares ------------------------------------------------
+def _whitened(model, y, ref):
+    d = model.residual(y, ref)
+    return d / np.sqrt(model.R)
+
+
+def discrepancy(model, theta, theta_alt, steps, stride=1):
+    """``d(theta, theta')`` in chi-square units, batched over leading axes (internal units)."""
+    Ak = _powers(model.A, steps)[::stride]
+    x = np.einsum("kij,...j->...ki", Ak, theta)
+    xa = np.einsum("kij,...j->...ki", Ak, theta_alt)
+    r = _whitened(model, model.h(xa), model.h(x))
+    return stride * np.sum(r * r, axis=(-1, -2))
+
+
+def track_distance(model, theta, theta_alt, steps):
+    """Mean distance (m) between the positions of two passages over the passage."""
+    Ak = _powers(model.A, steps)
+    p = np.einsum("kij,...j->...ki", Ak[:, :2], theta)
+    pa = np.einsum("kij,...j->...ki", Ak[:, :2], theta_alt)
+    return np.linalg.norm(p - pa, axis=-1).mean(axis=-1)
+
+
+def fit_passages(model, y, theta_init, steps, stride=1, iterations=40):
+    """Batched Levenberg–Marquardt fit of passages to measurements (internal units).
+
+    ``y`` (B or 1, K', m) are the measurements at steps ``0, stride, 2 stride, ...``;
+    ``theta_init`` (B, n).  Returns the fitted initial states (B, n) and their
+    chi-square over the fitted samples.
+    """
+    Ak = _powers(model.A, steps)[::stride]
+    w = 1.0 / np.sqrt(model.R)
+    theta = np.array(theta_init, dtype=float)
+    B, n = theta.shape
+
+    def residual(th):
+        X = np.einsum("kij,bj->bki", Ak, th)
+        return (model.residual(model.h(X), y) * w).reshape(B, -1), X
+
+    r, X = residual(theta)
+    cost = np.sum(r * r, axis=-1)
+    lam = np.full(B, 1e-2)
+    for _ in range(iterations):
+        Jac = (model.H(X) @ Ak * w[:, None]).reshape(B, -1, n)
+        JtJ = np.swapaxes(Jac, -1, -2) @ Jac
+        g = np.einsum("bmn,bm->bn", Jac, r)
+        D = np.diagonal(JtJ, axis1=-2, axis2=-1)
+        A = JtJ + lam[:, None, None] * (np.eye(n) * (D + 1e-12)[:, None, :])
+        step = -np.linalg.solve(A, g[..., None])[..., 0]
+        trial = theta + step
+        r_t, X_t = residual(trial)
+        cost_t = np.sum(r_t * r_t, axis=-1)
+        better = np.isfinite(cost_t) & (cost_t < cost)
+        theta = np.where(better[:, None], trial, theta)
+        r = np.where(better[:, None], r_t, r)
+        X = np.where(better[:, None, None], X_t, X)
+        cost = np.where(better, cost_t, cost)
+        lam = np.clip(np.where(better, lam / 3.0, lam * 5.0), 1e-9, 1e9)
+    return theta, cost
+
+
+def lm_fit(model, theta_ref, theta_init, steps, stride=2, iterations=40):
+    """Passages (B, n) whose predictions best match those of ``theta_ref``; returns ``(theta, chi2)``
+    with chi2 on the full passage."""
+    Ak = _powers(model.A, steps)[::stride]
+    y_ref = model.h(np.einsum("kij,j->ki", Ak, theta_ref))[None]
+    theta, _ = fit_passages(model, y_ref, theta_init, steps, stride, iterations)
+    return theta, discrepancy(model, theta_ref, theta, steps)
+
+
+# -- candidates -------------------------------------------------------------------
+def mirror(model, theta, point, direction):
+    """Passages mirrored across the vertical plane through ``point`` along ``direction`` (internal units)."""
+    u = np.asarray(direction, float) / np.linalg.norm(direction)
+    M2 = 2.0 * np.outer(u, u) - np.eye(2)
+    c = np.asarray(point, float)[:2]
+    out = np.array(theta, dtype=float)
+    out[..., 0:2] = c + (out[..., 0:2] - c) @ M2.T
+    out[..., 2:4] = out[..., 2:4] @ M2.T
+    labels = model.labels
+    if "mx" in labels:
+        i = labels.index("mx")
+        M = np.eye(3)
+        M[:2, :2] = M2
+        out[..., i:i + 3] = -(out[..., i:i + 3] @ M.T)        # axial: det(M) M m with det(M) = -1
+    return out                                                # z, p unchanged; the keel follows v
+
+
+def mirror_candidates(model, theta, angles=6):
+    """Mirror images of ``theta`` across lines through sensor pairs and through each sensor at ``angles`` angles."""
+    pos = np.unique(np.round(model.array.positions[:, :2], 6), axis=0)
+    lines = []
+    for i in range(len(pos)):
+        for j in range(i + 1, len(pos)):
+            lines.append((pos[i], pos[j] - pos[i]))
+        for a in np.arange(angles) * np.pi / angles:
+            lines.append((pos[i], np.array([np.cos(a), np.sin(a)])))
+    return np.stack([mirror(model, theta, c, d) for c, d in lines])
+
+
+def _random_starts(model, theta, count, far, rng):
+    """Random passages around the array, each at least ``far`` from theta's start."""
+    n = model.n
+    starts = np.repeat(theta[None], count, axis=0)
+    centre = model.array.positions[:, :2].mean(axis=0)
+    r0 = max(np.linalg.norm(theta[:2] - centre), 2 * far)
+    ang = rng.uniform(0, 2 * np.pi, count)
+    rad = r0 * rng.uniform(0.5, 1.5, count)
+    starts[:, 0:2] = centre + rad[:, None] * np.stack([np.cos(ang), np.sin(ang)], -1)
+    speed = np.linalg.norm(theta[2:4]) * rng.uniform(0.7, 1.3, count)
+    head = np.arctan2(centre[1] - starts[:, 1], centre[0] - starts[:, 0]) + rng.uniform(-0.5, 0.5, count)
+    starts[:, 2:4] = speed[:, None] * np.stack([np.cos(head), np.sin(head)], -1)
+    labels = model.labels
+    if "mx" in labels:
+        i = labels.index("mx")
+        mag = np.linalg.norm(theta[i:i + 3]) * np.exp(rng.uniform(-1, 1, count))
+        d = rng.standard_normal((count, 3))
+        starts[:, i:i + 3] = mag[:, None] * d / np.linalg.norm(d, axis=-1, keepdims=True)
+    if "p" in labels:
+        starts[:, labels.index("p")] *= np.exp(rng.uniform(-0.7, 0.7, count))
+    assert starts.shape[1] == n
+    return starts
+
+
+def ambiguity_search(model, theta, steps, *, far=DEFAULT_FAR, starts=24, seed=0, refine=True):
+    """Far-apart passages that best match ``theta`` (internal units), best first.
+
+    Returns a list of ``(theta_alt, chi2, distance_m, source)``.
+    """
+    rng = np.random.default_rng(seed)
+    cands = [("mirror", mirror_candidates(model, theta))]
+    if starts:
+        cands.append(("search", _random_starts(model, theta, starts, far, rng)))
+    found = []
+    for source, init in cands:
+        if refine:
+            alt, chi2 = lm_fit(model, theta, init, steps)
+            direct = discrepancy(model, theta, init, steps)     # the exact mirror may beat the refinement
+            use_init = direct <= chi2
+            alt = np.where(use_init[:, None], init, alt)
+            chi2 = np.minimum(direct, chi2)
+        else:
+            alt, chi2 = init, discrepancy(model, theta, init, steps)
+        dist = track_distance(model, theta, alt, steps)
+        for a, c, d in zip(alt, chi2, dist):
+            if d > far and np.isfinite(c):
+                found.append((a, float(c), float(d), source))
+    found.sort(key=lambda t: t[1])
+    return found
+
+
+def check_array(model, thetas, steps, *, far=DEFAULT_FAR, chi2_threshold=DEFAULT_CHI2, starts=24, seed=0,
+                progress=False):
+    """Verdict of an array (through its model) on passages ``thetas`` (P, n) (internal units).
+
+    ``degenerate`` if the Fisher information of some passage is numerically
+    rank deficient or its condition number (internal units) exceeds 1e12; else ``ambiguous`` if some passage
+    has a far-apart alternative within ``chi2_threshold``; else ``observable``.
+    """
+    thetas = np.atleast_2d(np.asarray(thetas, dtype=float))
+    J = passage_fim(model, thetas, steps, stride=2)
+    w = np.linalg.eigvalsh(J)
+    top = w.max(axis=-1, keepdims=True)
+    rank = int((w > model.n * np.finfo(float).eps * top).sum(axis=-1).min())   # numerical rank
+    cond = float(np.max(w[:, -1] / np.maximum(w[:, 0], 1e-300)))
+    pairs, best = [], np.inf
+    iterator = range(len(thetas))
+    if progress:
+        from tqdm import tqdm
+
+        iterator = tqdm(iterator, desc="ambiguity search", unit="passage", leave=False)
+    for i in iterator:
+        found = ambiguity_search(model, thetas[i], steps, far=far, starts=starts, seed=seed + i)
+        if found:
+            best = min(best, found[0][1])
+            for alt, chi2, dist, source in found:
+                if chi2 < chi2_threshold:
+                    pairs.append(_ambiguity(model, thetas[i], alt, chi2, dist, source))
+                    break                                   # the best pair per passage
+    if rank < model.n or cond > DEGENERATE_CONDITION:
+        verdict = "degenerate"
+    elif best < chi2_threshold:
+        verdict = "ambiguous"
+    else:
+        verdict = "observable"
+    return Verdict(verdict, best, pairs, rank, cond, len(thetas), tuple(model.labels))
+
+
+def _ambiguity(model, theta, alt, chi2, dist, source):
+    return Ambiguity(model.to_si(theta), model.to_si(alt), chi2, dist, source)
+
+
+def check_scenario(scenario, passages=8, seed=0, progress=False, **kwargs):
+    """Verdict for a scenario's array: passages from its ``[prior]`` (or its nominal passage)."""
+    from shipsense.config import load_scenario
+    from shipsense.simulator import sample_passages
+    from shipsense.trackers.models import model_from_scenario
+
+    sc = load_scenario(scenario)
+    model = model_from_scenario(sc)
+    truth = sample_passages(sc, passages if sc.prior is not None else 1, seed=seed, random=sc.prior is not None)
+    thetas = model.to_internal(model.state_from_truth(truth))
+    return check_array(model, thetas, sc.steps, seed=seed, progress=progress, **kwargs)

@@ -1,0 +1,66 @@
+"""Fisher information and bounds against independent computations."""
+
+import numpy as np
+import pytest
+
+from shipsense import load_scenario
+from shipsense.design.fisher import bound_map, crlb, passage_fim, pcrlb, trajectory
+from shipsense.design.observability import fit_passages
+from shipsense.trackers.models import LinearModel, model_from_scenario
+
+
+def test_fim_matches_the_covariance_of_maximum_likelihood_estimates():
+    """Well-conditioned case (two vector magnetometers, a close passage): Cov(theta_ML) ~ J^-1."""
+    sc = load_scenario("S2")
+    model = model_from_scenario(sc, sensors=["M1", "M2"])
+    steps = 40
+    theta = model.to_internal(np.array([30.0, 25.0, -2.0, -2.0, 1e4, 1e4, 1e4]))
+    J = passage_fim(model, theta, steps)
+    C = crlb(J)
+    rng = np.random.default_rng(0)
+    B = 400
+    clean = model.h(trajectory(model, theta, steps))
+    y = clean + rng.standard_normal((B,) + clean.shape) * np.sqrt(model.R)
+    est, chi2 = fit_passages(model, y, np.repeat(theta[None], B, axis=0), steps)
+    assert np.median(chi2) == pytest.approx(steps * model.m - model.n, rel=0.15)
+    emp = np.cov(est.T)
+    d = np.sqrt(np.diag(C))
+    # variances within 25 % and correlations within 0.1 (400 samples)
+    np.testing.assert_allclose(np.diag(emp), np.diag(C), rtol=0.25)
+    np.testing.assert_allclose(emp / np.outer(d, d), C / np.outer(d, d), atol=0.1)
+
+
+def test_fim_is_additive_over_sensors():
+    model = model_from_scenario("S1-P2")
+    theta = model.to_internal(np.array([-120.0, -60.0, 8.0, 5.0, -6.8, 100.0]))
+    per = passage_fim(model, theta, 101, per_sensor=True)
+    assert per.shape == (3, 6, 6)
+    np.testing.assert_allclose(per.sum(axis=0), passage_fim(model, theta, 101), rtol=1e-12)
+
+
+def test_pcrlb_equals_the_kalman_covariance_for_a_linear_gaussian_model():
+    rng = np.random.default_rng(1)
+    A = np.eye(4)
+    A[0, 2] = A[1, 3] = 0.5
+    Q = 0.05 * np.eye(4)
+    C = rng.standard_normal((3, 4))
+    R = np.array([0.5, 1.0, 2.0])
+    model = LinearModel(A, Q, C, R)
+    P0 = np.diag([4.0, 4.0, 1.0, 1.0])
+    bounds = pcrlb(model, rng.standard_normal((5, 25, 4)), np.linalg.inv(P0))
+    P = P0.copy()
+    for k in range(25):
+        if k:
+            P = A @ P @ A.T + Q
+        S = C @ P @ C.T + np.diag(R)
+        P = P - P @ C.T @ np.linalg.solve(S, C @ P)
+        np.testing.assert_allclose(bounds[k], P, rtol=1e-9, atol=1e-12)
+
+
+def test_bound_map_is_smaller_inside_the_array_than_far_out():
+    model = model_from_scenario("S1-P2")
+    xs = np.array([0.0, 150.0])
+    bound, per = bound_map(model, xs, [0.0], velocity=[5.0, 0.0], params=[-6.8, 100.0])
+    assert bound.shape == (1, 2) and per.shape == (3, 1, 2)
+    assert np.isfinite(bound).all() and bound[0, 0] < bound[0, 1]
+    assert np.all(per >= bound[None] - 1e-12)   # one sensor alone is never better than all three

@@ -1,0 +1,42 @@
+"""Observability and ambiguity verdicts follow the measurement model."""
+
+import numpy as np
+import pytest
+
+from shipsense import load_scenario
+from shipsense.design.observability import check_scenario, discrepancy, mirror
+from shipsense.trackers.models import model_from_scenario
+
+
+def test_collinear_envelope_array_is_ambiguous_with_mirror_pairs():
+    v = check_scenario("S1-P1", passages=2)
+    assert v.verdict == "ambiguous" and v.min_chi2 < 1e-6 and v.fim_rank == 6   # full rank, yet ambiguous
+    for p in v.pairs:   # the alternative is the mirror image across the sensor line x = 0
+        assert p.alternative[0] == pytest.approx(-p.passage[0], abs=1e-6)
+        assert p.alternative[1] == pytest.approx(p.passage[1], abs=1e-6)
+
+
+def test_triangle_envelope_array_is_observable():
+    v = check_scenario("S1-P2", passages=2)
+    assert v.verdict == "observable" and v.min_chi2 > 25 and not v.pairs
+
+
+@pytest.mark.parametrize("kind, verdict", [("vector", "observable"), ("magnitude", "ambiguous")])
+def test_magnetometers_on_a_line_depend_on_the_measurement_kind(kind, verdict):
+    sc = load_scenario("S2-field-trial")
+    mags = [s.model_copy(update={"kind": kind}) for s in sc.sensors if s.type == "magnetometer"]
+    assert len(mags) == 3 and len({s.position[1] for s in mags}) == 1   # three on the line y = 0
+    v = check_scenario(sc.model_copy(update={"sensors": mags}), passages=2)
+    assert v.verdict == verdict, (v.verdict, v.min_chi2)
+
+
+def test_mirror_transform_is_exact_for_envelopes_and_axial_for_moments():
+    model = model_from_scenario("S1-P1")
+    theta = model.to_internal(np.array([-150.0, -80.0, 8.0, 4.0, -6.8, 100.0]))
+    alt = mirror(model, theta, [0.0, 0.0], [0.0, 1.0])
+    assert discrepancy(model, theta, alt, 101) < 1e-12 * discrepancy(model, theta, theta * 1.01, 101)
+    mag = model_from_scenario("S0")
+    th = np.array([-140.0, -70.0, 6.0, 6.0, 80.0, 20.0, 40.0])
+    m = mirror(mag, th, [0.0, 0.0], [1.0, 0.0])       # across y = 0: (x, -y), m -> (-mx, my, -mz)
+    np.testing.assert_allclose(m[:4], [-140.0, 70.0, 6.0, -6.0])
+    np.testing.assert_allclose(m[4:], [-80.0, 20.0, -40.0])

@@ -1,0 +1,79 @@
+"""Placement: the certified bound, rounding, the first-order path, cuts and candidate grids."""
+
+import numpy as np
+import pytest
+
+from shipsense import load_scenario
+from shipsense.design import placement as pl
+from shipsense.design.observability import check_array
+from shipsense.simulator import sample_passages
+from shipsense.trackers.models import candidate_model, subset_model
+
+
+@pytest.fixture(scope="module")
+def small():
+    sc = load_scenario("S1-P2")
+    cands = pl.grid_candidates([(-20, -20), (20, -20), (20, 20), (-20, 20)], 20.0, -15.0)   # 3 x 3 = 9
+    cands = np.vstack([cands, [[5.0, 5.0, -15.0]]])
+    model = candidate_model(sc, cands)
+    thetas = model.to_internal(model.state_from_truth(sample_passages(sc, 4, seed=3)))
+    prior = model.to_internal(np.array([30.0, 30.0, 2.0, 2.0, 1.0, 50.0]))
+    return sc, model, thetas, pl.build_problem(model, thetas, sc.steps, 3, prior)
+
+
+@pytest.mark.parametrize("criterion", ["D", "A"])
+def test_relaxation_bound_is_above_every_design_and_rounding_is_within_the_gap(small, criterion):
+    *_, problem = small
+    res = pl.place(problem, criterion)
+    sets, values = pl.enumerate_designs(problem, criterion)
+    assert values.max() <= res.upper_bound + 1e-9
+    assert res.value <= values.max() + 1e-9
+    assert res.upper_bound - values.max() <= res.certified_gap + 1e-9
+    assert res.certified_gap >= 0
+    # the rounded design is the enumerated optimum here (10 candidates, k = 3)
+    assert res.value == pytest.approx(values.max(), rel=1e-9, abs=1e-9)
+
+
+def test_first_order_solver_matches_the_conic_one(small):
+    *_, problem = small
+    conic = pl.place(problem, "D", method="convex")
+    fo = pl.place(problem, "D", method="first-order")
+    assert fo.relaxation == pytest.approx(conic.relaxation, abs=1e-3 * abs(conic.relaxation))
+    assert fo.upper_bound >= pl.enumerate_designs(problem, "D")[1].max() - 1e-9
+
+
+def test_capped_simplex_projection():
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        v = rng.normal(size=12) * 3
+        w = pl.project_capped_simplex(v, 4)
+        assert w.sum() == pytest.approx(4) and w.min() >= 0 and w.max() <= 1
+        for _ in range(20):   # no feasible point is closer to v
+            u = pl.project_capped_simplex(rng.normal(size=12), 4)
+            assert np.linalg.norm(v - w) <= np.linalg.norm(v - u) + 1e-9
+
+
+def test_ambiguity_cuts_move_a_sensor_off_the_cable():
+    sc = load_scenario("S1-P2")
+    cable = np.array([[0.0, y, -15.0] for y in np.arange(-40.0, 41.0, 5.0)])
+    spur = np.array([[3.0, 0.0, -15.0], [6.0, 0.0, -15.0]])
+    cands = np.vstack([cable, spur])
+    model = candidate_model(sc, cands)
+    thetas = model.to_internal(model.state_from_truth(sample_passages(sc, 6, seed=2)))
+    prior = model.to_internal(np.array([30.0, 30.0, 2.0, 2.0, 1.0, 50.0]))
+    problem = pl.build_problem(model, thetas, sc.steps, 3, prior)
+    plain = pl.place(problem, "D")
+    assert np.all(cands[plain.chosen, 0] == 0.0)                                    # all on the cable...
+    assert check_array(subset_model(model, plain.chosen), thetas[:4], sc.steps, starts=8).verdict == "ambiguous"
+    cut = pl.place_with_cuts(problem, model, thetas, sc.steps)
+    assert cut.cuts and np.any(cands[cut.chosen, 0] != 0.0)                          # ...until the cuts
+    assert cut.verdict.verdict == "observable" and cut.certified_gap >= 0
+
+
+def test_grid_candidates_respect_polygon_exclusions_and_spacing():
+    tri = [(0, 0), (40, 0), (0, 40)]
+    pts = pl.grid_candidates(tri, 5.0, -10.0, exclusions=[(0.0, 0.0, 7.0)], min_spacing=9.0)
+    assert np.all(pts[:, 0] + pts[:, 1] <= 40 + 1e-9) and np.all(pts[:, 2] == -10.0)
+    assert np.all(np.hypot(pts[:, 0], pts[:, 1]) > 7.0)
+    d = np.linalg.norm(pts[:, None, :2] - pts[None, :, :2], axis=-1) + np.eye(len(pts)) * 1e9
+    assert d.min() >= 9.0
