@@ -250,7 +250,7 @@ def cmd_check(args) -> int:
 
 
 def _read_candidates(path, z_default):
-    """Candidates from a CSV (x,y[,z]) or a TOML file with a [candidates] table."""
+    """Candidates (N, 3) and optional costs (N,) from a CSV (x,y[,z][,cost]) or a TOML [candidates] table."""
     import csv
     import tomllib
 
@@ -266,6 +266,7 @@ def _read_candidates(path, z_default):
             raise _BadInput(f"{path}: a candidate CSV needs a header with x,y (and optionally z)")
         try:
             pts = np.array([[float(r["x"]), float(r["y"]), float(r.get("z") or z_default)] for r in rows])
+            costs = np.array([float(r["cost"]) for r in rows]) if "cost" in rows[0] else None
         except ValueError as err:
             raise _BadInput(f"{path}: {err}") from None
     elif path.suffix == ".toml":
@@ -277,11 +278,12 @@ def _read_candidates(path, z_default):
             raise _BadInput(f"{path}: needs a [candidates] table with polygon = [[x, y], ...] and spacing")
         pts = grid_candidates(c["polygon"], float(c["spacing"]), float(c.get("z", z_default)),
                               c.get("exclusions", []), float(c.get("min_spacing", 0.0)))
+        costs = None
     else:
         raise _BadInput(f"--candidates must be a .csv or .toml file, got {path.name!r}")
     if not np.isfinite(pts).all() or len(pts) == 0:
         raise _BadInput(f"{path}: candidates must be finite and at least one")
-    return pts
+    return pts, costs
 
 
 def cmd_design(args) -> int:
@@ -299,8 +301,9 @@ def cmd_design(args) -> int:
         raise _BadInput(f"--criterion must be one of {', '.join(CRITERIA)}, got {args.criterion!r}")
     template = sc.sensors[0]
     z = template.position[2]
+    costs = None
     if args.candidates:
-        cands = _read_candidates(args.candidates, z)
+        cands, costs = _read_candidates(args.candidates, z)
     else:
         pos = np.array([s.position[:2] for s in sc.sensors])
         centre = pos.mean(axis=0)
@@ -320,6 +323,13 @@ def cmd_design(args) -> int:
     prior_std = model.to_internal(np.array([std[c] for c in model.labels]))
     bar = _progress(2, f"design: {len(cands)} candidates x {len(thetas)} passages")
     problem = build_problem(model, thetas, sc.steps, args.k, prior_std)
+    if (costs is None) != (args.budget is None):
+        raise _BadInput("--budget needs candidate costs (a 'cost' column in the candidate CSV), and vice versa")
+    if costs is not None:
+        try:
+            problem = problem.with_costs(costs, args.budget)
+        except ValueError as err:
+            raise _BadInput(str(err)) from None
     bar.update(1)
     if args.no_cuts:
         result = place(problem, args.criterion)
@@ -351,6 +361,18 @@ def cmd_design(args) -> int:
     report_path.write_text(json.dumps(report, indent=2) + "\n")
     plot_design(cands, result.weights, result.chosen, truth, out.with_suffix(".png"),
                 title=f"{args.criterion}-optimal {args.k} of {len(cands)} candidates: {report['verdict']}")
+    from shipsense.design.fisher import bound_map
+    from shipsense.plotting import plot_bound_map
+    from shipsense.trackers.models import subset_model
+
+    design_model = subset_model(model, result.chosen)
+    span = np.ptp(cands[:, :2], axis=0).max() / 2 + 40.0
+    centre = cands[:, :2].mean(axis=0)
+    xs = centre[0] + np.linspace(-span, span, 41)
+    ys = centre[1] + np.linspace(-span, span, 41)
+    bound, _ = bound_map(design_model, xs, ys, velocity=thetas[0, 2:4], params=thetas[0, 4:])
+    plot_bound_map(design_model.array, xs, ys, bound, out.with_suffix(".bounds.png"),
+                   title=f"position CRLB of the design (passage segments at {np.hypot(*thetas[0, 2:4]):.1f} m/s)")
     print(f"{args.criterion}-optimal design of {args.k} {template.type}s ({template.kind}) from {len(cands)} "
           f"candidates and {len(thetas)} prior passages ({result.method} relaxation, solver: {result.status})")
     print(f"  objective {result.value:.4g}; relaxation {result.relaxation:.4g}; certified upper bound "
@@ -358,7 +380,8 @@ def cmd_design(args) -> int:
     print(f"  ambiguity cuts added: {len(result.cuts)}; verdict: {report['verdict']}")
     for sid, p in zip([s.id for s in sensors], chosen):
         print(f"  {sid}: ({p[0]:.1f}, {p[1]:.1f}, {p[2]:.1f})")
-    print(f"wrote {out} (layout; check it with `shipsense check {out}`), {report_path} and {out.with_suffix('.png')}")
+    print(f"wrote {out} (layout; check it with `shipsense check {out}`), {report_path}, {out.with_suffix('.png')} "
+          f"and {out.with_suffix('.bounds.png')}")
     return EXIT_OK
 
 
@@ -427,6 +450,8 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--out", default="layout.toml", help="layout file to write (default: %(default)s)")
     g.add_argument("--passages", type=int, default=8, help="prior passages to average over (default 8)")
     g.add_argument("--seed", type=int, default=0)
+    g.add_argument("--budget", type=float, default=None,
+                   help="total cost allowed, with a 'cost' column in the candidate CSV")
     g.add_argument("--no-cuts", action="store_true", help="skip the ambiguity cuts")
     g.set_defaults(func=cmd_design)
 

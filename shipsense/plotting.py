@@ -150,3 +150,24 @@ def plot_design(candidates, weights, chosen, truth, path, title=""):
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def plot_bound_map(array, xs, ys, bound, path, title=""):
+    """Map of the position bound (m, log colour scale) with the array."""
+    from matplotlib.colors import LogNorm
+
+    fig, ax = plt.subplots(figsize=(7.5, 6.5), layout="constrained")
+    finite = np.isfinite(bound) & (bound > 0)
+    vmin = bound[finite].min() if finite.any() else 1e-3
+    vmax = bound[finite].max() if finite.any() else 1.0
+    mesh = ax.pcolormesh(xs, ys, np.where(finite, bound, np.nan), norm=LogNorm(vmin=vmin, vmax=max(vmax, vmin * 10)),
+                         cmap="magma_r", shading="nearest")
+    fig.colorbar(mesh, ax=ax, label="position CRLB sqrt(trace) [m]")
+    draw_array(ax, array)
+    ax.set_aspect("equal", adjustable="box")
+    ax.set_xlabel("x east [m]")
+    ax.set_ylabel("y north [m]")
+    ax.set_title(title, fontsize=10)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

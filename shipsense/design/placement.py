@@ -84,12 +84,29 @@ def grid_candidates(polygon, spacing, z, exclusions=(), min_spacing=0.0):
 # -- information ----------------------------------------------------------------------
 @dataclass(frozen=True)
 class DesignProblem:
-    """Scaled per-candidate information ``J`` (S, N, n, n), the prior term ``eps`` and the budget ``k``."""
+    """Scaled per-candidate information ``J`` (S, N, n, n), the prior term ``eps`` and the number ``k``.
+
+    Optional per-candidate ``costs`` (N,) with a ``budget``: designs must also
+    satisfy ``sum_i c_i w_i <= budget``.
+    """
 
     J: np.ndarray
     eps: float
     k: int
     scale: float
+    costs: np.ndarray | None = None
+    budget: float | None = None
+
+    def with_costs(self, costs, budget):
+        costs = np.asarray(costs, dtype=float)
+        if costs.shape != (self.N,) or not np.all(np.isfinite(costs)) or np.any(costs < 0):
+            raise ValueError(f"costs must be {self.N} finite non-negative numbers")
+        if not np.isfinite(budget) or budget < np.sort(costs)[: self.k].sum():
+            raise ValueError(f"budget {budget:g} cannot pay for {self.k} sensors (the cheapest cost "
+                             f"{np.sort(costs)[: self.k].sum():g})")
+        from dataclasses import replace
+
+        return replace(self, costs=costs, budget=float(budget))
 
     @property
     def n(self):
@@ -162,15 +179,20 @@ def certified_bound(problem, w, criterion="D", cuts=None):
     w = np.clip(np.asarray(w, dtype=float), 0.0, 1.0)
     g = gradient(problem, w, criterion)
     f = float(objective(problem, w, criterion))
-    if not cuts:
+    if not cuts and problem.costs is None:
         best = float(np.sort(g)[::-1][: problem.k].sum())
     else:
         from scipy.optimize import linprog
 
-        A_ub = -np.asarray(cuts)
-        res = linprog(-g, A_ub=A_ub, b_ub=-np.ones(len(cuts)), A_eq=np.ones((1, problem.N)), b_eq=[problem.k],
+        rows, rhs = [-np.asarray(c) for c in cuts or []], [-1.0] * len(cuts or [])
+        if problem.costs is not None:
+            rows.append(problem.costs)
+            rhs.append(problem.budget)
+        res = linprog(-g, A_ub=np.array(rows), b_ub=np.array(rhs), A_eq=np.ones((1, problem.N)), b_eq=[problem.k],
                       bounds=[(0, 1)] * problem.N, method="highs")
-        best = float(-res.fun) if res.success else float(np.sort(g)[::-1][: problem.k].sum())
+        if not res.success:
+            raise RuntimeError(f"certificate LP failed: {res.message}")
+        best = float(-res.fun)
     return f + best - float(g @ w), f
 
 
@@ -206,6 +228,8 @@ def solve_convex(problem, criterion="D", cuts=None, return_status=False):
         cons += [cp.lambda_min(M) >= t for M in Ms]
     for c in cuts or []:
         cons.append(np.asarray(c) @ w >= 1)
+    if problem.costs is not None:
+        cons.append(problem.costs @ w <= problem.budget)
     prob = cp.Problem(obj, cons)
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", message="Solution may be inaccurate")
@@ -273,11 +297,15 @@ def _value_of_sets(problem, sets, criterion, chunk=4096):
     return out
 
 
-def _feasible(sets, cuts):
-    if not cuts:
-        return np.ones(len(sets), dtype=bool)
-    C = np.asarray(cuts)                                                 # (ncuts, N)
-    return np.all(C[:, np.asarray(sets)].sum(axis=-1) >= 1.0 - 1e-9, axis=0)
+def _feasible(sets, cuts, problem=None):
+    sets = np.asarray(sets)
+    ok = np.ones(len(sets), dtype=bool)
+    if cuts:
+        C = np.asarray(cuts)                                             # (ncuts, N)
+        ok &= np.all(C[:, sets].sum(axis=-1) >= 1.0 - 1e-9, axis=0)
+    if problem is not None and problem.costs is not None:
+        ok &= problem.costs[sets].sum(axis=-1) <= problem.budget + 1e-9
+    return ok
 
 
 def greedy(problem, criterion="D", cuts=None):
@@ -286,8 +314,12 @@ def greedy(problem, criterion="D", cuts=None):
         rest = np.setdiff1d(np.arange(problem.N), chosen)
         sets = np.array([chosen + [i] for i in rest])
         vals = _value_of_sets(problem, sets, criterion)
-        if cuts and len(chosen) == problem.k - 1:
-            vals = np.where(_feasible(sets, cuts), vals, -np.inf)
+        if len(chosen) == problem.k - 1:
+            vals = np.where(_feasible(sets, cuts, problem), vals, -np.inf)
+        elif problem.costs is not None:   # keep enough budget for the cheapest completion
+            spent = problem.costs[sets].sum(axis=-1)
+            left = np.sort(problem.costs)[: problem.k - len(chosen) - 1].sum()
+            vals = np.where(spent + left <= problem.budget + 1e-9, vals, -np.inf)
         chosen.append(int(rest[np.argmax(vals)]))
     return np.array(chosen)
 
@@ -308,7 +340,7 @@ def swap_refine(problem, chosen, criterion="D", cuts=None, max_rounds=50):
             break
         trials = np.array(trials)
         vals = _value_of_sets(problem, trials, criterion)
-        vals = np.where(_feasible(trials, cuts), vals, -np.inf)
+        vals = np.where(_feasible(trials, cuts, problem), vals, -np.inf)
         i = int(np.argmax(vals))
         if vals[i] <= best + 1e-12:
             break
@@ -319,7 +351,7 @@ def swap_refine(problem, chosen, criterion="D", cuts=None, max_rounds=50):
 def round_design(problem, w, criterion="D", cuts=None):
     """Top-k and greedy rounding, each refined by swaps; the better one."""
     top = np.argsort(w)[::-1][: problem.k]
-    if cuts and not _feasible(top[None], cuts)[0]:
+    if not _feasible(top[None], cuts, problem)[0]:
         top = greedy(problem, criterion, cuts)
     a = swap_refine(problem, top, criterion, cuts)
     b = swap_refine(problem, greedy(problem, criterion, cuts), criterion, cuts)
@@ -362,18 +394,18 @@ def place(problem, criterion="D", method="auto", cuts=None, first_order_above=80
     """Solve the relaxation, certify it, round and refine; returns a :class:`Placement`."""
     t0 = time.perf_counter()
     if method == "auto":
-        method = "first-order" if problem.N > first_order_above and not cuts else "convex"
+        method = "first-order" if problem.N > first_order_above and not cuts and problem.costs is None else "convex"
     status = "first-order"
     if method == "convex":
         try:
             w, status = solve_convex(problem, criterion, cuts, return_status=True)
         except RuntimeError as err:
-            if cuts:
+            if cuts or problem.costs is not None:
                 raise
             w, status = solve_first_order(problem, criterion), f"first-order fallback ({err})"
     elif method == "first-order":
-        if cuts:
-            raise ValueError("ambiguity cuts need the convex solver")
+        if cuts or problem.costs is not None:
+            raise ValueError("ambiguity cuts and costs need the convex solver")
         w = solve_first_order(problem, criterion)
     else:
         raise ValueError(f"method must be 'auto', 'convex' or 'first-order', got {method!r}")
@@ -408,6 +440,7 @@ def place_with_cuts(problem, candidate_model, thetas, steps, criterion="D", tau=
 
 
 def enumerate_designs(problem, criterion="D"):
-    """Every k-subset and its value (for small candidate sets: tests and checks)."""
+    """Every feasible k-subset and its value (for small candidate sets: tests and checks)."""
     sets = np.array(list(combinations(range(problem.N), problem.k)))
+    sets = sets[_feasible(sets, None, problem)]
     return sets, _value_of_sets(problem, sets, criterion)

@@ -34,6 +34,21 @@ def test_relaxation_bound_is_above_every_design_and_rounding_is_within_the_gap(s
     assert res.value == pytest.approx(values.max(), rel=1e-9, abs=1e-9)
 
 
+def test_costs_and_budget_are_respected_and_certified(small):
+    *_, problem = small
+    costs = np.ones(problem.N)
+    free = pl.place(problem, "D")
+    costs[free.chosen] = 5.0                       # make the unconstrained optimum unaffordable
+    constrained = problem.with_costs(costs, budget=7.0)
+    res = pl.place(constrained, "D")
+    sets, values = pl.enumerate_designs(constrained, "D")
+    assert costs[res.chosen].sum() <= 7.0
+    assert values.max() <= res.upper_bound + 1e-9 and res.value <= values.max() + 1e-9
+    assert res.upper_bound <= free.upper_bound + 1e-9
+    with pytest.raises(ValueError, match="cannot pay"):
+        problem.with_costs(np.full(problem.N, 5.0), budget=7.0)
+
+
 def test_first_order_solver_matches_the_conic_one(small):
     *_, problem = small
     conic = pl.place(problem, "D", method="convex")
