@@ -11,7 +11,10 @@ Public entry points:
 from importlib.metadata import PackageNotFoundError, version
 
 from shipsense.config import Scenario, ScenarioError, load_scenario, shipped_scenarios
+from shipsense.envs import register_envs
 from shipsense.simulator import STATE_LABELS, Simulation, simulate
+
+register_envs()
 
 try:
     __version__ = version("shipsense")

@@ -385,6 +385,33 @@ def cmd_design(args) -> int:
     return EXIT_OK
 
 
+def cmd_train(args) -> int:
+    from shipsense.envs import training
+
+    if args.timesteps is not None and args.timesteps < 64:
+        raise _BadInput(f"--timesteps must be >= 64, got {args.timesteps}")
+    out = args.out or f"results/train-{args.task}"
+    try:
+        if args.task == "scheduling":
+            summary = training.train_scheduling(args.timesteps or 20_000, out, args.seed)
+            print(f"scheduling (Passage-v0, S2, one read per step): PPO {summary['timesteps']} steps at "
+                  f"{summary['ppo_fps']:.0f} frames/s; held-out episodes: {summary['held_out_episodes']}")
+            for name, r in summary["results"].items():
+                print(f"  {name:<26} mean error {r['mean_error_m']:8.2f} m  median {r['median_error_m']:7.2f} m  "
+                      f"reads/step {r['reads_per_step']:.2f}")
+        else:
+            summary = training.train_placement(args.timesteps or 600, out, args.seed)
+            print(f"placement (ArrayDesign-v0, S1-P2, k = 3): MaskablePPO {summary['timesteps']} steps at "
+                  f"{summary['ppo_fps']:.1f} frames/s; held-out passages: {summary['held_out_passages']}")
+            for name, r in summary["results"].items():
+                print(f"  {name:<22} {r['verdict']:<11} converged {r['convergence_rate']:.2f}  "
+                      f"TRMSE {r['trmse_m']:7.2f} m")
+    except RuntimeError as err:
+        raise _BadInput(str(err)) from None
+    print(f"wrote the model and {out}/evaluation.json")
+    return EXIT_OK
+
+
 def cmd_reproduce(args) -> int:
     from shipsense.reproduce import EXPERIMENTS, run
 
@@ -454,6 +481,14 @@ def build_parser() -> argparse.ArgumentParser:
                    help="total cost allowed, with a 'cost' column in the candidate CSV")
     g.add_argument("--no-cuts", action="store_true", help="skip the ambiguity cuts")
     g.set_defaults(func=cmd_design)
+
+    tr = sub.add_parser("train", help="train a sensor-scheduling or placement agent (needs the rl extra)")
+    tr.add_argument("task", choices=["placement", "scheduling"])
+    tr.add_argument("--timesteps", type=int, default=None,
+                    help="environment steps (default: 20000 scheduling, 600 placement)")
+    tr.add_argument("--out", default=None, help="output directory (default: results/train-TASK)")
+    tr.add_argument("--seed", type=int, default=0)
+    tr.set_defaults(func=cmd_train)
 
     r = sub.add_parser("reproduce", help="reproduce the reference experiments of S0, S1 or S2")
     r.add_argument("name", metavar="S0|S1|S2")

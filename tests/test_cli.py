@@ -130,3 +130,16 @@ def test_design_writes_a_layout_that_check_accepts(tmp_path, capsys):
     assert main(["design", "S1-P2", "--k", "3", "--candidates", str(cands), "--out", str(tmp_path / "x.toml")]) == 2
     assert main(["design", "S1-P2", "--k", "0"]) == 2
     assert main(["design", "S1-P2", "--k", "3", "--criterion", "Z"]) == 2
+
+
+def test_train_scheduling_writes_a_model_and_an_evaluation(tmp_path):
+    import json
+
+    import pytest
+
+    pytest.importorskip("stable_baselines3")
+    assert main(["train", "scheduling", "--timesteps", "256", "--out", str(tmp_path)]) == 0
+    summary = json.loads((tmp_path / "evaluation.json").read_text())
+    assert set(summary["results"]) == {"agent (PPO)", "read-all (trimmed to 1)", "round-robin"}
+    assert all(r["reads_per_step"] <= 1.0 for r in summary["results"].values())
+    assert (tmp_path / "scheduling_ppo.zip").is_file()

@@ -163,14 +163,17 @@ class SensorArray:
                 raise ValueError("this array has magnetometers: moments are required")
             B = dipole_field(self.positions[idx], sources[..., None, :], np.asarray(moments)[..., None, :])
             vec = B if self._index["identity"] else np.einsum("sji,...sj->...si", self.orientations[idx], B)
-            if self._index["mag_vector_only"] and len(idx) == len(self.ids):   # the common hot path
-                return vec.reshape(batch + (3 * len(self.ids),))[..., self._index["gather"]]
-            code = self._index["mag_code"]
-            scalar = np.sqrt(np.sum(B * B, axis=-1))
-            if np.any(code == 2):
-                scalar = np.where(code == 2, B @ self.earth_direction, scalar)
-            slots[..., idx, :] = np.where((code == 0)[:, None], vec,
-                                          np.stack([scalar, 0 * scalar, 0 * scalar], axis=-1))
+            if self._index["mag_vector_only"]:
+                if len(idx) == len(self.ids):   # the common hot path: vector magnetometers only
+                    return vec.reshape(batch + (3 * len(self.ids),))[..., self._index["gather"]]
+                slots[..., idx, :] = vec
+            else:
+                code = self._index["mag_code"]
+                scalar = np.sqrt(np.sum(B * B, axis=-1))
+                if np.any(code == 2):
+                    scalar = np.where(code == 2, B @ self.earth_direction, scalar)
+                slots[..., idx, :] = np.where((code == 0)[:, None], vec,
+                                              np.stack([scalar, 0 * scalar, 0 * scalar], axis=-1))
         idx = groups["electrode"]
         if idx.size:
             if dipoles is None:

@@ -135,6 +135,116 @@ class BankRun:
         return out
 
 
+class BankState:
+    """The running state of a bank over R passages x H hypotheses: one flat batch, stepped one sample at a time.
+
+    This is the bank's only time step: :func:`run_bank` loops over it, and the
+    gymnasium environments call it once per environment step.
+
+    Parameters
+    ----------
+    unit : FilterUnit
+    model : FieldModel
+    seeds : ndarray, shape (R, H, n)
+        Initial means (SI).
+    P0 : ndarray, shape (n, n) or (R, H, n, n)
+        Initial covariances (SI).
+    """
+
+    def __init__(self, unit, model, seeds, P0):
+        self.unit, self.model = unit, model
+        seeds = np.asarray(seeds, dtype=float)
+        self.R, self.H, n = seeds.shape
+        xs = model.x_scale
+        P0 = np.broadcast_to(np.asarray(P0, dtype=float) / np.outer(xs, xs), (self.R, self.H, n, n))
+        self.belief = Belief.from_cov(seeds.reshape(-1, n) / xs, P0.reshape(-1, n, n))
+        self.cum = np.zeros((self.R, self.H))
+        self.idx = np.arange(self.R * self.H)        # active (not pruned) flat elements
+        self.steps = 0
+
+    @property
+    def run_of(self):
+        return self.idx // self.H
+
+    @property
+    def hyp_of(self):
+        return self.idx % self.H
+
+    def reset_runs(self, runs, seeds, P0):
+        """Re-seed the hypotheses of some runs (all elements must be active)."""
+        if len(self.idx) != self.R * self.H:
+            raise ValueError("reset_runs needs a bank without pruning")
+        runs = np.asarray(runs, dtype=int)
+        xs = self.model.x_scale
+        n = xs.size
+        fresh = Belief.from_cov(np.asarray(seeds, float).reshape(-1, n) / xs,
+                                np.broadcast_to(np.asarray(P0, float) / np.outer(xs, xs),
+                                                (len(runs) * self.H, n, n)))
+        rows = (runs[:, None] * self.H + np.arange(self.H)).ravel()
+        for arr, new in zip(self.belief, fresh):
+            arr[rows] = new
+        self.cum[runs] = 0.0
+
+    def step(self, y, mask=None, predict=True, runs=None):
+        """Predict (unless ``predict`` is False) and update with the samples ``y`` (R, m) SI.
+
+        ``mask`` (R, m) marks the components to use.  With ``runs`` (indices),
+        only those runs' hypotheses step (their rows are gathered, stepped and
+        written back); the others are untouched.  Returns the innovation of
+        the stepped elements.
+        """
+        if runs is None:
+            sub, rows = self.belief, None
+            run, hyp = self.run_of, self.hyp_of
+        else:
+            if len(self.idx) != self.R * self.H:
+                raise ValueError("stepping a subset of runs needs a bank without pruning")
+            rows = (np.asarray(runs, dtype=int)[:, None] * self.H + np.arange(self.H)).ravel()
+            sub = Belief(*(a[rows] for a in self.belief))
+            run, hyp = rows // self.H, rows % self.H
+        b = self.unit.predict(sub, self.model) if predict else sub
+        yy = np.asarray(y, dtype=float)[run] / self.model.y_scale
+        mk = None if mask is None else np.asarray(mask)[run]
+        new, inn = self.unit.update(b, yy, self.model, mk)
+        if rows is None:
+            self.belief = new
+        else:
+            for arr, part in zip(self.belief, new):
+                arr[rows] = part
+        self.cum[run, hyp] += inn.loglik
+        self.steps += 1
+        return inn
+
+    def prune(self, nats):
+        """Drop active elements more than ``nats`` below the best of their run."""
+        run = self.run_of
+        c = self.cum[run, self.hyp_of]
+        best = np.full(self.R, -np.inf)
+        np.maximum.at(best, run, c)
+        keep = c >= best[run] - nats
+        if not keep.all():
+            self.idx = self.idx[keep]
+            self.belief = Belief(*(a[keep] for a in self.belief))
+            dropped = np.zeros(self.R * self.H, dtype=bool)
+            dropped[:] = True
+            dropped[self.idx] = False
+            self.cum.reshape(-1)[dropped] = -np.inf
+        return ~keep
+
+    def means(self):
+        """Posterior means of the active elements, SI (len(idx), n)."""
+        return self.belief.mean * self.model.x_scale
+
+    def position_cov(self):
+        """Posterior position covariances of the active elements, SI (len(idx), 2, 2)."""
+        L = self.belief.chol[:, :2, :] * self.model.x_scale[:2, None]
+        return L @ np.swapaxes(L, -1, -2)
+
+    def selected(self):
+        """Maximum-likelihood hypothesis of every run (R,)."""
+        return np.argmax(self.cum, axis=1)
+
+
 def run_bank(unit, model, measurements, seeds, P0, *, prune_nats=None, progress=False) -> BankRun:
     """Run a bank of hypotheses over passages as one batch.
 
@@ -150,7 +260,7 @@ def run_bank(unit, model, measurements, seeds, P0, *, prune_nats=None, progress=
         Initial covariances (SI).
     prune_nats : float, optional
         Remove hypotheses whose cumulative log-likelihood falls this far below
-        the best of their run (checked every step).
+        the best of their run (checked every step); their compute is freed.
     progress : bool
         Progress bar over the steps.
     """
@@ -165,14 +275,7 @@ def run_bank(unit, model, measurements, seeds, P0, *, prune_nats=None, progress=
                          f"got {y.shape} and {seeds.shape}")
     R, K, m = y.shape
     H, n = seeds.shape[1:]
-    xs, ys = model.x_scale, model.y_scale
-    y = y / ys
-    P0 = np.broadcast_to(np.asarray(P0, dtype=float) / np.outer(xs, xs), (R, H, n, n)).reshape(R * H, n, n)
-    belief = Belief.from_cov(seeds.reshape(R * H, n) / xs, P0)
-    run_of = np.repeat(np.arange(R), H)
-    hyp_of = np.tile(np.arange(H), R)
-    idx = np.arange(R * H)
-
+    state = BankState(unit, model, seeds, P0)
     means = np.full((R, H, K, n), np.nan)
     pos_cov = np.full((R, H, K, 2, 2), np.nan)
     loglik = np.full((R, H, K), np.nan)
@@ -180,31 +283,21 @@ def run_bank(unit, model, measurements, seeds, P0, *, prune_nats=None, progress=
     used = np.zeros((R, H, K), dtype=int)
     ok = np.zeros((R, H, K), dtype=bool)
     active = np.zeros((R, H, K), dtype=bool)
-    cum = np.zeros(R * H)
     steps = range(K)
     if progress:
         from tqdm import tqdm
 
         steps = tqdm(steps, desc=f"bank {unit.name} {R}x{H}", unit="step", leave=False)
     for k in steps:
-        if k:
-            belief = unit.predict(belief, model)
-        belief, inn = unit.update(belief, y[run_of[idx], k], model)
-        r, h = run_of[idx], hyp_of[idx]
-        means[r, h, k] = belief.mean * xs
-        L = belief.chol[:, :2, :] * xs[:2, None]
-        pos_cov[r, h, k] = L @ np.swapaxes(L, -1, -2)
+        inn = state.step(y[:, k], predict=k > 0)
+        r, h = state.run_of, state.hyp_of
+        means[r, h, k] = state.means()
+        pos_cov[r, h, k] = state.position_cov()
         loglik[r, h, k] = inn.loglik
         nis[r, h, k] = inn.nis
         used[r, h, k] = inn.m
-        ok[r, h, k] = belief.ok
+        ok[r, h, k] = state.belief.ok
         active[r, h, k] = True
-        cum[idx] += inn.loglik
         if prune_nats is not None:
-            best = np.full(R, -np.inf)
-            np.maximum.at(best, r, cum[idx])
-            keep = cum[idx] >= best[r] - prune_nats
-            if not keep.all():
-                idx = idx[keep]
-                belief = Belief(belief.mean[keep], belief.chol[keep], belief.ok[keep])
+            state.prune(prune_nats)
     return BankRun(seeds, means, pos_cov, loglik, nis, used, ok, active, tuple(model.labels))

@@ -86,6 +86,7 @@ class FieldModel:
         object.__setattr__(self, "_d", {
             "labels": tuple(labels), "x_scale": x_scale, "y_scale": y_scale,
             "A": cv_transition(self.period, n - 4), "axial": self.array.axial,
+            "axial_cols": np.flatnonzero(self.array.axial),
             "mom": labels.index("mx") if "mx" in labels else None,
             "z": labels.index("z") if "z" in labels else None,
         })
@@ -113,9 +114,9 @@ class FieldModel:
     def residual(self, a, b):
         """``a - b`` with bearing channels wrapped modulo pi."""
         d = np.asarray(a) - np.asarray(b)
-        ax = self.axial
-        if ax.any():
-            d = np.where(ax, wrap_axial(d), d)
+        cols = self._d["axial_cols"]
+        if cols.size:
+            d[..., cols] = wrap_axial(d[..., cols])
         return d
 
     # -- measurement function ---------------------------------------------------

@@ -1,0 +1,70 @@
+"""Environment benchmark: steps per second of Passage-v0 (single and native vector, 64 envs),
+each with a 12-hypothesis bank, with CartPole-v1 measured in the same run as the reference.
+
+Run:  python benchmarks/envs.py [--steps 2000] [--num-envs 64]
+
+Actions are all-ones (read every sensor) so that every step runs the full
+update; autoresets are included.  PPO frames per second are reported by
+``shipsense train`` (see EXPERIMENTS.md).
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import gymnasium as gym
+import numpy as np
+
+import shipsense  # noqa: F401  (registers the environments)
+
+TWELVE = {"tracker": {"filter": "ukf", "process_noise": {"model": "diagonal",
+                                                         "q_diag": [1e-4, 1e-4, 1e-4, 1e-4, 2e-4, 2e-4, 2e-4]},
+                      "bank": {"levels": [5e3, 2e4, 8e4], "bearings_deg": [45.0, 135.0, 225.0, 315.0],
+                               "initial_velocity": [3.5, 3.5], "initial_course": "towards_array",
+                               "position_std": 20.0, "moment_std": 5e4}}}
+
+
+def single_rate(env, steps, action):
+    env.reset(seed=0)
+    t0 = time.perf_counter()
+    for _ in range(steps):
+        _, _, term, trunc, _ = env.step(action)
+        if term or trunc:
+            env.reset()
+    return steps / (time.perf_counter() - t0)
+
+
+def vector_rate(envs, steps, actions):
+    envs.reset(seed=0)
+    t0 = time.perf_counter()
+    for _ in range(steps):
+        envs.step(actions)
+    return steps * envs.num_envs / (time.perf_counter() - t0)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--steps", type=int, default=2000)
+    ap.add_argument("--num-envs", type=int, default=64)
+    args = ap.parse_args(argv)
+    n = args.num_envs
+    cart = single_rate(gym.make("CartPole-v1"), args.steps, 1)
+    cart_vec = vector_rate(gym.make_vec("CartPole-v1", num_envs=n, vectorization_mode="vector_entry_point"),
+                           args.steps // 10, np.ones(n, dtype=np.int64))
+    env = gym.make("shipsense/Passage-v0", overrides=TWELVE)
+    assert env.unwrapped.core.H == 12
+    single = single_rate(env, args.steps, np.ones(3, dtype=np.int8))
+    venv = gym.make_vec("shipsense/Passage-v0", num_envs=n, vectorization_mode="vector_entry_point",
+                        overrides=TWELVE)
+    vec = vector_rate(venv, max(args.steps // 10, 20), np.ones((n, 3), dtype=np.int8))
+    print(f"{'environment':<40}{'steps/s':>12}")
+    print(f"{'CartPole-v1 (single)':<40}{cart:>12,.0f}")
+    print(f"{f'CartPole-v1 (native vector, {n} envs)':<40}{cart_vec:>12,.0f}")
+    print(f"{'shipsense/Passage-v0 (single, 12 hyp.)':<40}{single:>12,.0f}")
+    print(f"{f'shipsense/Passage-v0 (vector, {n} envs)':<40}{vec:>12,.0f}")
+    print(f"\nPassage-v0 / CartPole-v1: single {single / cart:.3f}, vector {vec / cart_vec:.3f}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,323 @@
+"""``shipsense/Passage-v0``: schedule which sensors to read while the tracker follows a passing ship.
+
+## Description
+
+One episode is one ship passage drawn from the scenario's prior past its
+array.  A multiple-initial-value bank (the scenario's ``[tracker.bank]``)
+runs inside the environment as the observer: it is seeded from the first
+sample of every sensor (the detection), and from then on the agent chooses at
+every step which sensors to read.  Reading costs energy, which is what limits
+seabed nodes.  The agent sees the tracker's output, never the truth.
+
+## Action space
+
+``MultiBinary(n_sensors)``: 1 = read that sensor at this step.  Energy budget:
+at most ``max_reads`` sensors per step.  **Trimming rule**: if more are
+requested, the first ``max_reads`` requested sensors in index order are read
+and the rest dropped; ``info["trimmed"]`` counts the dropped ones.
+
+## Observation space
+
+``Box(-1, 1, (7 + H + S,), float32)``, all finite and clipped:
+
+| index | content |
+| --- | --- |
+| 0-1 | selected estimate's position relative to the array centroid / ``position_scale`` |
+| 2-3 | its velocity / 10 m/s |
+| 4-5 | ``(log10(std_x), log10(std_y)) / 3`` of its position |
+| 6 .. 6+H-1 | the hypotheses' normalised log-likelihoods / 50, in [-1, 0] |
+| 6+H .. 6+H+S-1 | per sensor: ``log10(1 + SNR) / 5`` of its strongest channel if read this step, else 0 |
+| last | elapsed fraction of the passage |
+
+## Rewards
+
+``-min(error / error_scale, 10) - energy_cost * reads`` with ``error`` the
+selected estimate's position error (m); both terms are in ``info``.
+
+## Episode end
+
+Terminated when the passage ends (its last sample).  There is no other
+termination; truncation comes only from a ``TimeLimit`` wrapper if the user
+adds one (none is registered).
+
+## Arguments
+
+``scenario`` (shipped name or TOML path), ``overrides`` (dict of top-level
+scenario fields, e.g. ``{"steps": 60}``), ``filter`` (filter unit name),
+``max_reads`` (default: all sensors), ``energy_cost`` (0.01 per read),
+``error_scale`` (10 m), ``render_mode`` (``"rgb_array"``).  All JSON-able.
+
+## Version history
+
+* v0: initial version.
+"""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from shipsense.config import load_scenario
+from shipsense.simulator import simulate
+from shipsense.trackers.bank import BankState
+from shipsense.trackers.filters import get_filter
+from shipsense.trackers.init import seed_hypotheses
+from shipsense.trackers.models import model_from_scenario
+
+SEED_HIGH = 2**31 - 1
+
+
+class PassageCore:
+    """The environment's state and dynamics for E environments at once (E = 1 for :class:`PassageEnv`)."""
+
+    def __init__(self, num_envs=1, scenario="S2", overrides=None, filter=None, max_reads=None, energy_cost=0.01,
+                 error_scale=10.0):
+        sc = load_scenario(scenario)
+        if overrides:
+            sc = sc.with_updates(**overrides)
+        if sc.prior is None:
+            raise ValueError(f"scenario {sc.name!r} has no [prior]: Passage-v0 draws passages from it")
+        if sc.tracker is None or sc.tracker.bank is None:
+            from shipsense.tracking import DEFAULT_BANK
+
+            self.bank_cfg = DEFAULT_BANK
+        else:
+            self.bank_cfg = sc.tracker.bank
+        self.scenario = sc
+        self.model = model_from_scenario(sc)
+        name = filter or (sc.tracker.filter if sc.tracker is not None else "ukf")
+        options = {"n_pu": sc.tracker.n_pu} if name == "puekf" and sc.tracker is not None else {}
+        self.unit = get_filter(name, **options)
+        arr = self.model.array
+        self.S = len(arr.ids)
+        self.H = len(self.bank_cfg.levels) * len(self.bank_cfg.bearings_deg)
+        self.max_reads = self.S if max_reads is None else int(max_reads)
+        if not 1 <= self.max_reads <= self.S:
+            raise ValueError(f"max_reads must be between 1 and {self.S}, got {max_reads}")
+        self.energy_cost = float(energy_cost)
+        self.error_scale = float(error_scale)
+        self.E = int(num_envs)
+        self.K = sc.steps
+        self.centre = arr.positions[:, :2].mean(axis=0)
+        self.position_scale = 1.5 * sc.prior.range[1]
+        self.sensor_of = arr.channel_sensor
+        self.first_channel = np.flatnonzero(np.diff(np.concatenate([[-1], self.sensor_of])))   # channels by sensor
+        self.std = sc.channel_std
+        self.obs_dim = 7 + self.H + self.S
+        self.y = np.zeros((self.E, self.K, self.model.m))
+        self.truth = np.zeros((self.E, self.K, self.model.n))
+        self.k = np.zeros(self.E, dtype=int)
+        self.last_read = np.zeros((self.E, self.S), dtype=bool)
+        self.bank = None
+
+    # -- episodes ---------------------------------------------------------------
+    def reset_envs(self, envs, seeds):
+        """Draw new passages for ``envs`` (indices) from integer ``seeds`` and seed their banks."""
+        envs = np.asarray(envs, dtype=int)
+        seeds_, P0 = [], None
+        for e, s in zip(envs, seeds):  # one passage per environment (its own reproducible seed)
+            sim = simulate(self.scenario, runs=1, seed=int(s), random=True)
+            self.y[e] = sim.measurements[0]
+            self.truth[e] = self.model.state_from_truth(sim.truth[0])
+            x0, P0 = seed_hypotheses(self.model, sim.measurements[:, 0], self.bank_cfg)
+            seeds_.append(x0[0])
+        seeds_ = np.array(seeds_)
+        if self.bank is None or len(envs) == self.E and self.bank.R != self.E:
+            full = np.zeros((self.E, self.H, self.model.n))
+            full[envs] = seeds_
+            self.bank = BankState(self.unit, self.model, full, P0)
+            self.bank.cum[:] = 0.0
+        self.bank.reset_runs(envs, seeds_, P0)
+        # the detection: every sensor's first sample updates the reset environments' banks
+        self.bank.step(self.y[:, 0], predict=False, runs=envs)
+        self.k[envs] = 0
+        self.last_read[envs] = True
+        return self._observe()[envs]
+
+    def step(self, actions, envs=None):
+        """Advance environments ``envs`` (default all) by one sample with actions (E, S).
+
+        Returns rewards (E,), terminated (E,) and an info dict of (E,) arrays;
+        entries of environments that did not step are meaningless.
+        """
+        want = np.asarray(actions).astype(bool).reshape(self.E, self.S)
+        order = np.cumsum(want, axis=1)
+        read = want & (order <= self.max_reads)                     # the trimming rule: first max_reads in order
+        trimmed = want.sum(axis=1) - read.sum(axis=1)
+        envs = np.arange(self.E) if envs is None else np.asarray(envs, dtype=int)
+        self.k[envs] += 1
+        y = self.y[np.arange(self.E), self.k]
+        mask = read[:, self.sensor_of]
+        self.bank.step(y, mask, runs=None if len(envs) == self.E else envs)
+        self.last_read[envs] = read[envs]
+        return self._rewards(read, trimmed)
+
+    def _selected(self):
+        sel = self.bank.selected()
+        rows = np.arange(self.E) * self.H + sel
+        return sel, self.bank.means()[rows], self.bank.position_cov()[rows]
+
+    def _rewards(self, read, trimmed):
+        self._cache = sel, est, cov = self._selected()
+        truth = self.truth[np.arange(self.E), self.k]
+        d = est[:, :2] - truth[:, :2]
+        error = np.hypot(d[:, 0], d[:, 1])
+        a, b, c = cov[:, 0, 0], cov[:, 0, 1], cov[:, 1, 1]     # 2 x 2 inverse in closed form
+        nees = (c * d[:, 0] ** 2 - 2 * b * d[:, 0] * d[:, 1] + a * d[:, 1] ** 2) / (a * c - b * b)
+        reads = read.sum(axis=1)
+        error_term = -np.minimum(error / self.error_scale, 10.0)
+        energy_term = -self.energy_cost * reads
+        info = {"truth": truth[:, :2].copy(), "estimate": est[:, :2].copy(), "error": error, "nees": nees,
+                "selected": sel, "reads": reads, "trimmed": trimmed, "error_term": error_term,
+                "energy_term": energy_term}
+        return error_term + energy_term, self.k >= self.K - 1, info
+
+    def _observe(self):
+        cached, self._cache = getattr(self, "_cache", None), None
+        sel, est, cov = cached if cached is not None else self._selected()
+        obs = np.zeros((self.E, self.obs_dim))
+        obs[:, 0:2] = (est[:, :2] - self.centre) / self.position_scale
+        obs[:, 2:4] = est[:, 2:4] / 10.0
+        obs[:, 4:6] = np.log10(np.sqrt(np.maximum(np.diagonal(cov, axis1=-2, axis2=-1), 1e-12))) / 3.0
+        norm = self.bank.cum - self.bank.cum.max(axis=1, keepdims=True)
+        obs[:, 6:6 + self.H] = np.clip(np.nan_to_num(norm / 50.0, nan=-1.0, neginf=-1.0), -1.0, 0.0)
+        y = self.y[np.arange(self.E), self.k]
+        snr = np.abs(np.nan_to_num(y)) / self.std
+        per_sensor = np.maximum.reduceat(snr, self.first_channel, axis=1)
+        obs[:, 6 + self.H:6 + self.H + self.S] = np.where(self.last_read, np.log10(1.0 + per_sensor) / 5.0, 0.0)
+        obs[:, -1] = self.k / max(self.K - 1, 1)
+        return np.clip(np.nan_to_num(obs), -1.0, 1.0).astype(np.float32)
+
+    def render(self, e=0):
+        """RGB picture of environment ``e``: array, truth, hypotheses and the selected estimate."""
+        from shipsense.plotting import draw_array, plt
+
+        fig, ax = plt.subplots(figsize=(5, 5), dpi=80)
+        draw_array(ax, self.model.array, label=False)
+        k = self.k[e]
+        ax.plot(*self.truth[e, : k + 1, :2].T, "-", color="tab:red", label="truth")
+        means = self.bank.means().reshape(self.E, self.H, -1)[e]
+        ax.scatter(means[:, 0], means[:, 1], s=10, color="0.5", label="hypotheses")
+        sel = self.bank.selected()[e]
+        ax.plot(means[sel, 0], means[sel, 1], "o", color="tab:blue", label="estimate")
+        r = self.position_scale
+        ax.set_xlim(self.centre[0] - r, self.centre[0] + r)
+        ax.set_ylim(self.centre[1] - r, self.centre[1] + r)
+        ax.set_aspect("equal")
+        ax.legend(loc="upper right", fontsize=7)
+        ax.set_title(f"step {k}", fontsize=9)
+        fig.canvas.draw()
+        img = np.asarray(fig.canvas.buffer_rgba())[..., :3].copy()
+        plt.close(fig)
+        return img
+
+
+def _spaces(core):
+    low = -np.ones(core.obs_dim, dtype=np.float32)
+    high = np.ones(core.obs_dim, dtype=np.float32)
+    low[-1] = 0.0
+    high[6:6 + core.H] = 0.0
+    return spaces.Box(low, high, dtype=np.float32), spaces.MultiBinary(core.S)
+
+
+class PassageEnv(gym.Env):
+    __doc__ = __doc__
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 4}
+
+    def __init__(self, scenario="S2", overrides=None, filter=None, max_reads=None, energy_cost=0.01,
+                 error_scale=10.0, render_mode=None):
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
+        self.core = PassageCore(1, scenario, overrides, filter, max_reads, energy_cost, error_scale)
+        self.observation_space, self.action_space = _spaces(self.core)
+        self.render_mode = render_mode
+        self._kwargs = dict(scenario=scenario, overrides=overrides, filter=filter, max_reads=max_reads,
+                            energy_cost=energy_cost, error_scale=error_scale, render_mode=render_mode)
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        obs = self.core.reset_envs([0], [int(self.np_random.integers(SEED_HIGH))])
+        return obs[0], {}
+
+    def step(self, action):
+        if self.core.bank is None:
+            raise RuntimeError("call reset() before step()")
+        if self.core.k[0] >= self.core.K - 1:
+            raise RuntimeError("the passage has ended: call reset()")
+        rewards, terminated, info = self.core.step(np.asarray(action)[None])
+        obs = self.core._observe()[0]
+        return obs, float(rewards[0]), bool(terminated[0]), False, {k: v[0] for k, v in info.items()}
+
+    def render(self):
+        if self.render_mode == "rgb_array":
+            return self.core.render(0)
+        return None
+
+    def __getstate__(self):  # rebuild from the JSON-able arguments (and keep the episode state)
+        return {"kwargs": self._kwargs, "core": self.core.__dict__, "np_random": self._np_random}
+
+    def __setstate__(self, state):
+        self.__init__(**state["kwargs"])
+        self.core.__dict__.update(state["core"])
+        self._np_random = state["np_random"]
+
+
+class PassageVectorEnv(VectorEnv):
+    """Native vector version of ``shipsense/Passage-v0``: the same :class:`PassageCore` on a batch.
+
+    Sub-environment ``i`` reset with ``seed`` behaves exactly like a single
+    :class:`PassageEnv` reset with ``seed + i``.  Autoreset mode: next step.
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "autoreset_mode": AutoresetMode.NEXT_STEP}
+
+    def __init__(self, num_envs=1, scenario="S2", overrides=None, filter=None, max_reads=None, energy_cost=0.01,
+                 error_scale=10.0, render_mode=None):
+        self.num_envs = int(num_envs)
+        self.core = PassageCore(self.num_envs, scenario, overrides, filter, max_reads, energy_cost, error_scale)
+        self.single_observation_space, self.single_action_space = _spaces(self.core)
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+        self.action_space = batch_space(self.single_action_space, self.num_envs)
+        self.render_mode = render_mode
+        self._rngs = None
+        self._prev_done = np.zeros(self.num_envs, dtype=bool)
+
+    def _reseed(self, seed):
+        if seed is None:
+            base = np.random.SeedSequence().entropy % SEED_HIGH
+        else:
+            base = int(seed)
+        self._rngs = [np.random.Generator(np.random.PCG64(np.random.SeedSequence(base + i)))
+                      for i in range(self.num_envs)]
+
+    def reset(self, *, seed=None, options=None):
+        if seed is not None or self._rngs is None:
+            self._reseed(seed)
+        envs = np.arange(self.num_envs)
+        obs = self.core.reset_envs(envs, [int(r.integers(SEED_HIGH)) for r in self._rngs])
+        self._prev_done[:] = False
+        return obs, {}
+
+    def step(self, actions):
+        actions = np.asarray(actions).reshape(self.num_envs, -1)
+        done = self._prev_done
+        if done.any():  # next-step autoreset: these environments reset now and ignore their action
+            idx = np.flatnonzero(done)
+            self.core.reset_envs(idx, [int(self._rngs[i].integers(SEED_HIGH)) for i in idx])
+        live = np.flatnonzero(~done)
+        # environments that just reset do not step; the others advance together
+        rewards, terminated, info = self.core.step(actions, envs=live)
+        rewards = np.where(done, 0.0, rewards)
+        terminated = np.where(done, False, terminated)
+        obs = self.core._observe()
+        self._prev_done = terminated.copy()
+        truncated = np.zeros(self.num_envs, dtype=bool)
+        return obs, rewards.astype(np.float64), terminated, truncated, info
+
+    def render(self):
+        if self.render_mode == "rgb_array":
+            return tuple(self.core.render(e) for e in range(self.num_envs))
+        return None

@@ -1,0 +1,176 @@
+"""Passage-v0 and its native vector env: checkers, determinism, spaces, vector = single, energy budget."""
+
+import multiprocessing as mp
+import pickle
+import warnings
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import shipsense  # noqa: F401  (registers the environments)
+from shipsense.envs.passage import PassageEnv, PassageVectorEnv
+
+SHORT = {"overrides": {"steps": 30}}
+IGNORED_WARNINGS = ()   # the ignore-list: nothing is ignored (the checkers run warning-free)
+
+
+def _rollout(env, seed, actions_seed=0, steps=None):
+    obs, info = env.reset(seed=seed)
+    rng = np.random.default_rng(actions_seed)
+    out = [(obs, None, None, None)]
+    while True:
+        a = rng.integers(0, 2, env.action_space.n)
+        obs, r, term, trunc, info = env.step(a)
+        out.append((obs, r, term, info))
+        if term or trunc or (steps and len(out) > steps):
+            return out
+
+
+def test_gymnasium_checker_passes_without_warnings():
+    from gymnasium.utils.env_checker import check_env
+
+    env = gym.make("shipsense/Passage-v0", render_mode="rgb_array", **SHORT).unwrapped   # with its spec
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        check_env(env, skip_render_check=False)
+    caught = [w for w in caught if not any(s in str(w.message) for s in IGNORED_WARNINGS)]
+    assert not caught, [str(w.message) for w in caught]
+
+
+def test_stable_baselines_checker_passes():
+    sb3 = pytest.importorskip("stable_baselines3.common.env_checker")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        sb3.check_env(PassageEnv(**SHORT), warn=True)
+    assert not [w for w in caught if "shipsense" in str(w.filename) or "env_checker" in str(w.filename)], \
+        [str(w.message) for w in caught]
+
+
+def test_same_seed_same_rollout_including_info():
+    a = _rollout(PassageEnv(**SHORT), seed=7)
+    b = _rollout(PassageEnv(**SHORT), seed=7)
+    assert len(a) == len(b)
+    for (oa, ra, ta, ia), (ob, rb, tb, ib) in zip(a, b):
+        np.testing.assert_array_equal(oa, ob)
+        assert ra == rb and ta == tb
+        if ia is not None:
+            assert ia.keys() == ib.keys()
+            for k in ia:
+                np.testing.assert_array_equal(ia[k], ib[k])
+    c = _rollout(PassageEnv(**SHORT), seed=8)
+    assert not np.array_equal(a[1][0], c[1][0])
+
+
+def test_observations_stay_inside_the_space_and_the_episode_terminates():
+    env = PassageEnv(**SHORT)
+    for seed in range(3):
+        roll = _rollout(env, seed=seed, actions_seed=seed)
+        assert all(env.observation_space.contains(o) and np.isfinite(o).all() for o, *_ in roll)
+        assert roll[-1][2] is True and len(roll) == 30       # terminated at the last sample
+        info = roll[-1][3]
+        assert {"truth", "error", "nees", "selected", "reads", "trimmed", "error_term", "energy_term"} <= set(info)
+        assert roll[-1][1] == pytest.approx(info["error_term"] + info["energy_term"])
+
+
+def test_vector_env_equals_single_envs_step_by_step_across_autoreset():
+    n = 3
+    venv = PassageVectorEnv(num_envs=n, **SHORT)
+    singles = [PassageEnv(**SHORT) for _ in range(n)]
+    vo, _ = venv.reset(seed=11)
+    so = [s.reset(seed=11 + i)[0] for i, s in enumerate(singles)]
+    np.testing.assert_array_equal(vo, np.array(so))
+    rng = np.random.default_rng(0)
+    pending = [False] * n
+    for _ in range(35):                                   # one episode (29 steps) and the next one's start
+        acts = rng.integers(0, 2, (n, 3))
+        vo, vr, vt, vtr, vinfo = venv.step(acts)
+        for i, s in enumerate(singles):
+            if pending[i]:                                # next-step autoreset
+                obs, _ = s.reset()
+                r, t = 0.0, False
+                pending[i] = False
+            else:
+                obs, r, t, _, info = s.step(acts[i])
+                assert info["error"] == pytest.approx(vinfo["error"][i], rel=1e-12)
+                pending[i] = t
+            np.testing.assert_allclose(vo[i], obs, rtol=0, atol=1e-6)
+            assert vr[i] == pytest.approx(r, rel=1e-12, abs=1e-12) and vt[i] == t
+        assert not vtr.any()
+
+
+@settings(max_examples=15, deadline=None)
+@given(max_reads=st.integers(1, 3), actions=st.lists(st.lists(st.integers(0, 1), min_size=3, max_size=3),
+                                                   min_size=5, max_size=5))
+def test_energy_budget_holds_at_every_step(max_reads, actions):
+    env = PassageEnv(max_reads=max_reads, **SHORT)
+    env.reset(seed=0)
+    for a in actions:
+        _, r, _, _, info = env.step(np.array(a))
+        assert info["reads"] <= max_reads
+        assert info["reads"] + info["trimmed"] == sum(a)
+        assert info["energy_term"] == pytest.approx(-0.01 * info["reads"])
+
+
+def _make_in_child(queue):
+    import gymnasium as gym_
+
+    env = gym_.make("shipsense:shipsense/Passage-v0", overrides={"steps": 20})
+    obs, _ = env.reset(seed=1)
+    queue.put(obs.shape)
+
+
+def test_make_in_a_spawned_process():
+    ctx = mp.get_context("spawn")
+    q = ctx.Queue()
+    p = ctx.Process(target=_make_in_child, args=(q,))
+    p.start()
+    shape = q.get(timeout=120)
+    p.join(timeout=60)
+    assert p.exitcode == 0 and shape == PassageEnv(**SHORT).observation_space.shape
+
+
+def test_registration_is_idempotent_and_vector_make_uses_the_native_env():
+    from shipsense.envs import register_envs
+
+    register_envs()
+    register_envs()
+    envs = gym.make_vec("shipsense/Passage-v0", num_envs=2, vectorization_mode="vector_entry_point",
+                        overrides={"steps": 20})
+    assert isinstance(envs.unwrapped, PassageVectorEnv)
+    obs, _ = envs.reset(seed=0)
+    assert obs.shape == (2,) + PassageEnv(**SHORT).observation_space.shape
+
+
+def test_pickling_keeps_the_episode():
+    env = PassageEnv(**SHORT)
+    env.reset(seed=4)
+    env.step(np.array([1, 0, 1]))
+    clone = pickle.loads(pickle.dumps(env))
+    a = env.step(np.array([1, 1, 0]))
+    b = clone.step(np.array([1, 1, 0]))
+    np.testing.assert_array_equal(a[0], b[0])
+    assert a[1] == b[1]
+
+
+def test_render_rgb_array():
+    env = PassageEnv(render_mode="rgb_array", **SHORT)
+    env.reset(seed=0)
+    img = env.render()
+    assert img.ndim == 3 and img.shape[2] == 3 and img.dtype == np.uint8
+
+
+def test_ppo_smoke_run():
+    pytest.importorskip("stable_baselines3")
+    import torch
+    from stable_baselines3 import PPO
+
+    torch.set_num_threads(1)
+    env = PassageEnv(**SHORT)
+    model = PPO("MlpPolicy", env, n_steps=256, batch_size=64, n_epochs=2, seed=0, device="cpu", verbose=0)
+    model.learn(total_timesteps=2048)
+    obs, _ = env.reset(seed=0)
+    action, _ = model.predict(obs, deterministic=True)
+    assert env.action_space.contains(action)
