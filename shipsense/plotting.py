@@ -12,6 +12,14 @@ _MARKERS = {"magnetometer": ("s", "tab:blue"), "electrode": ("^", "tab:orange"),
 _DISPLAY = {"T": (1e9, "nT"), "V/m": (1e6, "µV/m"), "rad": (180 / np.pi, "deg")}
 
 
+def figure_to_rgb(fig):
+    """The rendered figure as an (H, W, 3) uint8 array; the figure is closed."""
+    fig.canvas.draw()
+    img = np.asarray(fig.canvas.buffer_rgba())[..., :3].copy()
+    plt.close(fig)
+    return img
+
+
 def draw_array(ax, array, label=True):
     """Sensors of a :class:`~shipsense.physics.array.SensorArray` on a map (x east, y north)."""
     for t, (marker, color) in _MARKERS.items():

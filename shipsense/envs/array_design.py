@@ -180,7 +180,7 @@ class ArrayDesignEnv(gym.Env):
     def render(self):
         if self.render_mode != "rgb_array":
             return None
-        from shipsense.plotting import plt
+        from shipsense.plotting import figure_to_rgb, plt
 
         fig, ax = plt.subplots(figsize=(5, 5), dpi=80)
         ax.scatter(self.candidates[:, 0], self.candidates[:, 1], s=8, color="0.7")
@@ -188,10 +188,7 @@ class ArrayDesignEnv(gym.Env):
             ax.scatter(*self.candidates[self.chosen, :2].T, s=60, color="tab:orange", edgecolor="k")
         ax.set_aspect("equal")
         ax.set_title(f"{len(self.chosen)} of {self.k} placed", fontsize=9)
-        fig.canvas.draw()
-        img = np.asarray(fig.canvas.buffer_rgba())[..., :3].copy()
-        plt.close(fig)
-        return img
+        return figure_to_rgb(fig)
 
     def __getstate__(self):
         return {"kwargs": self._kwargs, "chosen": list(self.chosen), "np_random": self._np_random}

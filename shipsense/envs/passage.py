@@ -193,7 +193,7 @@ class PassageCore:
 
     def render(self, e=0):
         """RGB picture of environment ``e``: array, truth, hypotheses and the selected estimate."""
-        from shipsense.plotting import draw_array, plt
+        from shipsense.plotting import draw_array, figure_to_rgb, plt
 
         fig, ax = plt.subplots(figsize=(5, 5), dpi=80)
         draw_array(ax, self.model.array, label=False)
@@ -209,10 +209,7 @@ class PassageCore:
         ax.set_aspect("equal")
         ax.legend(loc="upper right", fontsize=7)
         ax.set_title(f"step {k}", fontsize=9)
-        fig.canvas.draw()
-        img = np.asarray(fig.canvas.buffer_rgba())[..., :3].copy()
-        plt.close(fig)
-        return img
+        return figure_to_rgb(fig)
 
 
 def _spaces(core):
