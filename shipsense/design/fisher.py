@@ -22,14 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-
-def _powers(A, K):
-    """A^k for k = 0..K-1, shape (K, n, n)."""
-    out = np.empty((K,) + A.shape)
-    out[0] = np.eye(A.shape[0])
-    for k in range(1, K):
-        out[k] = A @ out[k - 1]
-    return out
+from shipsense.trackers.batchfit import powers as _powers
 
 
 def trajectory(model, theta, steps):

@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from shipsense.design.fisher import _powers, passage_fim
+from shipsense.trackers.batchfit import fit_passages
 
 DEFAULT_CHI2 = 25.0
 """A far-apart passage closer than this (chi-square units, ~5 sigma) is an ambiguity."""
@@ -98,44 +99,6 @@ def track_distance(model, theta, theta_alt, steps):
     p = np.einsum("kij,...j->...ki", Ak[:, :2], theta)
     pa = np.einsum("kij,...j->...ki", Ak[:, :2], theta_alt)
     return np.linalg.norm(p - pa, axis=-1).mean(axis=-1)
-
-
-def fit_passages(model, y, theta_init, steps, stride=1, iterations=40):
-    """Batched Levenberg–Marquardt fit of passages to measurements (internal units).
-
-    ``y`` (B or 1, K', m) are the measurements at steps ``0, stride, 2 stride, ...``;
-    ``theta_init`` (B, n).  Returns the fitted initial states (B, n) and their
-    chi-square over the fitted samples.
-    """
-    Ak = _powers(model.A, steps)[::stride]
-    w = 1.0 / np.sqrt(model.R)
-    theta = np.array(theta_init, dtype=float)
-    B, n = theta.shape
-
-    def residual(th):
-        X = np.einsum("kij,bj->bki", Ak, th)
-        return (model.residual(model.h(X), y) * w).reshape(B, -1), X
-
-    r, X = residual(theta)
-    cost = np.sum(r * r, axis=-1)
-    lam = np.full(B, 1e-2)
-    for _ in range(iterations):
-        Jac = (model.H(X) @ Ak * w[:, None]).reshape(B, -1, n)
-        JtJ = np.swapaxes(Jac, -1, -2) @ Jac
-        g = np.einsum("bmn,bm->bn", Jac, r)
-        D = np.diagonal(JtJ, axis1=-2, axis2=-1)
-        A = JtJ + lam[:, None, None] * (np.eye(n) * (D + 1e-12)[:, None, :])
-        step = -np.linalg.solve(A, g[..., None])[..., 0]
-        trial = theta + step
-        r_t, X_t = residual(trial)
-        cost_t = np.sum(r_t * r_t, axis=-1)
-        better = np.isfinite(cost_t) & (cost_t < cost)
-        theta = np.where(better[:, None], trial, theta)
-        r = np.where(better[:, None], r_t, r)
-        X = np.where(better[:, None, None], X_t, X)
-        cost = np.where(better, cost_t, cost)
-        lam = np.clip(np.where(better, lam / 3.0, lam * 5.0), 1e-9, 1e9)
-    return theta, cost
 
 
 def lm_fit(model, theta_ref, theta_init, steps, stride=2, iterations=40):
