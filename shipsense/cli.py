@@ -420,7 +420,7 @@ def cmd_reproduce(args) -> int:
     key = args.name.upper()
     if key not in EXPERIMENTS:
         raise _BadInput(f"unknown experiment set {args.name!r}; choose one of {', '.join(EXPERIMENTS)}")
-    out = Path(args.out or f"results/{key}")
+    out = Path(args.out or f"results/{'wide' if key == 'WIDE' else key}")
     summary = run(key, runs=args.runs, out=out, seed=args.seed)
     print(f"{key}: {summary['runs']} runs in {summary['seconds']:.1f} s; wrote {out}/summary.json, CSV tables "
           f"and PNG figures")
@@ -490,9 +490,10 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--seed", type=int, default=0)
     tr.set_defaults(func=cmd_train)
 
-    r = sub.add_parser("reproduce", help="reproduce the reference experiments of S0, S1 or S2")
-    r.add_argument("name", metavar="S0|S1|S2")
-    r.add_argument("--runs", type=int, default=None, help="Monte Carlo runs (default: 200 for S0, 100 otherwise)")
+    r = sub.add_parser("reproduce", help="reproduce the reference experiments of S0, S1, S2, or the wide-prior study")
+    r.add_argument("name", metavar="S0|S1|S2|wide")
+    r.add_argument("--runs", type=int, default=None,
+                   help="Monte Carlo runs (default: 200 for S0, 100 for S1 and S2, 500 passages per family for wide)")
     r.add_argument("--out", default=None, help="output directory (default: results/NAME)")
     r.add_argument("--seed", type=int, default=0)
     r.set_defaults(func=cmd_reproduce)

@@ -150,6 +150,8 @@ class PriorConfig(_Model):
     range: PositiveRange = (150.0, 400.0)
     bearing_deg: Range = (0.0, 360.0)
     course_offset_deg: Range = (-20.0, 20.0)
+    cpa: Range | None = Field(None, description="If given, the course is set so that the closest approach to "
+                              "the centroid is uniform in this range (m), instead of course_offset_deg.")
     speed: PositiveRange = (3.0, 10.0)
     moment: PositiveRange | None = None
     p: PositiveRange | None = None
@@ -203,8 +205,10 @@ class ProcessNoiseConfig(_Model):
 
     ``identity``: ``sigma_q I``; ``dwna``: white acceleration ``sigma_a`` (m/s²) plus a per-step
     random-walk variance ``param_var`` on each parameter (moment in (1e6 A·m²)², z in m², p in
-    (A·m)²); ``diagonal``: ``diag(q_diag)``.  The defaults (DWNA, sigma_a = 1 m/s², moment walk
-    0.6) are the consistent setting measured on S0 by ``experiments/filter_consistency.py``.
+    (A·m)²); ``diagonal``: ``diag(q_diag)``.  The defaults (DWNA, sigma_a = 1 m/s², a moment walk
+    of 0.85 % of the scenario's moment magnitude per step) are the consistent setting measured on
+    S0 by ``experiments/filter_consistency.py`` (0.6 (1e6 A·m²)² there), made relative so that it
+    transfers to ships of other sizes.
     """
 
     model: Literal["identity", "dwna", "diagonal"] = "dwna"

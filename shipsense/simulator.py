@@ -129,8 +129,12 @@ def _passages(sc: Scenario, runs: int, random: bool, streams) -> np.ndarray:
     rng_ = pr.range[0] + (pr.range[1] - pr.range[0]) * u[:, 0]
     brg = np.deg2rad(pr.bearing_deg[0] + (pr.bearing_deg[1] - pr.bearing_deg[0]) * u[:, 1])
     start = centre + rng_[:, None] * np.stack([np.cos(brg), np.sin(brg)], axis=-1)
-    offset = pr.course_offset_deg[0] + (pr.course_offset_deg[1] - pr.course_offset_deg[0]) * u[:, 2]
-    course = brg + np.pi + np.deg2rad(offset)
+    if pr.cpa is not None:   # closest approach to the centroid uniform in [cpa_min, cpa_max]
+        cpa = pr.cpa[0] + (pr.cpa[1] - pr.cpa[0]) * u[:, 2]
+        course = brg + np.pi + np.arcsin(np.clip(cpa / rng_, -1.0, 1.0))
+    else:
+        offset = pr.course_offset_deg[0] + (pr.course_offset_deg[1] - pr.course_offset_deg[0]) * u[:, 2]
+        course = brg + np.pi + np.deg2rad(offset)
     speed = pr.speed[0] + (pr.speed[1] - pr.speed[0]) * u[:, 3]
     x0[:, 0:2] = start
     x0[:, 2:4] = speed[:, None] * np.stack([np.cos(course), np.sin(course)], axis=-1)

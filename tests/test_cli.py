@@ -99,6 +99,17 @@ def test_reproduce_writes_the_documented_summary_keys(tmp_path):
     assert main(["reproduce", "S9"]) == 2
 
 
+def test_reproduce_wide_writes_the_documented_summary_keys(tmp_path):
+    import json
+
+    assert main(["reproduce", "wide", "--runs", "4", "--out", str(tmp_path)]) == 0
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    for family in ("one_magnetometer", "two_magnetometers", "envelope_p2"):
+        for method in ("miv_bank", "global_init"):
+            assert {"convergence_rate", "mrmse_r_m", "rmse_over_pcrlb", "nees_mean",
+                    "seconds_per_passage"} <= set(summary[family][method])
+
+
 def test_check_exit_codes_and_json(capsys):
     import json
 

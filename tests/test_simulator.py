@@ -106,3 +106,22 @@ def test_raw_envelope_chain_and_seismic_chain_run_and_stay_close():
     ax = sim2.array.axial
     err = np.rad2deg(np.abs(np.angle(np.exp(2j * (sim2.measurements[..., ax] - sim2.clean[..., ax]))) / 2))
     assert np.median(err) < 2.0
+
+
+def test_prior_closest_approach_range():
+    sc = load_scenario("S2").with_updates(prior={**load_scenario("S2").prior.model_dump(), "cpa": (-10.0, 10.0)})
+    sim = simulate(sc, runs=200, seed=2, random=True)
+    p0, v = sim.truth[:, 0, :2], sim.truth[:, 0, 2:4]          # the array centroid is the origin
+    cpa = np.abs(p0[:, 0] * v[:, 1] - p0[:, 1] * v[:, 0]) / np.linalg.norm(v, axis=-1)
+    assert cpa.max() <= 10.0 + 1e-9 and cpa.max() > 8.0
+
+
+def test_default_moment_walk_is_relative_to_the_ship():
+    from shipsense.config import ProcessNoiseConfig
+    from shipsense.trackers.models import model_from_scenario
+
+    small = model_from_scenario(load_scenario("S2").with_updates(prior=None), process_noise=ProcessNoiseConfig())
+    big = model_from_scenario(load_scenario("S0").with_updates(prior=None), process_noise=ProcessNoiseConfig())
+    assert np.diag(big.Q)[4] == pytest.approx(0.6069, rel=1e-3)      # the setting measured consistent on S0
+    ratio = np.sqrt(np.diag(small.Q)[4] / np.diag(big.Q)[4])
+    assert ratio == pytest.approx(np.linalg.norm([1e4] * 3) / np.linalg.norm([8e7, 2e7, 4e7]), rel=1e-9)

@@ -1,4 +1,4 @@
-"""The reference experiments of the three source studies (scenarios.md): ``shipsense reproduce S0|S1|S2``.
+"""The reference experiments (scenarios.md): ``shipsense reproduce S0|S1|S2``, and ``wide`` (issue 7).
 
 Each ``run(runs, out, seed, progress)`` writes ``summary.json``, CSV tables
 and PNG figures into ``out`` and returns the summary.  The keys of
@@ -8,16 +8,17 @@ and PNG figures into ``out`` and returns the summary.  The keys of
 from __future__ import annotations
 
 EXPERIMENTS = {"S0": ("shipsense.reproduce.s0", 200), "S1": ("shipsense.reproduce.s1", 100),
-               "S2": ("shipsense.reproduce.s2", 100)}
+               "S2": ("shipsense.reproduce.s2", 100), "WIDE": ("shipsense.reproduce.wide", 500)}
 
 
 def run(name: str, runs: int | None = None, out=None, seed: int = 0, progress: bool = True):
-    """Run the experiment set of scenario ``name`` (S0, S1 or S2)."""
+    """Run the experiment set ``name`` (S0, S1, S2 or wide)."""
     from importlib import import_module
 
     key = name.upper()
     if key not in EXPERIMENTS:
         raise ValueError(f"unknown experiment set {name!r}; choose one of {', '.join(EXPERIMENTS)}")
     module, default_runs = EXPERIMENTS[key]
-    return import_module(module).run(runs=runs or default_runs, out=out or f"results/{key}", seed=seed,
+    folder = "wide" if key == "WIDE" else key
+    return import_module(module).run(runs=runs or default_runs, out=out or f"results/{folder}", seed=seed,
                                      progress=progress)

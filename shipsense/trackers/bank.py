@@ -52,11 +52,12 @@ class BankRun:
     ok: np.ndarray
     active: np.ndarray
     labels: tuple
+    initial_loglik: np.ndarray = 0.0
 
     @property
     def cum_loglik(self) -> np.ndarray:
-        """Cumulative log-likelihood (R, H, K); -inf once pruned."""
-        c = np.cumsum(np.where(self.active, self.loglik, 0.0), axis=-1)
+        """Cumulative log-likelihood (R, H, K) (from ``initial_loglik``); -inf once pruned."""
+        c = np.cumsum(np.where(self.active, self.loglik, 0.0), axis=-1) + np.asarray(self.initial_loglik)[..., None]
         return np.where(self.active, c, -np.inf)
 
     @property
@@ -151,14 +152,14 @@ class BankState:
         Initial covariances (SI).
     """
 
-    def __init__(self, unit, model, seeds, P0):
+    def __init__(self, unit, model, seeds, P0, initial_loglik=None):
         self.unit, self.model = unit, model
         seeds = np.asarray(seeds, dtype=float)
         self.R, self.H, n = seeds.shape
         xs = model.x_scale
         P0 = np.broadcast_to(np.asarray(P0, dtype=float) / np.outer(xs, xs), (self.R, self.H, n, n))
         self.belief = Belief.from_cov(seeds.reshape(-1, n) / xs, P0.reshape(-1, n, n))
-        self.cum = np.zeros((self.R, self.H))
+        self.cum = np.zeros((self.R, self.H)) if initial_loglik is None else np.array(initial_loglik, float)
         self.idx = np.arange(self.R * self.H)        # active (not pruned) flat elements
         self.steps = 0
 
@@ -245,7 +246,8 @@ class BankState:
         return np.argmax(self.cum, axis=1)
 
 
-def run_bank(unit, model, measurements, seeds, P0, *, prune_nats=None, progress=False) -> BankRun:
+def run_bank(unit, model, measurements, seeds, P0, *, prune_nats=None, progress=False,
+             initial_loglik=None) -> BankRun:
     """Run a bank of hypotheses over passages as one batch.
 
     Parameters
@@ -263,6 +265,9 @@ def run_bank(unit, model, measurements, seeds, P0, *, prune_nats=None, progress=
         the best of their run (checked every step); their compute is freed.
     progress : bool
         Progress bar over the steps.
+    initial_loglik : ndarray, shape (R, H), optional
+        Prior log-likelihoods of the hypotheses (e.g. from a batch fit); the
+        cumulative log-likelihoods start there.
     """
     if isinstance(unit, str):
         unit = get_filter(unit)
@@ -275,7 +280,7 @@ def run_bank(unit, model, measurements, seeds, P0, *, prune_nats=None, progress=
                          f"got {y.shape} and {seeds.shape}")
     R, K, m = y.shape
     H, n = seeds.shape[1:]
-    state = BankState(unit, model, seeds, P0)
+    state = BankState(unit, model, seeds, P0, initial_loglik)
     means = np.full((R, H, K, n), np.nan)
     pos_cov = np.full((R, H, K, 2, 2), np.nan)
     loglik = np.full((R, H, K), np.nan)
@@ -300,4 +305,5 @@ def run_bank(unit, model, measurements, seeds, P0, *, prune_nats=None, progress=
         active[r, h, k] = True
         if prune_nats is not None:
             state.prune(prune_nats)
-    return BankRun(seeds, means, pos_cov, loglik, nis, used, ok, active, tuple(model.labels))
+    init = np.zeros((R, H)) if initial_loglik is None else np.asarray(initial_loglik, float)
+    return BankRun(seeds, means, pos_cov, loglik, nis, used, ok, active, tuple(model.labels), init)

@@ -19,12 +19,14 @@ def powers(A, K):
     return out
 
 
-def fit_passages(model, y, theta_init, steps, stride=1, iterations=40):
+def fit_passages(model, y, theta_init, steps, stride=1, iterations=40, return_information=False):
     """Batched Levenberg–Marquardt fit of passages to measurements (internal units).
 
     ``y`` (B or 1, K', m) are the measurements at steps ``0, stride, 2 stride, ...``;
     ``theta_init`` (B, n); NaN samples are ignored.  Returns the fitted
-    initial states (B, n) and their chi-square over the fitted samples.
+    initial states (B, n) and their chi-square over the fitted samples (and,
+    with ``return_information``, the Gauss–Newton information ``J^T J`` (B, n, n)
+    at the solution: the inverse of the batch-fit covariance).
     """
     Ak = powers(model.A, steps)[::stride]
     w = 1.0 / np.sqrt(model.R)
@@ -57,4 +59,7 @@ def fit_passages(model, y, theta_init, steps, stride=1, iterations=40):
         X = np.where(better[:, None, None], X_t, X)
         cost = np.where(better, cost_t, cost)
         lam = np.clip(np.where(better, lam / 3.0, lam * 5.0), 1e-9, 1e9)
+    if return_information:
+        Jac = (model.H(X) @ Ak * (w * present)[..., None]).reshape(B, -1, n)
+        return theta, cost, np.swapaxes(Jac, -1, -2) @ Jac
     return theta, cost

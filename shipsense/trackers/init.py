@@ -16,6 +16,8 @@ positions around that sensor (trackers.md §2).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from shipsense.physics.magnetic import MU0_OVER_4PI
@@ -101,3 +103,206 @@ def seed_hypotheses(model, y, bank, source_z=None):
         x0[..., iz + 1] = bank.p_initial if "mx" in labels else np.repeat(np.asarray(bank.levels, dtype=float), L)
         std += [bank.z_std, bank.p_std]
     return x0, np.diag(np.square(std))
+
+
+# -- the global initialiser (beyond the source studies) ------------------------------------------
+@dataclass(frozen=True)
+class GlobalInit:
+    """Hypotheses from :func:`global_init` for R passages (SI units).
+
+    Attributes
+    ----------
+    start : ndarray of int, shape (R,)
+        First sample the bank processes (after the fitted window).
+    seeds : ndarray, shape (R, M, n)
+        Means at ``start`` (the batch fits propagated to it).
+    P0 : ndarray, shape (R, M, n, n)
+        Their covariances (batch-fit covariance propagated, plus the process noise).
+    loglik : ndarray, shape (R, M)
+        ``-chi2 / 2`` of each batch fit: the bank's prior log-likelihoods.
+    window : ndarray, shape (R, M, W, n)
+        The fitted trajectories over the window (estimates before ``start``).
+    k0 : ndarray of int, shape (R,)
+        First sample of the window (the detection).
+    """
+
+    start: np.ndarray
+    seeds: np.ndarray
+    P0: np.ndarray
+    loglik: np.ndarray
+    window: np.ndarray
+    k0: np.ndarray
+
+
+def _parameter_slots(model):
+    labels = model.labels
+    slots = [labels.index(c) for c in ("mx", "my", "mz", "p") if c in labels]
+    if any(k == "magnitude" for k in model.array.kinds):
+        raise ValueError("the global initialiser needs measurements linear in the moment (not 'magnitude')")
+    return slots
+
+
+def candidate_grid(model, ranges, bearings_deg, courses_deg, speeds, source_z=None):
+    """Candidate initial states (C, n) (internal units, parameters zero) around the array centroid."""
+    centre = model.array.positions[:, :2].mean(axis=0)
+    R_, B_, C_, V_ = np.meshgrid(np.asarray(ranges, float), np.deg2rad(bearings_deg), np.deg2rad(courses_deg),
+                                 np.asarray(speeds, float), indexing="ij")
+    R_, B_, C_, V_ = (a.ravel() for a in (R_, B_, C_, V_))
+    theta = np.zeros((R_.size, model.n))
+    theta[:, 0] = centre[0] + R_ * np.cos(B_)
+    theta[:, 1] = centre[1] + R_ * np.sin(B_)
+    theta[:, 2] = V_ * np.cos(C_)
+    theta[:, 3] = V_ * np.sin(C_)
+    if "z" in model.labels:
+        theta[:, model.labels.index("z")] = model.source_z if source_z is None else source_z
+    return theta
+
+
+def linear_basis(model, theta, steps, stride=1):
+    """Offset (C, W, m) and unit-parameter basis (C, W, m, P) of candidate passages (internal units).
+
+    The measurements are linear in the moment (and ``p``) for vector, tmi and
+    envelope (``p >= 0``) channels: ``h = offset + basis @ params``; bearing
+    channels are in the offset.
+    """
+    from shipsense.trackers.batchfit import powers
+
+    slots = _parameter_slots(model)
+    Ak = powers(model.A, steps)[::stride]
+    X = np.einsum("kij,cj->cki", Ak, theta)
+    X[..., slots] = 0.0
+    offset = model.h(X)
+    basis = np.empty(offset.shape + (len(slots),))
+    for j, s in enumerate(slots):
+        Xj = X.copy()
+        Xj[..., s] = 1.0
+        basis[..., j] = model.h(Xj) - offset
+    return offset, basis
+
+
+def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, course_step_deg=30.0,
+                window_s=15.0, grid_samples=16, keep=6, distinct_m=15.0, snr_start=5.0, inflate=2.0,
+                source_z=None, common_start=False):
+    """Global initialisation of passages from a grid search with the moment eliminated in closed form.
+
+    Parameters
+    ----------
+    model : FieldModel
+    measurements : ndarray, shape (R, K, m)
+        SI units, NaN = missing.
+    ranges, speeds : sequence of float
+        Grid of start ranges from the array centroid (m) and speeds (m/s).
+    bearing_step_deg, course_step_deg : float
+        Grid steps of the start bearing and the course.
+    window_s : float
+        Duration (s) fitted from the detection on (W samples); the grid search
+        uses about ``grid_samples`` of them, the refinement all.
+    keep : int
+        Distinct minima kept per passage (M): the best ones more than ``distinct_m`` apart.
+    snr_start : float
+        The window starts at the first sample with some channel above this SNR (adaptive start).
+    inflate : float
+        Factor on the batch-fit covariance (linearisation of a nonlinear fit).
+    common_start : bool
+        Start every passage's window at the latest detection of the batch, so
+        that one bank runs them all (:func:`track_with_global_init`).
+
+    Returns
+    -------
+    GlobalInit
+    """
+    from shipsense.trackers.batchfit import fit_passages, powers
+
+    y_si = np.asarray(measurements, dtype=float)
+    R, K, m = y_si.shape
+    window = int(np.clip(round(window_s / model.period), 4, K - 1))
+    stride = max(1, window // grid_samples)
+    y = y_si / model.y_scale
+    std = np.sqrt(model.R)
+    field = ~model.axial
+    snr = np.where(field, np.abs(np.nan_to_num(y)) / std, 0.0).max(axis=-1)              # (R, K)
+    above = snr > snr_start
+    k0 = np.where(above.any(axis=1), np.argmax(above, axis=1), 0)
+    k0 = np.minimum(k0, K - window - 1).clip(0)
+    if common_start:   # one bank start for the whole batch: every window starts at the latest detection
+        k0 = np.full(R, k0.max())
+    grid = candidate_grid(model, ranges, np.arange(0.0, 360.0, bearing_step_deg),
+                          np.arange(0.0, 360.0, course_step_deg), speeds, source_z)
+    offset, basis = linear_basis(model, grid, window, stride)                            # (C, W', m[, P])
+    Wn = offset.shape[1]
+    idx = k0[:, None] + stride * np.arange(Wn)[None, :]                                   # (R, W')
+    yw = y[np.arange(R)[:, None], idx]                                                    # (R, W', m)
+    present = np.isfinite(yw)
+    d = model.residual(np.where(present, yw, 0.0)[:, None], offset[None]) / std          # (R, C, W', m)
+    d = np.where(present[:, None], d, 0.0)
+    G = basis / std[:, None]                                                              # (C, W', m, P)
+    Gm = G[None] * present[:, None, ..., None]                                            # (R, C, W', m, P)
+    A = np.einsum("rcwmp,rcwmq->rcpq", Gm, Gm)
+    b = np.einsum("rcwmp,rcwm->rcp", Gm, d)
+    P = A.shape[-1]
+    params = np.linalg.solve(A + 1e-9 * np.eye(P), b[..., None])[..., 0]
+    if "p" in model.labels:                                   # the envelope needs p >= 0
+        params[..., -1] = np.maximum(params[..., -1], 0.0)
+    fit = d - np.einsum("rcwmp,rcp->rcwm", Gm, params)
+    chi2 = np.sum(fit * fit, axis=(-1, -2))                                              # (R, C)
+    slots = _parameter_slots(model)
+    Ak = powers(model.A, window)
+    mid = Ak[window // 2][:2]
+    M = keep
+    starts = np.zeros((R, M, model.n))
+    for r in range(R):   # choosing distinct minima is a short greedy pass per passage (not a filter loop)
+        order = np.argsort(chi2[r])
+        chosen = []
+        for c in order:
+            pos = mid @ grid[c]
+            if all(np.hypot(*(pos - mid @ grid[o])) > distinct_m for o in chosen):
+                chosen.append(c)
+                if len(chosen) == M:
+                    break
+        th = grid[chosen].copy()
+        th[:, slots] = params[r, chosen]
+        starts[r, : len(chosen)] = th
+        starts[r, len(chosen):] = th[0]
+    # refine every kept minimum by a batch Levenberg-Marquardt fit over the whole window
+    yfit = y[np.arange(R)[:, None], k0[:, None] + np.arange(window)[None, :]]           # (R, W, m)
+    theta, chi2_fit, info = fit_passages(model, np.repeat(yfit, M, axis=0), starts.reshape(R * M, -1),
+                                         window, return_information=True)
+    theta = theta.reshape(R, M, -1)
+    cov = np.linalg.pinv(info, hermitian=True).reshape(R, M, model.n, model.n) * inflate
+    # propagate to the first sample after the window
+    Aw = Ak[-1] @ model.A
+    seeds = np.einsum("ij,rmj->rmi", Aw, theta)
+    P0 = Aw @ cov @ Aw.T + window * model.Q
+    traj = np.einsum("kij,rmj->rmki", Ak, theta)
+    xs = model.x_scale
+    return GlobalInit(start=k0 + window, seeds=seeds * xs, P0=P0 * np.outer(xs, xs),
+                      loglik=-0.5 * chi2_fit.reshape(R, M), window=traj * xs, k0=k0)
+
+
+def track_with_global_init(unit, model, measurements, gi: GlobalInit):
+    """Run the bank from the global initialiser's hypotheses; returns ``(estimates (R, K, n) SI, BankRun)``.
+
+    Before the bank starts, the estimate is the best batch fit's trajectory
+    (propagated backwards before the detection).  All passages must share the
+    bank's start (the study uses a common start, ``max(gi.start)``).
+    """
+    from shipsense.trackers.bank import run_bank
+
+    y = np.asarray(measurements, dtype=float)
+    R, K, _ = y.shape
+    start = int(gi.start.max())
+    if np.any(gi.start != start):
+        raise ValueError("all passages must share the bank's start; use a common window")
+    if start >= K:
+        raise ValueError(f"the passage ({K} samples) ends inside the fitted window ({start} samples)")
+    bank = run_bank(unit, model, y[:, start:], gi.seeds, gi.P0, initial_loglik=gi.loglik)
+    est = np.empty((R, K, model.n))
+    est[:, start:] = bank.selected_means
+    best = np.argmax(gi.loglik, axis=1)
+    theta0 = gi.window[np.arange(R), best, 0] / model.x_scale                 # internal, at k0
+    ks = np.arange(start)[None, :] - gi.k0[:, None]                           # steps relative to k0
+    # constant velocity forwards and backwards: x_k = x_0 + k T v for the kinematic block
+    traj = np.repeat(theta0[:, None, :], start, axis=1)
+    traj[..., 0:2] += ks[..., None] * model.period * theta0[:, None, 2:4]
+    est[:, :start] = traj * model.x_scale
+    return est, bank

@@ -213,13 +213,21 @@ def subset_model(model: FieldModel, keep) -> FieldModel:
                       moment_unit=model.moment_unit)
 
 
-def _process_noise(sc, pn, types, period):
+MOMENT_WALK = 0.0085
+"""Default per-step random walk of the magnetic moment, relative to the scenario's moment magnitude."""
+
+
+def _process_noise(sc, pn, types, period, moment_unit=1e6):
     n_params = 3 * ("magnetometer" in types) + 2 * ("electrode" in types)
     if pn.model == "identity":
         return q_identity(n_params, pn.sigma_q)
     if pn.model == "diagonal":
         return np.diag(np.asarray(pn.q_diag, dtype=float)[: 4 + n_params])
-    default = [0.6] * (3 * ("magnetometer" in types)) + [0.0, 1e-3] * ("electrode" in types)
+    scale = float(np.linalg.norm(sc.passage.moment)) if sc.passage.moment is not None else moment_unit
+    if sc.prior is not None and sc.prior.moment is not None:
+        scale = float(np.sqrt(sc.prior.moment[0] * sc.prior.moment[1]))
+    walk = (MOMENT_WALK * scale / moment_unit) ** 2
+    default = [walk] * (3 * ("magnetometer" in types)) + [0.0, 1e-3] * ("electrode" in types)
     param_var = pn.param_var if pn.param_var is not None and len(pn.param_var) == n_params else default
     return q_dwna(period, pn.sigma_a, param_var)
 
@@ -230,9 +238,10 @@ def model_from_scenario(scenario, sensors=None, *, moment_unit=1e6, process_nois
     Process noise comes from ``[tracker.process_noise]`` (or ``process_noise``,
     a ProcessNoiseConfig), in internal units.  Defaults when the scenario has
     no tracker section, or ``param_var`` is not given: DWNA with sigma_a = 1
-    m/s² and per-step random walks of 0.6 (moment, in (1e6 A·m²)²), 0 (z) and
-    1e-3 (p, (A·m)²) -- the consistent setting measured on S0 (README,
-    "Filter consistency").
+    m/s² and per-step random walks with standard deviation 0.85 % of the
+    moment magnitude (the nominal passage's, or the geometric mean of the
+    prior's range when there is one), 0 on z and 1e-3 (A·m)² on p -- the
+    consistent setting measured on S0 (README, "Filter consistency").
     """
     from shipsense.config import ProcessNoiseConfig, load_scenario
 

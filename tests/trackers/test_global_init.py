@@ -1,0 +1,62 @@
+"""The global initialiser: closed-form moment elimination, recovery of passages, mirror minima."""
+
+import numpy as np
+import pytest
+
+from shipsense import load_scenario, simulate
+from shipsense.trackers.filters import get_filter
+from shipsense.trackers.init import candidate_grid, global_init, linear_basis, track_with_global_init
+from shipsense.trackers.models import model_from_scenario
+
+
+def test_basis_reproduces_the_measurement_model_for_any_moment():
+    model = model_from_scenario("S2")                       # two vector magnetometers and a bearing
+    grid = candidate_grid(model, [60.0, 120.0], [0.0, 90.0], [200.0], [5.0])
+    offset, basis = linear_basis(model, grid, 10)
+    m = np.array([0.02, -0.01, 0.03])                       # internal units (1e6 A m^2)
+    theta = grid.copy()
+    theta[:, 4:] = m
+    from shipsense.trackers.batchfit import powers
+
+    X = np.einsum("kij,cj->cki", powers(model.A, 10), theta)
+    np.testing.assert_allclose(offset + basis @ m, model.h(X), rtol=1e-10, atol=1e-12)
+
+
+@pytest.mark.parametrize("name, sensors, tol", [("S2", ["M1", "M2"], 3.0), ("S1-P2", None, 8.0)])
+def test_recovers_random_passages_without_a_prior_on_position(name, sensors, tol):
+    sc = load_scenario(name)
+    model = model_from_scenario(sc, sensors=sensors)
+    sim = simulate(sc, runs=8, seed=3, random=True)
+    cols = np.isin([c[0] for c in sim.channels], model.array.ids)
+    y = sim.measurements[..., cols]
+    truth = model.state_from_truth(sim.truth)
+    gi = global_init(model, y, ranges=np.geomspace(20, 1.2 * sc.prior.range[1], 8),
+                     speeds=np.linspace(*sc.prior.speed, 3))
+    best = np.argmax(gi.loglik, axis=1)
+    at = np.minimum(gi.start, sc.steps - 1)
+    err = np.hypot(*(gi.seeds[np.arange(8), best, :2] - truth[np.arange(8), at, :2]).T)
+    assert np.all(err < tol), err
+    assert gi.P0.shape == (8, 6, model.n, model.n) and np.all(np.linalg.eigvalsh(gi.P0) > 0)
+
+
+def test_keeps_the_mirror_minimum_of_a_collinear_envelope_array():
+    sc = load_scenario("S1-P1")
+    model = model_from_scenario(sc)
+    sim = simulate(sc, runs=1, seed=0)
+    gi = global_init(model, sim.measurements, ranges=np.geomspace(20, 300, 8), speeds=[7.0, 10.0])
+    order = np.argsort(gi.loglik[0])[::-1]
+    a, b = gi.seeds[0, order[0], :2], gi.seeds[0, order[1], :2]
+    assert abs(a[0] + b[0]) < 3.0 and abs(a[1] - b[1]) < 3.0          # mirror images across x = 0
+    assert gi.loglik[0, order[0]] - gi.loglik[0, order[1]] < 1.0       # equally likely
+
+
+def test_tracking_from_the_global_initialiser_converges_on_s2():
+    sc = load_scenario("S2")
+    model = model_from_scenario(sc, sensors=["M1", "M2"])
+    sim = simulate(sc, runs=4, seed=5, random=True)
+    y = sim.measurements[..., :6]
+    gi = global_init(model, y, ranges=np.geomspace(20, 150, 8), speeds=np.linspace(3, 7, 3), common_start=True)
+    est, bank = track_with_global_init(get_filter("ukf"), model, y, gi)
+    truth = model.state_from_truth(sim.truth)
+    final = np.hypot(*(est[:, -1, :2] - truth[:, -1, :2]).T)
+    assert est.shape == truth.shape and np.all(final < 5.0), final
