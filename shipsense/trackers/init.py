@@ -182,7 +182,7 @@ def linear_basis(model, theta, steps, stride=1):
 
 def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, course_step_deg=30.0,
                 window_s=15.0, grid_samples=16, keep=6, distinct_m=15.0, snr_start=5.0, inflate=2.0,
-                source_z=None, common_start=False):
+                source_z=None, common_start=False, max_bytes=512e6):
     """Global initialisation of passages from a grid search with the moment eliminated in closed form.
 
     Parameters
@@ -206,6 +206,8 @@ def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, c
     common_start : bool
         Start every passage's window at the latest detection of the batch, so
         that one bank runs them all (:func:`track_with_global_init`).
+    max_bytes : float
+        Memory for the grid stage; passages are processed in chunks within it.
 
     Returns
     -------
@@ -231,20 +233,28 @@ def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, c
     offset, basis = linear_basis(model, grid, window, stride)                            # (C, W', m[, P])
     Wn = offset.shape[1]
     idx = k0[:, None] + stride * np.arange(Wn)[None, :]                                   # (R, W')
-    yw = y[np.arange(R)[:, None], idx]                                                    # (R, W', m)
-    present = np.isfinite(yw)
-    d = model.residual(np.where(present, yw, 0.0)[:, None], offset[None]) / std          # (R, C, W', m)
-    d = np.where(present[:, None], d, 0.0)
+    yw_all = y[np.arange(R)[:, None], idx]                                                # (R, W', m)
     G = basis / std[:, None]                                                              # (C, W', m, P)
-    Gm = G[None] * present[:, None, ..., None]                                            # (R, C, W', m, P)
-    A = np.einsum("rcwmp,rcwmq->rcpq", Gm, Gm)
-    b = np.einsum("rcwmp,rcwm->rcp", Gm, d)
-    P = A.shape[-1]
-    params = np.linalg.solve(A + 1e-9 * np.eye(P), b[..., None])[..., 0]
-    if "p" in model.labels:                                   # the envelope needs p >= 0
-        params[..., -1] = np.maximum(params[..., -1], 0.0)
-    fit = d - np.einsum("rcwmp,rcp->rcwm", Gm, params)
-    chi2 = np.sum(fit * fit, axis=(-1, -2))                                              # (R, C)
+    P = G.shape[-1]
+    C = G.shape[0]
+    chi2 = np.empty((R, C))
+    params = np.empty((R, C, P))
+    # passages in chunks: the (chunk, C, W', m, P) arrays stay near max_bytes
+    chunk = max(1, int(max_bytes // (8 * C * Wn * m * max(P, 1) * 3)))
+    for lo in range(0, R, chunk):
+        yw = yw_all[lo:lo + chunk]
+        present = np.isfinite(yw)
+        d = model.residual(np.where(present, yw, 0.0)[:, None], offset[None]) / std      # (r, C, W', m)
+        d = np.where(present[:, None], d, 0.0)
+        Gm = G[None] * present[:, None, ..., None]                                        # (r, C, W', m, P)
+        A = np.einsum("rcwmp,rcwmq->rcpq", Gm, Gm)
+        b = np.einsum("rcwmp,rcwm->rcp", Gm, d)
+        par = np.linalg.solve(A + 1e-9 * np.eye(P), b[..., None])[..., 0]
+        if "p" in model.labels:                                   # the envelope needs p >= 0
+            par[..., -1] = np.maximum(par[..., -1], 0.0)
+        fit = d - np.einsum("rcwmp,rcp->rcwm", Gm, par)
+        chi2[lo:lo + chunk] = np.sum(fit * fit, axis=(-1, -2))
+        params[lo:lo + chunk] = par
     slots = _parameter_slots(model)
     Ak = powers(model.A, window)
     mid = Ak[window // 2][:2]
