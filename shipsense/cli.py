@@ -182,7 +182,6 @@ def cmd_track(args) -> int:
     sel = bank.selected[0]
     labels = list(tr.model.labels)
     header = ["time", *labels, "std_x", "std_y", "selected"]
-    tcols = {"x": 0, "y": 1, "vx": 2, "vy": 3, "z": 4, "mx": 5, "my": 6, "mz": 7, "p": 8}
     if truth is not None:
         header += ["true_x", "true_y", "error_m"]
     with open(out / "estimates.csv", "w", newline="") as fh:
@@ -192,7 +191,7 @@ def cmd_track(args) -> int:
             row = [f"{t[k]:.6g}", *(f"{v:.6g}" for v in est[k]), f"{np.sqrt(cov[k, 0, 0]):.4g}",
                    f"{np.sqrt(cov[k, 1, 1]):.4g}", int(sel[k])]
             if truth is not None:
-                tx, ty = truth[k0 + k, tcols["x"]], truth[k0 + k, tcols["y"]]
+                tx, ty = truth[k0 + k, 0], truth[k0 + k, 1]                  # STATE_LABELS: x, y first
                 row += [f"{tx:.6g}", f"{ty:.6g}", f"{np.hypot(est[k, 0] - tx, est[k, 1] - ty):.4g}"]
             w.writerow(row)
     cum = bank.cum_loglik[0]
@@ -294,7 +293,7 @@ def cmd_design(args) -> int:
     from shipsense.plotting import plot_design
     from shipsense.simulator import sample_passages
     from shipsense.trackers.models import candidate_model
-    from shipsense.tracking import DEFAULT_BANK
+    from shipsense.tracking import scenario_tracker
 
     sc = load_scenario(args.scenario)
     if args.criterion not in CRITERIA:
@@ -317,7 +316,7 @@ def cmd_design(args) -> int:
     truth = sample_passages(sc, args.passages if sc.prior is not None else 1, seed=args.seed,
                             random=sc.prior is not None)
     thetas = model.to_internal(model.state_from_truth(truth))
-    b = sc.tracker.bank if sc.tracker is not None and sc.tracker.bank is not None else DEFAULT_BANK
+    _, b = scenario_tracker(sc)
     std = {"x": b.position_std, "y": b.position_std, "vx": b.velocity_std, "vy": b.velocity_std,
            "mx": b.moment_std, "my": b.moment_std, "mz": b.moment_std, "z": b.z_std, "p": b.p_std}
     prior_std = model.to_internal(np.array([std[c] for c in model.labels]))

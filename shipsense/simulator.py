@@ -158,7 +158,7 @@ def sample_passages(scenario, runs: int, seed: int = 0, random: bool = True) -> 
     return _passages(sc, runs, random, streams)
 
 
-def _keel_dipole(velocity, p):
+def keel_dipole(velocity, p):
     """Horizontal electric dipole ``p v/|v|`` along the keel, (..., 3)."""
     speed = np.linalg.norm(velocity, axis=-1, keepdims=True)
     d = p[..., None] * velocity / np.where(speed > 0, speed, 1.0)
@@ -205,7 +205,7 @@ def simulate(scenario, runs: int | None = None, seed: int | None = None, *, rand
     truth[..., 0:2] = cv_positions(x0[:, 0:2], x0[:, 2:4], times)
     sources = truth[..., [0, 1, 4]]
     moments = truth[..., 5:8]
-    dipoles = _keel_dipole(truth[..., 2:4], truth[..., 8])
+    dipoles = keel_dipole(truth[..., 2:4], truth[..., 8])
     clean = array.measure(sources, moments, dipoles)
 
     m = array.n_channels
@@ -241,7 +241,7 @@ def _envelope_chain(sc: Scenario, array: SensorArray, x0, streams):
     raw_t = np.arange(times[0] - ch.pad_s, times[-1] + ch.pad_s + 0.5 * dt, dt)
     src = np.concatenate([cv_positions(x0[:, 0:2], x0[:, 2:4], raw_t), np.broadcast_to(
         x0[:, None, 4:5], (x0.shape[0], raw_t.size, 1))], axis=-1)
-    dip = _keel_dipole(x0[:, None, 2:4], x0[:, None, 8])
+    dip = keel_dipole(x0[:, None, 2:4], x0[:, None, 8])
     elec = array.group("electrode")
     is_env = np.array([array.kinds[i] == "envelope" for i in elec])
     E = array.electric_field(src, dip)[..., is_env, :]          # (runs, n_raw, S_env, 3)

@@ -28,6 +28,20 @@ class Track:
     config: BankConfig
 
 
+def scenario_tracker(scenario: Scenario, filter_name=None):
+    """The scenario's filter unit (with its options) and bank configuration, or the defaults.
+
+    Returns ``(unit, bank_config)``: ``[tracker].filter`` (``ukf`` without a
+    tracker section) unless ``filter_name`` is given, ``n_pu`` for the PUEKF,
+    and ``[tracker.bank]`` or :data:`DEFAULT_BANK`.
+    """
+    tracker = scenario.tracker
+    cfg = tracker.bank if tracker is not None and tracker.bank is not None else DEFAULT_BANK
+    name = filter_name or (tracker.filter if tracker is not None else "ukf")
+    options = {"n_pu": tracker.n_pu} if name == "puekf" and tracker is not None else {}
+    return get_filter(name, **options), cfg
+
+
 def track_passage(scenario: Scenario, measurements, filter_name=None, progress=False) -> Track:
     """Seed the bank from the first step with a field sample and run it over one passage.
 
@@ -36,11 +50,7 @@ def track_passage(scenario: Scenario, measurements, filter_name=None, progress=F
     """
     y = np.asarray(measurements, dtype=float)
     model = model_from_scenario(scenario)
-    cfg = scenario.tracker.bank if scenario.tracker is not None and scenario.tracker.bank is not None \
-        else DEFAULT_BANK
-    name = filter_name or (scenario.tracker.filter if scenario.tracker is not None else "ukf")
-    options = {"n_pu": scenario.tracker.n_pu} if name == "puekf" and scenario.tracker is not None else {}
-    unit = get_filter(name, **options)
+    unit, cfg = scenario_tracker(scenario, filter_name)
     primary = "magnetometer" if "magnetometer" in model.array.types else "electrode"
     use = np.array([t == primary for t in model.array.types])
     has = ~np.isnan(np.where(use, field_strength(model, y), np.nan)).all(axis=-1)
@@ -49,4 +59,4 @@ def track_passage(scenario: Scenario, measurements, filter_name=None, progress=F
     k0 = int(np.argmax(has))
     seeds, P0 = seed_hypotheses(model, y[None, k0], cfg)
     bank = run_bank(unit, model, y[None, k0:], seeds, P0, prune_nats=cfg.prune_nats, progress=progress)
-    return Track(model, bank, k0, name, cfg)
+    return Track(model, bank, k0, unit.name, cfg)

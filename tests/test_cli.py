@@ -31,7 +31,7 @@ def test_simulate_writes_npz_csv_and_plot(tmp_path, capsys):
 
 def test_bad_input_exits_2_with_one_message(tmp_path):
     bad = tmp_path / "bad.toml"
-    bad.write_text((tmp_path / "x").as_posix() and 'period = 0.5\nsteps = "many"\n')
+    bad.write_text('period = 0.5\nsteps = "many"\n')
     proc = subprocess.run([sys.executable, "-m", "shipsense.cli", "simulate", str(bad)],
                           capture_output=True, text=True)
     assert proc.returncode == 2

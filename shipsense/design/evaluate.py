@@ -16,7 +16,6 @@ import numpy as np
 from shipsense.design.fisher import pcrlb
 from shipsense.design.observability import check_array
 from shipsense.trackers.bank import run_bank
-from shipsense.trackers.filters import get_filter
 from shipsense.trackers.init import seed_hypotheses
 from shipsense.trackers.metrics import convergence_rate, position_error, trmse
 from shipsense.trackers.models import model_from_scenario
@@ -45,7 +44,7 @@ def evaluate_layout(scenario, passages=50, seed=HELD_OUT_SEED, filter_name=None,
     """Evaluate a scenario's array with its tracker on ``passages`` random passages from its prior."""
     from shipsense.config import load_scenario
     from shipsense.simulator import simulate
-    from shipsense.tracking import DEFAULT_BANK
+    from shipsense.tracking import scenario_tracker
 
     sc = load_scenario(scenario)
     if sc.prior is None:
@@ -53,9 +52,7 @@ def evaluate_layout(scenario, passages=50, seed=HELD_OUT_SEED, filter_name=None,
     model = model_from_scenario(sc)
     sim = simulate(sc, runs=passages, seed=seed, random=True)
     truth = model.state_from_truth(sim.truth)
-    bank_cfg = sc.tracker.bank if sc.tracker is not None and sc.tracker.bank is not None else DEFAULT_BANK
-    name = filter_name or (sc.tracker.filter if sc.tracker is not None else "ukf")
-    unit = get_filter(name, **({"n_pu": sc.tracker.n_pu} if name == "puekf" and sc.tracker else {}))
+    unit, bank_cfg = scenario_tracker(sc, filter_name)
     seeds, P0 = seed_hypotheses(model, sim.measurements[:, 0], bank_cfg)
     bank = run_bank(unit, model, sim.measurements, seeds, P0, prune_nats=bank_cfg.prune_nats)
     est = bank.selected_means

@@ -55,12 +55,12 @@ from shipsense.config import load_scenario
 from shipsense.design.fisher import passage_fim
 from shipsense.design.observability import check_array
 from shipsense.design.placement import grid_candidates
-from shipsense.simulator import sample_passages, simulate
+from shipsense.simulator import keel_dipole, sample_passages, simulate
 from shipsense.trackers.bank import run_bank
-from shipsense.trackers.filters import get_filter
 from shipsense.trackers.init import seed_hypotheses
 from shipsense.trackers.metrics import convergence_rate, trmse
 from shipsense.trackers.models import candidate_model, subset_model
+from shipsense.tracking import scenario_tracker
 
 
 class ArrayDesignEnv(gym.Env):
@@ -130,9 +130,7 @@ class ArrayDesignEnv(gym.Env):
         model = subset_model(self.model, self.chosen)
         # measurements of the chosen sensors: the template's channels at the chosen positions
         meas = simulate_layout(sc, self.candidates[self.chosen], self._sim)
-        cfg = sc.tracker.bank
-        name = sc.tracker.filter
-        unit = get_filter(name, **({"n_pu": sc.tracker.n_pu} if name == "puekf" else {}))
+        unit, cfg = scenario_tracker(sc)
         seeds, P0 = seed_hypotheses(model, meas[:, 0], cfg)
         bank = run_bank(unit, model, meas, seeds, P0)
         est = bank.selected_means
@@ -212,8 +210,6 @@ def simulate_layout(scenario, positions, sim):
     layout = sc.model_copy(update={"sensors": sensors})
     array = layout.array()
     truth = sim.truth
-    from shipsense.simulator import _keel_dipole
-
-    clean = array.measure(truth[..., [0, 1, 4]], truth[..., 5:8], _keel_dipole(truth[..., 2:4], truth[..., 8]))
+    clean = array.measure(truth[..., [0, 1, 4]], truth[..., 5:8], keel_dipole(truth[..., 2:4], truth[..., 8]))
     rng = np.random.default_rng(12345)
     return clean + layout.channel_std * rng.standard_normal(clean.shape)

@@ -63,9 +63,9 @@ from gymnasium.vector.utils import batch_space
 from shipsense.config import load_scenario
 from shipsense.simulator import simulate
 from shipsense.trackers.bank import BankState
-from shipsense.trackers.filters import get_filter
 from shipsense.trackers.init import seed_hypotheses
 from shipsense.trackers.models import model_from_scenario
+from shipsense.tracking import scenario_tracker
 
 SEED_HIGH = 2**31 - 1
 
@@ -80,17 +80,9 @@ class PassageCore:
             sc = sc.with_updates(**overrides)
         if sc.prior is None:
             raise ValueError(f"scenario {sc.name!r} has no [prior]: Passage-v0 draws passages from it")
-        if sc.tracker is None or sc.tracker.bank is None:
-            from shipsense.tracking import DEFAULT_BANK
-
-            self.bank_cfg = DEFAULT_BANK
-        else:
-            self.bank_cfg = sc.tracker.bank
         self.scenario = sc
         self.model = model_from_scenario(sc)
-        name = filter or (sc.tracker.filter if sc.tracker is not None else "ukf")
-        options = {"n_pu": sc.tracker.n_pu} if name == "puekf" and sc.tracker is not None else {}
-        self.unit = get_filter(name, **options)
+        self.unit, self.bank_cfg = scenario_tracker(sc, filter)
         arr = self.model.array
         self.S = len(arr.ids)
         self.H = len(self.bank_cfg.levels) * len(self.bank_cfg.bearings_deg)
@@ -125,11 +117,8 @@ class PassageCore:
             x0, P0 = seed_hypotheses(self.model, sim.measurements[:, 0], self.bank_cfg)
             seeds_.append(x0[0])
         seeds_ = np.array(seeds_)
-        if self.bank is None or len(envs) == self.E and self.bank.R != self.E:
-            full = np.zeros((self.E, self.H, self.model.n))
-            full[envs] = seeds_
-            self.bank = BankState(self.unit, self.model, full, P0)
-            self.bank.cum[:] = 0.0
+        if self.bank is None:   # the first reset creates the bank; later ones re-seed its runs
+            self.bank = BankState(self.unit, self.model, np.zeros((self.E, self.H, self.model.n)), P0)
         self.bank.reset_runs(envs, seeds_, P0)
         # the detection: every sensor's first sample updates the reset environments' banks
         self.bank.step(self.y[:, 0], predict=False, runs=envs)

@@ -13,9 +13,6 @@ import numpy as np
 from shipsense.plotting import plt
 from shipsense.trackers.metrics import convergence_rate, mrmse, trmse
 
-MAGNETIC_TRUTH = [0, 1, 2, 3, 5, 6, 7]   # simulation truth columns of the magnetic state
-ELECTRIC_TRUTH = [0, 1, 2, 3, 4, 8]      # ... and of the electric state (x, y, vx, vy, z, p)
-
 
 class Output:
     """An experiment's output folder: ``summary.json``, CSV tables and PNG figures."""

@@ -8,7 +8,7 @@ import numpy as np
 
 from shipsense.config import ProcessNoiseConfig, load_scenario
 from shipsense.plotting import draw_array, plt
-from shipsense.reproduce.common import MAGNETIC_TRUTH, Output, Stages, bank_summary, bar_charts, rmse_plot
+from shipsense.reproduce.common import Output, Stages, bank_summary, bar_charts, rmse_plot
 from shipsense.simulator import simulate
 from shipsense.trackers.bank import run_bank
 from shipsense.trackers.driver import run_filter
@@ -30,8 +30,8 @@ def run(runs=200, out="results/S0", seed=0, progress=True):
     st = Stages(["simulate", "basin", "seeding", "selection", "units", "dense"], "S0", progress)
     st.step("simulate")
     sim = simulate(sc, runs=runs, seed=seed)
-    truth = sim.truth[..., MAGNETIC_TRUTH]
     model = model_from_scenario(sc)
+    truth = model.state_from_truth(sim.truth)
     bank = sc.tracker.bank
     seeds, P0 = seed_hypotheses(model, sim.measurements[:, 0], bank)
     times = sc.times

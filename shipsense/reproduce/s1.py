@@ -8,7 +8,7 @@ from shipsense.config import load_scenario
 from shipsense.physics.array import SensorArray
 from shipsense.physics.motion import cv_positions
 from shipsense.plotting import draw_array, plt
-from shipsense.reproduce.common import ELECTRIC_TRUTH, Output, Stages, bank_summary, bar_charts, rmse_plot
+from shipsense.reproduce.common import Output, Stages, bank_summary, bar_charts, rmse_plot
 from shipsense.simulator import simulate
 from shipsense.trackers.bank import run_bank
 from shipsense.trackers.filters import get_filter
@@ -71,8 +71,8 @@ def bank_for(sc, runs, seed, unit, o=None, tag=None, chain=None):
     if chain is not None:
         sc = sc.with_updates(envelope_chain={"mode": chain})
     sim = simulate(sc, runs=runs, seed=seed)
-    truth = sim.truth[..., ELECTRIC_TRUTH]
     model = model_from_scenario(sc)
+    truth = model.state_from_truth(sim.truth)
     seeds, P0 = seed_hypotheses(model, sim.measurements[:, 0], sc.tracker.bank)
     b = run_bank(unit, model, sim.measurements, seeds, P0)
     summ, _ = bank_summary(b, truth, centre=model.array.positions[:, :2].mean(axis=0))

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from shipsense.config import load_scenario
-from shipsense.reproduce.common import MAGNETIC_TRUTH, Output, Stages, rmse_plot
+from shipsense.reproduce.common import Output, Stages, rmse_plot
 from shipsense.simulator import simulate
 from shipsense.trackers.driver import run_filter
 from shipsense.trackers.metrics import convergence_rate, mrmse, rmse_k
@@ -37,7 +37,7 @@ def _start(truth, r, rng):
 
 def _track(sc, sim, sensors, unit, r, seed):
     model = model_from_scenario(sc, sensors=sensors)
-    truth = sim.truth[..., MAGNETIC_TRUTH]
+    truth = model.state_from_truth(sim.truth)
     x0, P0 = _start(truth, r, np.random.default_rng(seed + 17))
     run = run_filter(unit, model, sim.measurements[..., _columns(sim, sensors)], x0, P0)
     return run, truth
@@ -56,7 +56,7 @@ def mirror_discrepancy(sc, sensors, kind=None):
                                                else s for s in sc.sensors]})
     model = model_from_scenario(sc, sensors=sensors)
     sim = simulate(sc, runs=1, seed=0)
-    truth = model.to_internal(sim.truth[0][..., MAGNETIC_TRUTH[:model.n]])   # bearings only: (x, y, vx, vy)
+    truth = model.to_internal(model.state_from_truth(sim.truth[0]))
     mirror = truth.copy()
     mirror[:, 1] *= -1
     mirror[:, 3] *= -1

@@ -30,10 +30,10 @@ from shipsense.config import BankConfig, load_scenario
 from shipsense.reproduce.common import Output, Stages
 from shipsense.simulator import simulate
 from shipsense.trackers.bank import run_bank
-from shipsense.trackers.filters import get_filter
 from shipsense.trackers.init import global_init, seed_hypotheses, track_with_global_init
 from shipsense.trackers.metrics import position_error
 from shipsense.trackers.models import model_from_scenario
+from shipsense.tracking import scenario_tracker
 
 PERIOD, STEPS = 0.5, 330
 SIGMA_A = 0.02
@@ -105,7 +105,7 @@ def _metrics(est, covs_pos, truth, bound_pos, seconds, ends):
 
 def run_family(name, passages, seed):
     sc, model = family_scenario(name)
-    unit = get_filter(sc.tracker.filter, n_pu=5) if sc.tracker.filter == "puekf" else get_filter(sc.tracker.filter)
+    unit, _ = scenario_tracker(sc)
     sim = simulate(sc, runs=passages, seed=seed, random=True)
     cols = np.isin([c[0] for c in sim.channels], model.array.ids)
     y = sim.measurements[..., cols]
