@@ -94,7 +94,8 @@ class SensorArray:
         env = np.array([self.kinds[i] == "envelope" for i in groups["electrode"]], dtype=bool)
         identity = np.allclose(self.orientations, np.eye(3), rtol=0, atol=0)
         object.__setattr__(self, "_index", {
-            "gather": np.array(gather, dtype=int), "channels": tuple(channels), "groups": groups,
+            "gather": np.array(gather, dtype=int), "gather_identity": list(gather) == list(range(3 * len(self.ids))),
+            "channels": tuple(channels), "groups": groups,
             "mag_code": mag_code, "envelope": env, "identity": identity,
             "mag_vector_only": bool(mag_code.size) and not mag_code.any(),
         })
@@ -156,16 +157,20 @@ class SensorArray:
         groups = self._index["groups"]
         batch = np.broadcast_shapes(sources.shape[:-1],
                                     *(np.shape(a)[:-1] for a in (moments, dipoles) if a is not None))
-        slots = np.zeros(batch + (len(self.ids), 3), dtype=dtype)
         idx = groups["magnetometer"]
+        if idx.size and moments is None:
+            raise ValueError("this array has magnetometers: moments are required")
+        if idx.size and self._index["mag_vector_only"] and len(idx) == len(self.ids):
+            # the hot path inside the filters: vector magnetometers only, no slot table
+            B = dipole_field(self.positions, sources[..., None, :], np.asarray(moments)[..., None, :])
+            vec = B if self._index["identity"] else np.einsum("sji,...sj->...si", self.orientations, B)
+            vec = vec.reshape(batch + (3 * len(self.ids),))
+            return vec if self._index["gather_identity"] else vec[..., self._index["gather"]]
+        slots = np.zeros(batch + (len(self.ids), 3), dtype=dtype)
         if idx.size:
-            if moments is None:
-                raise ValueError("this array has magnetometers: moments are required")
             B = dipole_field(self.positions[idx], sources[..., None, :], np.asarray(moments)[..., None, :])
             vec = B if self._index["identity"] else np.einsum("sji,...sj->...si", self.orientations[idx], B)
             if self._index["mag_vector_only"]:
-                if len(idx) == len(self.ids):   # the common hot path: vector magnetometers only
-                    return vec.reshape(batch + (3 * len(self.ids),))[..., self._index["gather"]]
                 slots[..., idx, :] = vec
             else:
                 code = self._index["mag_code"]

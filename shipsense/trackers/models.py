@@ -85,6 +85,8 @@ class FieldModel:
         object.__setattr__(self, "R", R)
         object.__setattr__(self, "_d", {
             "labels": tuple(labels), "x_scale": x_scale, "y_scale": y_scale,
+            # one scale for every channel (a single-type array): divide by a scalar, not a row
+            "y_scale_uniform": float(y_scale[0]) if np.all(y_scale == y_scale[0]) else None,
             "A": cv_transition(self.period, n - 4), "axial": self.array.axial,
             "axial_cols": np.flatnonzero(self.array.axial),
             "mom": labels.index("mx") if "mx" in labels else None,
@@ -123,8 +125,10 @@ class FieldModel:
     def _source(self, x):
         """Source position, moment and dipole (SI) of internal states (..., n)."""
         d = self._d
-        z = x[..., d["z"]] if d["z"] is not None else np.full(x.shape[:-1], self.source_z)
-        q = np.stack([x[..., 0], x[..., 1], z], axis=-1)
+        q = np.empty(x.shape[:-1] + (3,), dtype=x.dtype)
+        q[..., 0] = x[..., 0]
+        q[..., 1] = x[..., 1]
+        q[..., 2] = x[..., d["z"]] if d["z"] is not None else self.source_z
         moment = x[..., d["mom"]:d["mom"] + 3] * self.moment_unit if d["mom"] is not None else None
         dipole = None
         if d["z"] is not None:
@@ -138,7 +142,9 @@ class FieldModel:
         """Predicted measurements (internal units), (..., n) -> (..., m)."""
         x = np.asarray(x)
         q, moment, dipole = self._source(x.astype(np.result_type(x, float), copy=False))
-        return self.array.measure(q, moment, dipole) / self.y_scale
+        y = self.array.measure(q, moment, dipole)
+        uniform = self._d["y_scale_uniform"]
+        return y / uniform if uniform is not None else y / self.y_scale
 
     def H(self, x):
         """Analytic Jacobian ``dh/dx`` (internal units), (..., n) -> (..., m, n)."""
