@@ -17,7 +17,7 @@ import time
 import numpy as np
 from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
 
-from shipsense import simulate
+from shipsense import simulate, tune_allocator
 from shipsense.trackers.filters import FILTER_NAMES, Belief, get_filter
 from shipsense.trackers.models import model_from_scenario
 
@@ -78,8 +78,12 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=20)
     ap.add_argument("--batches", type=int, nargs="+", default=[1, 12, 240, 2400])
+    ap.add_argument("--allocator", choices=("tuned", "default"), default="tuned",
+                    help="tuned: shipsense.tune_allocator() as the shipsense command does; default: glibc's")
     ap.add_argument("--filterpy-filters", type=int, default=24, help="filters in the FilterPy loop")
     args = ap.parse_args(argv)
+    tuned = args.allocator == "tuned" and tune_allocator()
+    print(f"allocator: {'tuned (shipsense.tune_allocator)' if tuned else 'default'}")
     base = time_filterpy(args.filterpy_filters, args.steps)
     print(f"S0 model (n=7, m=3); FilterPy UKF loop: {base:.1f} us per filter-step "
           f"({args.filterpy_filters} filters x {args.steps} steps)\n")

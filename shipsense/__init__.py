@@ -10,6 +10,7 @@ Public entry points:
 
 from importlib.metadata import PackageNotFoundError, version
 
+from shipsense.allocator import tune_allocator
 from shipsense.config import Scenario, ScenarioError, load_scenario, shipped_scenarios
 from shipsense.envs import register_envs
 from shipsense.simulator import STATE_LABELS, Simulation, simulate
@@ -22,4 +23,4 @@ except PackageNotFoundError:  # running from a source tree without installation
     __version__ = "0.0.0+unknown"
 
 __all__ = ["STATE_LABELS", "Scenario", "ScenarioError", "Simulation", "load_scenario", "shipped_scenarios",
-           "simulate", "__version__"]
+           "simulate", "tune_allocator", "__version__"]

@@ -500,10 +500,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
+    from shipsense.allocator import tune_allocator
     from shipsense.config import ScenarioError
 
     parser = build_parser()
     args = parser.parse_args(argv)
+    tune_allocator()   # the command is its own process: reuse freed heap (see shipsense.allocator)
     try:
         return args.func(args)
     except (ScenarioError, _BadInput) as err:

@@ -184,6 +184,7 @@ class BankState:
         rows = (runs[:, None] * self.H + np.arange(self.H)).ravel()
         for arr, new in zip(self.belief, fresh):
             arr[rows] = new
+        self.belief = Belief(*self.belief)   # written in place: drop a filter's covariance cache
         self.cum[runs] = 0.0
 
     def step(self, y, mask=None, predict=True, runs=None):
@@ -212,6 +213,7 @@ class BankState:
         else:
             for arr, part in zip(self.belief, new):
                 arr[rows] = part
+            self.belief = Belief(*self.belief)   # written in place: drop a filter's covariance cache
         self.cum[run, hyp] += inn.loglik
         self.steps += 1
         return inn

@@ -87,6 +87,10 @@ class FieldModel:
             "labels": tuple(labels), "x_scale": x_scale, "y_scale": y_scale,
             # one scale for every channel (a single-type array): divide by a scalar, not a row
             "y_scale_uniform": float(y_scale[0]) if np.all(y_scale == y_scale[0]) else None,
+            # magnetometers only: every reading is homogeneous of degree 1 in the moment, so the
+            # moment unit and the channel scale fold into one factor applied once to the output
+            "mag_gain": (self.moment_unit / y_scale[0] if np.all(y_scale == y_scale[0])
+                         else self.moment_unit / y_scale) if types == {"magnetometer"} else None,
             "A": cv_transition(self.period, n - 4), "axial": self.array.axial,
             "axial_cols": np.flatnonzero(self.array.axial),
             "mom": labels.index("mx") if "mx" in labels else None,
@@ -122,14 +126,21 @@ class FieldModel:
         return d
 
     # -- measurement function ---------------------------------------------------
-    def _source(self, x):
-        """Source position, moment and dipole (SI) of internal states (..., n)."""
+    def _source(self, x, si_moment=True):
+        """Source position, moment and dipole (SI) of internal states (..., n).
+
+        With ``si_moment`` False the moment stays in internal units.
+        """
         d = self._d
         q = np.empty(x.shape[:-1] + (3,), dtype=x.dtype)
         q[..., 0] = x[..., 0]
         q[..., 1] = x[..., 1]
         q[..., 2] = x[..., d["z"]] if d["z"] is not None else self.source_z
-        moment = x[..., d["mom"]:d["mom"] + 3] * self.moment_unit if d["mom"] is not None else None
+        moment = None
+        if d["mom"] is not None:
+            moment = x[..., d["mom"]:d["mom"] + 3]
+            if si_moment:
+                moment = moment * self.moment_unit
         dipole = None
         if d["z"] is not None:
             v = x[..., 2:4]
@@ -141,7 +152,12 @@ class FieldModel:
     def h(self, x):
         """Predicted measurements (internal units), (..., n) -> (..., m)."""
         x = np.asarray(x)
-        q, moment, dipole = self._source(x.astype(np.result_type(x, float), copy=False))
+        x = x.astype(np.result_type(x, float), copy=False)
+        gain = self._d["mag_gain"]
+        if gain is not None:   # magnetometers only: one scaling pass instead of two
+            q, moment, _ = self._source(x, si_moment=False)
+            return self.array.measure(q, moment) * gain
+        q, moment, dipole = self._source(x)
         y = self.array.measure(q, moment, dipole)
         uniform = self._d["y_scale_uniform"]
         return y / uniform if uniform is not None else y / self.y_scale

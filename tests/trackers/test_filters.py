@@ -151,6 +151,17 @@ def test_a_batch_element_equals_the_filter_run_alone(name, s0):
 
 
 @pytest.mark.parametrize("name", FILTER_NAMES)
+def test_large_batches_give_the_small_batch_results(name, s0):
+    """Above a few hundred elements the factorisations take vectorised paths; results must not change."""
+    sim, model, _, x0, P0 = s0
+    small = run_filter(name, model, sim.measurements[:, :40], x0, P0)
+    big = run_filter(name, model, np.repeat(sim.measurements[:, :40], 200, axis=0), np.repeat(x0, 200, axis=0), P0)
+    np.testing.assert_allclose(big.means[::200], small.means, rtol=1e-9, atol=1e-7)
+    np.testing.assert_allclose(big.loglik[::200], small.loglik, rtol=1e-9)
+    np.testing.assert_allclose(big.chols[::200], small.chols, rtol=1e-7, atol=1e-9)
+
+
+@pytest.mark.parametrize("name", FILTER_NAMES)
 def test_masked_update_equals_the_model_without_those_rows(name):
     sc = load_scenario("S2")
     full = model_from_scenario(sc, sensors=["M1", "M2"])

@@ -9,6 +9,7 @@ the batch is unaffected).
 
 from __future__ import annotations
 
+from functools import lru_cache
 from typing import NamedTuple
 
 import numpy as np
@@ -17,7 +18,13 @@ LOG_2PI = float(np.log(2.0 * np.pi))
 
 
 class Belief(NamedTuple):
-    """Gaussian belief: mean (..., n), lower Cholesky factor (..., n, n), health flag (...)."""
+    """Gaussian belief: mean (..., n), lower Cholesky factor (..., n, n), health flag (...).
+
+    Filter steps may return a belief that also carries the covariance its
+    factor came from (to save re-forming it).  Treat beliefs as immutable:
+    after writing into their arrays in place, rebuild with ``Belief(*belief)``,
+    which drops that cache.
+    """
 
     mean: np.ndarray
     chol: np.ndarray
@@ -26,7 +33,8 @@ class Belief(NamedTuple):
     @property
     def cov(self) -> np.ndarray:
         """Covariance ``L L^T`` (..., n, n)."""
-        return self.chol @ np.swapaxes(self.chol, -1, -2)
+        cached = getattr(self, "_cov", None)   # set by predict on the covariance it factorised
+        return cached if cached is not None else self.chol @ np.swapaxes(self.chol, -1, -2)
 
     @classmethod
     def from_cov(cls, mean, cov):
@@ -34,6 +42,22 @@ class Belief(NamedTuple):
         mean = np.asarray(mean, dtype=float)
         L, ok = safe_cholesky(np.broadcast_to(cov, mean.shape + mean.shape[-1:]))
         return cls(mean, L, ok)
+
+
+class _BeliefWithCov(Belief):
+    """A :class:`Belief` that also keeps the covariance its factor was computed from.
+
+    Returned by :func:`predict` (covariance form) and :func:`gain_update` so
+    that the next step does not form ``L L^T`` again; it iterates, indexes
+    and compares as a plain three-field :class:`Belief` (indexing drops the
+    cache).
+    """
+
+    @classmethod
+    def with_cov(cls, mean, chol, ok, cov):
+        out = cls(mean, chol, ok)
+        out._cov = cov
+        return out
 
 
 class Innovation(NamedTuple):
@@ -137,15 +161,59 @@ def predict(belief: Belief, model, square_root: bool = False) -> Belief:
     is formed and factorised (cheaper for small states).
     """
     A = model.A
-    mean = belief.mean @ A.T
-    AL = A @ belief.chol
+    mean = _transition(A, belief.mean[..., None])[..., 0]
+    cached = getattr(belief, "_cov", None)
+    if cached is not None and not square_root:   # A P A^T + Q from the covariance the update formed
+        P = _transition(A, cached, both_sides=True)
+        P += model.Q
+        chol, ok = safe_cholesky(P)
+        if ok.all():
+            return _BeliefWithCov.with_cov(mean, chol, belief.ok, P)
+        return Belief(mean, chol, belief.ok & ok)
+    AL = _transition(A, belief.chol)
     if square_root:
         sq = _sqrt_psd(model.Q)
+        sq = sq[:, np.abs(sq).max(axis=0) > 0]   # a rank-deficient Q (e.g. DWNA) needs fewer columns
         chol = tria(np.concatenate([AL, np.broadcast_to(sq, AL.shape[:-2] + sq.shape)], axis=-1))
         ok = np.isfinite(chol).all(axis=(-1, -2))
     else:
-        chol, ok = safe_cholesky(AL @ np.swapaxes(AL, -1, -2) + model.Q)
+        P = AL @ np.swapaxes(AL, -1, -2)
+        P += model.Q
+        chol, ok = safe_cholesky(P)
+        if ok.all():
+            return _BeliefWithCov.with_cov(mean, chol, belief.ok, P)
     return Belief(mean, chol, belief.ok & ok)
+
+
+def _transition(A, M, both_sides=False):
+    """``A M`` (or ``A M A^T`` with ``both_sides``) for M (..., n, k), by row and column operations.
+
+    Used when ``A`` is the identity plus a few entries whose rows are not
+    also their sources (the constant-velocity transition: two entries); a
+    batched matmul of thousands of small matrices costs several times more.
+    Falls back to matmul otherwise.
+    """
+    plan = _transition_plan(A.shape[0], np.ascontiguousarray(A, dtype=float).tobytes())
+    if plan is None:
+        out = A @ M
+        return out @ A.T if both_sides else out
+    out = M.copy()
+    for i, j, v in plan:
+        out[..., i, :] += v * out[..., j, :]
+    if both_sides:
+        for i, j, v in plan:
+            out[..., :, i] += v * out[..., :, j]
+    return out
+
+
+@lru_cache(maxsize=64)
+def _transition_plan(n, data):
+    """Off-diagonal entries ``(i, j, value)`` of ``A - I`` if row operations can apply it, else None."""
+    off = np.frombuffer(data, dtype=float).reshape(n, n) - np.eye(n)
+    nz = np.argwhere(off != 0)
+    if len(nz) > n or set(nz[:, 0]) & set(nz[:, 1]):
+        return None
+    return tuple((int(i), int(j), float(off[i, j])) for i, j in nz)
 
 
 def _sqrt_psd(Q):
@@ -187,9 +255,10 @@ def gain_update(belief: Belief, eps, Pxy, S, present, P=None):
     P = P - np.swapaxes(Kt, -1, -2) @ np.swapaxes(Pxy, -1, -2)
     L, ok = safe_cholesky(P)
     ok = ok & ok_s
-    if not ok.all():  # a failed element keeps its prior mean
-        mean = np.where(ok[..., None], mean, np.nan_to_num(belief.mean))
     inn = innovation(eps, S, Ls, present)
+    if ok.all():
+        return _BeliefWithCov.with_cov(mean, L, belief.ok, P), inn
+    mean = np.where(ok[..., None], mean, np.nan_to_num(belief.mean))   # a failed element keeps its prior mean
     return Belief(mean, L, belief.ok & ok), inn
 
 

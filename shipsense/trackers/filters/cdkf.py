@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from shipsense.trackers.filters._core import Belief, gain_update, prepare
-from shipsense.trackers.filters.ukf import symmetric_points
+from shipsense.trackers.filters.ukf import sigma_points
 
 H_STIRLING = float(np.sqrt(3.0))
 
@@ -25,7 +25,7 @@ def difference_terms(belief: Belief, y, model, present, h=H_STIRLING):
     """``eps``, ``Pxy`` and the first and second-order difference rows ``Y1``, ``Y2`` (..., n, m)."""
     x = belief.mean
     n = x.shape[-1]
-    Y = model.h(x[..., None, :] + symmetric_points(h * np.swapaxes(belief.chol, -1, -2)))
+    Y = model.h(sigma_points(x, belief.chol, h))
     Y0 = Y[..., :1, :]
     dp = model.residual(Y[..., 1:n + 1, :], Y0)
     dm = model.residual(Y[..., n + 1:, :], Y0)

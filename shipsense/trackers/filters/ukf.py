@@ -29,40 +29,56 @@ def merwe_weights(n, alpha=1.0, beta=2.0, kappa=0.0):
     return np.sqrt(n + lam), Wm, Wc
 
 
-def symmetric_points(dX, center=True):
-    """Offsets ``[0,] +dX_i, -dX_i`` (..., 2n[+1], n) from rows ``dX_i`` (..., n, n), preallocated."""
-    n = dX.shape[-1]
+def sigma_points(x, chol, spread, center=True):
+    """Points ``[x,] x + spread L_i, x - spread L_i`` (..., 2n[+1], n) of a mean (..., n) and factor (..., n, n).
+
+    ``L_i`` are the columns of the factor.  Written into one preallocated
+    array through flat (..., n*n) blocks, so that every operation has a long
+    contiguous inner loop (2-3x faster than broadcasting rows of length n).
+    """
+    n = x.shape[-1]
     c = int(center)
-    out = np.empty(dX.shape[:-2] + (2 * n + c, n))
+    batch = np.broadcast_shapes(x.shape[:-1], chol.shape[:-2])
+    S = np.multiply(spread, np.swapaxes(chol, -1, -2), order="C").reshape(chol.shape[:-2] + (n * n,))
+    xt = np.tile(np.broadcast_to(x, batch + (n,)), n)            # (..., n*n): x repeated per point
+    out = np.empty(batch + ((2 * n + c) * n,))
     if center:
-        out[..., 0, :] = 0.0
-    out[..., c:c + n, :] = dX
-    np.negative(dX, out=out[..., c + n:, :])
-    return out
+        out[..., :n] = x
+    np.add(xt, S, out=out[..., c * n:(c + n) * n])
+    np.subtract(xt, S, out=out[..., (c + n) * n:])
+    return out.reshape(batch + (2 * n + c, n))
 
 
 def sigma_statistics(belief: Belief, y, model, present, spread, Wm, Wc, center=True):
     """Innovation ``eps``, cross-covariance ``Pxy`` and ``Pyy`` (without R) of a symmetric point set.
 
-    Points: the mean (if ``center``) then ``x + spread L_i`` and ``x - spread L_i``.
+    Points: the mean (if ``center``) then ``x + spread L_i`` and ``x - spread L_i``,
+    all off-centre points with the same weight, so that
+    ``Pxy = spread W L (dY+ - dY-)`` (the centre's offset is zero).
     Angular (axial) channels are averaged as residuals about the first point's
     prediction.  Rows of masked components are zeroed.
     """
-    x = belief.mean
-    dXs = symmetric_points(spread * np.swapaxes(belief.chol, -1, -2), center)   # (..., N, n) offsets
-    Y = model.h(x[..., None, :] + dXs)                     # (..., N, m)
+    n = belief.mean.shape[-1]
+    c = int(center)
+    if not np.all(Wc[c:] == Wc[c]):
+        raise ValueError("sigma_statistics needs equal weights on the off-centre points")
+    Y = model.h(sigma_points(belief.mean, belief.chol, spread, center))     # (..., N, m)
     if model.axial.any():  # average angles as residuals about the first point's prediction
         ref = Y[..., :1, :]
         yhat = ref[..., 0, :] + (Wm @ model.residual(Y, ref))
         dY = model.residual(Y, yhat[..., None, :])
     else:
         yhat = Wm @ Y
-        dY = Y - yhat[..., None, :]
+        N, m = Y.shape[-2:]
+        # flat (..., N*m) rows: contiguous inner loops instead of rows of length m
+        dY = (Y.reshape(Y.shape[:-2] + (N * m,)) - np.tile(yhat, N)).reshape(Y.shape)
     if not present.all():
         dY = dY * present[..., None, :]
-    WdY = dY * Wc[:, None]
+    WdY = (dY.reshape(dY.shape[:-2] + (dY.shape[-2] * dY.shape[-1],)) * np.repeat(Wc, dY.shape[-1])).reshape(dY.shape)
     Pyy = np.swapaxes(dY, -1, -2) @ WdY
-    Pxy = np.swapaxes(dXs, -1, -2) @ WdY
+    Pxy = belief.chol @ (WdY[..., c:c + n, :] - WdY[..., c + n:, :])
+    if spread != 1.0:
+        Pxy *= spread
     eps = np.where(present, model.residual(y, yhat), 0.0)
     return eps, Pxy, Pyy
 

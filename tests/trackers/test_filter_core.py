@@ -1,0 +1,53 @@
+"""Vectorised small-matrix kernels of the filter core agree with LAPACK / matmul and flag failures."""
+
+import numpy as np
+import pytest
+
+from shipsense.physics.motion import cv_transition
+from shipsense.trackers.filters._core import Belief, _cholesky_unrolled, _transition, predict, safe_cholesky
+from shipsense.trackers.models import LinearModel
+
+
+def spd(rng, batch, n):
+    A = rng.standard_normal((batch, n, n + 2))
+    return A @ np.swapaxes(A, -1, -2)
+
+
+@pytest.mark.parametrize("n", [1, 3, 7, 9])
+def test_unrolled_cholesky_equals_lapack(n):
+    P = spd(np.random.default_rng(n), 700, n)
+    np.testing.assert_allclose(_cholesky_unrolled(P), np.linalg.cholesky(P), rtol=1e-10, atol=1e-12)
+
+
+def test_large_batch_cholesky_flags_only_the_bad_elements():
+    rng = np.random.default_rng(1)
+    P = spd(rng, 900, 7)
+    P[5] = np.diag([1.0, 1.0, -1.0, 1.0, 1.0, 1.0, 1.0])   # indefinite
+    P[17, 3, 2] = np.nan                                    # non-finite (lower triangle)
+    L, ok = safe_cholesky(P)
+    assert np.flatnonzero(~ok).tolist() == [5, 17]
+    assert np.isfinite(L).all()
+    good = np.ones(900, bool)
+    good[[5, 17]] = False
+    np.testing.assert_allclose(L[good], np.linalg.cholesky(P[good]), rtol=1e-10, atol=1e-12)
+
+
+@pytest.mark.parametrize("A", [cv_transition(0.5, 3), np.eye(4) + np.triu(np.ones((4, 4)), 1)], ids=["cv", "dense"])
+def test_transition_by_row_operations_equals_matmul(A):
+    M = np.random.default_rng(2).standard_normal((5, A.shape[0], A.shape[0]))
+    np.testing.assert_allclose(_transition(A, M), A @ M, rtol=1e-14, atol=1e-14)
+    np.testing.assert_allclose(_transition(A, M, both_sides=True), A @ M @ A.T, rtol=1e-14, atol=1e-13)
+
+
+def test_predict_from_a_cached_covariance_equals_predict_from_the_factor():
+    rng = np.random.default_rng(3)
+    A = cv_transition(0.5, 3)
+    model = LinearModel(A, 0.1 * np.eye(7), np.eye(3, 7), np.ones(3))
+    P = spd(rng, 600, 7)
+    first = predict(Belief.from_cov(rng.standard_normal((600, 7)), P), model)   # carries its covariance
+    assert getattr(first, "_cov", None) is not None
+    plain = Belief(*first)                                                       # drops it
+    assert getattr(plain, "_cov", None) is None
+    a, b = predict(first, model), predict(plain, model)
+    np.testing.assert_allclose(a.mean, b.mean, rtol=1e-14)
+    np.testing.assert_allclose(a.cov, b.cov, rtol=1e-10, atol=1e-12)
