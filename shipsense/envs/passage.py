@@ -147,7 +147,7 @@ class PassageCore:
     def _selected(self):
         sel = self.bank.selected()
         rows = np.arange(self.E) * self.H + sel
-        return sel, self.bank.means()[rows], self.bank.position_cov()[rows]
+        return sel, self.bank.means(rows), self.bank.position_cov(rows)
 
     def _rewards(self, read, trimmed):
         self._cache = sel, est, cov = self._selected()
@@ -172,13 +172,15 @@ class PassageCore:
         obs[:, 2:4] = est[:, 2:4] / 10.0
         obs[:, 4:6] = np.log10(np.sqrt(np.maximum(np.diagonal(cov, axis1=-2, axis2=-1), 1e-12))) / 3.0
         norm = self.bank.cum - self.bank.cum.max(axis=1, keepdims=True)
-        obs[:, 6:6 + self.H] = np.clip(np.nan_to_num(norm / 50.0, nan=-1.0, neginf=-1.0), -1.0, 0.0)
+        obs[:, 6:6 + self.H] = np.clip(np.where(np.isfinite(norm), norm / 50.0, -1.0), -1.0, 0.0)
         y = self.y[np.arange(self.E), self.k]
-        snr = np.abs(np.nan_to_num(y)) / self.std
+        snr = np.abs(np.where(np.isfinite(y), y, 0.0)) / self.std
         per_sensor = np.maximum.reduceat(snr, self.first_channel, axis=1)
         obs[:, 6 + self.H:6 + self.H + self.S] = np.where(self.last_read, np.log10(1.0 + per_sensor) / 5.0, 0.0)
         obs[:, -1] = self.k / max(self.K - 1, 1)
-        return np.clip(np.nan_to_num(obs), -1.0, 1.0).astype(np.float32)
+        if not np.isfinite(obs).all():
+            obs = np.nan_to_num(obs)
+        return np.clip(obs, -1.0, 1.0).astype(np.float32)
 
     def render(self, e=0):
         """RGB picture of environment ``e``: array, truth, hypotheses and the selected estimate."""

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from shipsense.physics.electric import Medium, fast_hed, hed_field
-from shipsense.physics.magnetic import dipole_field, dipole_field_jacobian
+from shipsense.physics.magnetic import dipole_field_at, dipole_field_jacobian
 from shipsense.physics.seismic import bearing, bearing_jacobian
 
 CHANNELS: dict[tuple[str, str], tuple[str, ...]] = {
@@ -34,6 +34,16 @@ KINDS = {t: tuple(k for (tt, k) in CHANNELS if tt == t) for t in UNITS}
 """Measurement kinds allowed for each sensor type."""
 
 _SCALAR_KIND_CODE = {"magnitude": 1, "tmi": 2}
+
+
+def as_slice(idx):
+    """Consecutive indices as a slice (basic indexing: views, no gather), other indices unchanged; None if empty."""
+    idx = np.asarray(idx, dtype=int)
+    if idx.size == 0:
+        return None
+    if np.array_equal(idx, np.arange(idx[0], idx[0] + idx.size)):
+        return slice(int(idx[0]), int(idx[0]) + idx.size)
+    return idx
 
 
 @dataclass(frozen=True, eq=False)
@@ -98,6 +108,9 @@ class SensorArray:
             "channels": tuple(channels), "groups": groups,
             "mag_code": mag_code, "envelope": env, "identity": identity,
             "mag_vector_only": bool(mag_code.size) and not mag_code.any(),
+            # the same indices as slices where they are consecutive (views instead of gathers)
+            "group_sel": {t: as_slice(g) for t, g in groups.items()},
+            "gather_sel": as_slice(np.array(gather, dtype=int)),
         })
 
     @property
@@ -162,33 +175,34 @@ class SensorArray:
             raise ValueError("this array has magnetometers: moments are required")
         if idx.size and self._index["mag_vector_only"] and len(idx) == len(self.ids):
             # the hot path inside the filters: vector magnetometers only, no slot table
-            B = dipole_field(self.positions, sources[..., None, :], np.asarray(moments)[..., None, :])
+            B = dipole_field_at(self.positions, sources, moments)
             vec = B if self._index["identity"] else np.einsum("sji,...sj->...si", self.orientations, B)
             vec = vec.reshape(batch + (3 * len(self.ids),))
             return vec if self._index["gather_identity"] else vec[..., self._index["gather"]]
         slots = np.zeros(batch + (len(self.ids), 3), dtype=dtype)
+        sel = self._index["group_sel"]
         if idx.size:
-            B = dipole_field(self.positions[idx], sources[..., None, :], np.asarray(moments)[..., None, :])
+            B = dipole_field_at(self.positions[idx], sources, moments)
             vec = B if self._index["identity"] else np.einsum("sji,...sj->...si", self.orientations[idx], B)
             if self._index["mag_vector_only"]:
-                slots[..., idx, :] = vec
+                slots[..., sel["magnetometer"], :] = vec
             else:
                 code = self._index["mag_code"]
                 scalar = np.sqrt(np.sum(B * B, axis=-1))
                 if np.any(code == 2):
                     scalar = np.where(code == 2, B @ self.earth_direction, scalar)
-                slots[..., idx, :] = np.where((code == 0)[:, None], vec,
+                slots[..., sel["magnetometer"], :] = np.where((code == 0)[:, None], vec,
                                               np.stack([scalar, 0 * scalar, 0 * scalar], axis=-1))
         idx = groups["electrode"]
         if idx.size:
             if dipoles is None:
                 raise ValueError("this array has electrodes: dipoles are required")
             E = self.electric_field(sources, dipoles)
-            slots[..., idx, :] = np.where(self._index["envelope"][:, None], np.abs(E), E)
+            slots[..., sel["electrode"], :] = np.where(self._index["envelope"][:, None], np.abs(E), E)
         idx = groups["accelerometer"]
         if idx.size:
-            slots[..., idx, 0] = bearing(self.positions[idx], sources[..., None, :])
-        return slots.reshape(batch + (3 * len(self.ids),))[..., self._index["gather"]]
+            slots[..., sel["accelerometer"], 0] = bearing(self.positions[idx], sources[..., None, :])
+        return slots.reshape(batch + (3 * len(self.ids),))[..., self._index["gather_sel"]]
 
     def measure_jacobian(self, sources, moments=None, dipoles=None):
         """Measurements and their derivatives with respect to the source's position and moments.

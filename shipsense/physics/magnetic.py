@@ -72,6 +72,48 @@ def dipole_field(sensors, sources, moments):
     return B
 
 
+def dipole_field_at(sensors, sources, moments):
+    """Flux density of one dipole per batch element at a set of sensors.
+
+    Same physics as :func:`dipole_field` with the sensor axis placed last in
+    the output, computed sensor-major so that every operation loops over the
+    batch, not over the (few) sensors.
+
+    Parameters
+    ----------
+    sensors : array_like, shape (S, 3)
+    sources, moments : array_like, shape (..., 3)
+
+    Returns
+    -------
+    B : ndarray, shape (..., S, 3)
+        Tesla; NaN where a sensor coincides with a source.
+    """
+    s = np.asarray(sensors)
+    q = np.asarray(sources)
+    m = np.asarray(moments)
+    dtype = np.result_type(s, q, m, float)
+    batch = np.broadcast_shapes(q.shape[:-1], m.shape[:-1])
+    col = (slice(None),) + (None,) * len(batch)                 # sensor axis first, then the batch
+    r = [np.subtract(s[col + (i,)], q[..., i], dtype=dtype) for i in range(3)]   # (S, ...)
+    r2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2]
+    m_dot_r = m[..., 0] * r[0] + m[..., 1] * r[1] + m[..., 2] * r[2]
+    singular = r2 == 0.0
+    if singular.any():
+        r2 = np.where(singular, 1.0, r2)
+    inv_r5 = MU0_OVER_4PI / (r2 * r2 * np.sqrt(r2))
+    a = 3.0 * m_dot_r * inv_r5
+    b = r2 * inv_r5
+    B = np.empty(batch + (s.shape[0], 3), dtype=dtype)
+    out = np.moveaxis(B, -2, 0)                                   # (S, ..., 3) view
+    for i in range(3):
+        np.multiply(a, r[i], out=out[..., i])
+        out[..., i] -= b * m[..., i]
+    if singular.any():
+        out[singular] = np.nan
+    return B
+
+
 def earth_field_direction(inclination_deg, declination_deg):
     """Unit vector of the Earth's main field in the world frame (x east, y north, z up).
 

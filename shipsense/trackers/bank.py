@@ -234,13 +234,15 @@ class BankState:
             self.cum.reshape(-1)[dropped] = -np.inf
         return ~keep
 
-    def means(self):
-        """Posterior means of the active elements, SI (len(idx), n)."""
-        return self.belief.mean * self.model.x_scale
+    def means(self, rows=None):
+        """Posterior means of the active elements (or of active rows ``rows``), SI (len(idx), n)."""
+        mean = self.belief.mean if rows is None else self.belief.mean[rows]
+        return mean * self.model.x_scale
 
-    def position_cov(self):
-        """Posterior position covariances of the active elements, SI (len(idx), 2, 2)."""
-        L = self.belief.chol[:, :2, :] * self.model.x_scale[:2, None]
+    def position_cov(self, rows=None):
+        """Posterior position covariances of the active elements (or rows ``rows``), SI (len(idx), 2, 2)."""
+        chol = self.belief.chol if rows is None else self.belief.chol[rows]
+        L = chol[:, :2, :] * self.model.x_scale[:2, None]
         return L @ np.swapaxes(L, -1, -2)
 
     def selected(self):

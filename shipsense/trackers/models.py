@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from shipsense.physics.array import SensorArray
+from shipsense.physics.array import SensorArray, as_slice
 from shipsense.physics.motion import cv_transition, q_dwna, q_identity
 from shipsense.physics.seismic import wrap_axial
 
@@ -92,7 +92,7 @@ class FieldModel:
             "mag_gain": (self.moment_unit / y_scale[0] if np.all(y_scale == y_scale[0])
                          else self.moment_unit / y_scale) if types == {"magnetometer"} else None,
             "A": cv_transition(self.period, n - 4), "axial": self.array.axial,
-            "axial_cols": np.flatnonzero(self.array.axial),
+            "axial_cols": as_slice(np.flatnonzero(self.array.axial)),
             "mom": labels.index("mx") if "mx" in labels else None,
             "z": labels.index("z") if "z" in labels else None,
         })
@@ -121,7 +121,7 @@ class FieldModel:
         """``a - b`` with bearing channels wrapped modulo pi."""
         d = np.asarray(a) - np.asarray(b)
         cols = self._d["axial_cols"]
-        if cols.size:
+        if cols is not None:
             d[..., cols] = wrap_axial(d[..., cols])
         return d
 

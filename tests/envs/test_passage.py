@@ -94,10 +94,12 @@ def test_vector_env_equals_single_envs_step_by_step_across_autoreset():
                 pending[i] = False
             else:
                 obs, r, t, _, info = s.step(acts[i])
-                assert info["error"] == pytest.approx(vinfo["error"][i], rel=1e-12)
+                # equal to rounding: an autoreset re-seeds some rows of the vector env's bank, after which
+                # its next predict re-forms the covariance from the factor instead of reusing the update's
+                assert info["error"] == pytest.approx(vinfo["error"][i], rel=1e-9)
                 pending[i] = t
             np.testing.assert_allclose(vo[i], obs, rtol=0, atol=1e-6)
-            assert vr[i] == pytest.approx(r, rel=1e-12, abs=1e-12) and vt[i] == t
+            assert vr[i] == pytest.approx(r, rel=1e-9, abs=1e-12) and vt[i] == t
         assert not vtr.any()
 
 

@@ -57,7 +57,8 @@ def test_pruning_frees_hypotheses_without_changing_the_survivors(s2_bank):
     pruned = run_bank("ukf", model, y, seeds, P0, prune_nats=50.0)
     assert (~pruned.active[:, :, -1]).sum() > 0
     alive = pruned.active
-    np.testing.assert_allclose(pruned.means[alive], full.means[alive], rtol=1e-12, atol=1e-9)
+    # equal to rounding: the linear-algebra path is chosen by batch size, and pruning shrinks the batch
+    np.testing.assert_allclose(pruned.means[alive], full.means[alive], rtol=1e-10, atol=1e-9)
     assert np.isnan(pruned.means[~alive]).all()
     np.testing.assert_array_equal(pruned.selected[:, -1], full.selected[:, -1])
     assert np.all(pruned.cum_loglik[~alive] == -np.inf)

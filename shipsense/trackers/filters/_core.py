@@ -194,7 +194,7 @@ def _transition(A, M, both_sides=False):
     Falls back to matmul otherwise.
     """
     plan = _transition_plan(A.shape[0], np.ascontiguousarray(A, dtype=float).tobytes())
-    if plan is None:
+    if plan is None or M.size < _UNROLL_MIN_BATCH * A.shape[0]:   # small: one matmul call is cheaper
         out = A @ M
         return out @ A.T if both_sides else out
     out = M.copy()
@@ -245,27 +245,55 @@ def gain_update(belief: Belief, eps, Pxy, S, present, P=None):
     """Kalman update from an innovation ``eps`` (..., m), cross-covariance ``Pxy`` (..., n, m) and ``S``.
 
     ``x+ = x + K eps``, ``P+ = P - K S K^T`` with ``K = Pxy S^-1``; the new
-    covariance is symmetrised and factorised with :func:`safe_cholesky`.
+    covariance is factorised with :func:`safe_cholesky`.  With ``S = Ls Ls^T``
+    and ``[W | w] = Ls^-1 [Pxy^T | eps]`` (one forward substitution) this is
+    ``x+ = x + W^T w``, ``P+ = P - W^T W`` and ``eps^T S^-1 eps = |w|^2``.
+    Small batches solve with ``S`` by one LAPACK call instead (a Python loop
+    of row operations costs more there; above it, one LAPACK call per matrix
+    costs more).
     """
     Ls, ok_s = safe_cholesky(S)
-    Kt = _chol_solve(Ls, np.swapaxes(Pxy, -1, -2))
-    mean = belief.mean + np.einsum("...mn,...m->...n", Kt, eps)
     if P is None:
         P = belief.cov
-    P = P - np.swapaxes(Kt, -1, -2) @ np.swapaxes(Pxy, -1, -2)
+    n = Pxy.shape[-2]
+    batch = np.broadcast_shapes(S.shape[:-2], Pxy.shape[:-2], eps.shape[:-1])
+    PyxT = np.swapaxes(Pxy, -1, -2)
+    if PyxT.shape[:-2] != batch or eps.shape[:-1] != batch:
+        PyxT = np.broadcast_to(PyxT, batch + PyxT.shape[-2:])
+        eps = np.broadcast_to(eps, batch + eps.shape[-1:])
+    rhs = np.concatenate([PyxT, eps[..., None]], axis=-1)
+    if int(np.prod(batch)) <= _LAPACK_SOLVE_MAX_BATCH and ok_s.all():
+        X = np.linalg.solve(S if S.shape[:-2] == batch else np.broadcast_to(S, batch + S.shape[-2:]), rhs)
+        mean = belief.mean + np.einsum("...mn,...m->...n", X[..., :n], eps)
+        P = P - np.swapaxes(X[..., :n], -1, -2) @ rhs[..., :n]
+        nis = np.sum(eps * X[..., n], axis=-1)
+    else:
+        Z = solve_lower(Ls, rhs)                                                 # [W | w]
+        W = Z[..., :n]
+        mean = belief.mean + np.einsum("...mn,...m->...n", W, Z[..., n])
+        P = P - np.swapaxes(W, -1, -2) @ W
+        nis = np.sum(Z[..., n] ** 2, axis=-1)
     L, ok = safe_cholesky(P)
     ok = ok & ok_s
-    inn = innovation(eps, S, Ls, present)
+    inn = innovation(eps, S, Ls, present, nis)
     if ok.all():
         return _BeliefWithCov.with_cov(mean, L, belief.ok, P), inn
     mean = np.where(ok[..., None], mean, np.nan_to_num(belief.mean))   # a failed element keeps its prior mean
     return Belief(mean, L, belief.ok & ok), inn
 
 
-def innovation(eps, S, Ls, present) -> Innovation:
-    """Innovation record with ``ln L = -1/2 (m ln 2 pi + ln det S + eps^T S^-1 eps)``."""
-    w = solve_lower(Ls, eps[..., None])[..., 0]
-    nis = np.sum(w * w, axis=-1)
+_LAPACK_SOLVE_MAX_BATCH = 64
+"""Batches up to this size solve with LAPACK (one call); larger ones by row-loop substitution."""
+
+
+def innovation(eps, S, Ls, present, nis=None) -> Innovation:
+    """Innovation record with ``ln L = -1/2 (m ln 2 pi + ln det S + eps^T S^-1 eps)``.
+
+    ``nis`` (``eps^T S^-1 eps``) is computed from ``Ls`` unless given.
+    """
+    if nis is None:
+        w = solve_lower(Ls, eps[..., None])[..., 0]
+        nis = np.sum(w * w, axis=-1)
     m = present.sum(axis=-1)
     logdet = 2.0 * np.sum(np.log(np.diagonal(Ls, axis1=-2, axis2=-1)), axis=-1)
     return Innovation(eps, S, -0.5 * (m * LOG_2PI + logdet + nis), nis, m)

@@ -40,7 +40,7 @@ def sigma_points(x, chol, spread, center=True):
     c = int(center)
     batch = np.broadcast_shapes(x.shape[:-1], chol.shape[:-2])
     S = np.multiply(spread, np.swapaxes(chol, -1, -2), order="C").reshape(chol.shape[:-2] + (n * n,))
-    xt = np.tile(np.broadcast_to(x, batch + (n,)), n)            # (..., n*n): x repeated per point
+    xt = np.tile(x if x.shape[:-1] == batch else np.broadcast_to(x, batch + (n,)), n)   # (..., n*n): x per point
     out = np.empty(batch + ((2 * n + c) * n,))
     if center:
         out[..., :n] = x
