@@ -68,6 +68,8 @@ from shipsense.trackers.models import model_from_scenario
 from shipsense.tracking import scenario_tracker
 
 SEED_HIGH = 2**31 - 1
+PASSAGE_BLOCK = 16
+"""Passages simulated per simulator call and environment (see :meth:`PassageCore.reset_envs`)."""
 
 
 class PassageCore:
@@ -104,17 +106,30 @@ class PassageCore:
         self.k = np.zeros(self.E, dtype=int)
         self.last_read = np.zeros((self.E, self.S), dtype=bool)
         self.bank = None
+        self._passages = {}   # environment -> passages simulated ahead (measurements, truth)
 
     # -- episodes ---------------------------------------------------------------
-    def reset_envs(self, envs, seeds):
-        """Draw new passages for ``envs`` (indices) from integer ``seeds`` and seed their banks."""
+    def reset_envs(self, envs, seeds, fresh=False):
+        """Draw new passages for ``envs`` (indices) and seed their banks.
+
+        Passages are simulated in blocks of :data:`PASSAGE_BLOCK` per
+        environment (one simulator call instead of one per episode): an
+        environment whose block is used up simulates the next one from the
+        integer in ``seeds``; ``fresh`` (a reset with an explicit seed) drops
+        the rest of its block first.  A seed is consumed by every reset, so
+        the sequence of passages depends only on the seeds.
+        """
         envs = np.asarray(envs, dtype=int)
         seeds_, P0 = [], None
-        for e, s in zip(envs, seeds):  # one passage per environment (its own reproducible seed)
-            sim = simulate(self.scenario, runs=1, seed=int(s), random=True)
-            self.y[e] = sim.measurements[0]
-            self.truth[e] = self.model.state_from_truth(sim.truth[0])
-            x0, P0 = seed_hypotheses(self.model, sim.measurements[:, 0], self.bank_cfg)
+        for e, s in zip(envs, seeds):  # each environment draws from its own reproducible stream
+            queue = self._passages.setdefault(int(e), [])
+            if fresh:
+                queue.clear()
+            if not queue:
+                sim = simulate(self.scenario, runs=PASSAGE_BLOCK, seed=int(s), random=True)
+                queue.extend(zip(sim.measurements, self.model.state_from_truth(sim.truth)))
+            self.y[e], self.truth[e] = queue.pop(0)
+            x0, P0 = seed_hypotheses(self.model, self.y[e][None, 0], self.bank_cfg)
             seeds_.append(x0[0])
         seeds_ = np.array(seeds_)
         if self.bank is None:   # the first reset creates the bank; later ones re-seed its runs
@@ -227,7 +242,7 @@ class PassageEnv(gym.Env):
 
     def reset(self, *, seed=None, options=None):
         super().reset(seed=seed)
-        obs = self.core.reset_envs([0], [int(self.np_random.integers(SEED_HIGH))])
+        obs = self.core.reset_envs([0], [int(self.np_random.integers(SEED_HIGH))], fresh=seed is not None)
         return obs[0], {}
 
     def step(self, action):
@@ -282,10 +297,11 @@ class PassageVectorEnv(VectorEnv):
                       for i in range(self.num_envs)]
 
     def reset(self, *, seed=None, options=None):
-        if seed is not None or self._rngs is None:
+        fresh = seed is not None or self._rngs is None
+        if fresh:
             self._reseed(seed)
         envs = np.arange(self.num_envs)
-        obs = self.core.reset_envs(envs, [int(r.integers(SEED_HIGH)) for r in self._rngs])
+        obs = self.core.reset_envs(envs, [int(r.integers(SEED_HIGH)) for r in self._rngs], fresh=fresh)
         self._prev_done[:] = False
         return obs, {}
 
