@@ -85,12 +85,6 @@ class FieldModel:
         object.__setattr__(self, "R", R)
         object.__setattr__(self, "_d", {
             "labels": tuple(labels), "x_scale": x_scale, "y_scale": y_scale,
-            # one scale for every channel (a single-type array): divide by a scalar, not a row
-            "y_scale_uniform": float(y_scale[0]) if np.all(y_scale == y_scale[0]) else None,
-            # magnetometers only: every reading is homogeneous of degree 1 in the moment, so the
-            # moment unit and the channel scale fold into one factor applied once to the output
-            "mag_gain": (self.moment_unit / y_scale[0] if np.all(y_scale == y_scale[0])
-                         else self.moment_unit / y_scale) if types == {"magnetometer"} else None,
             "A": cv_transition(self.period, n - 4), "axial": self.array.axial,
             "axial_cols": as_slice(np.flatnonzero(self.array.axial)),
             "mom": labels.index("mx") if "mx" in labels else None,
@@ -126,10 +120,12 @@ class FieldModel:
         return d
 
     # -- measurement function ---------------------------------------------------
-    def _source(self, x, si_moment=True):
-        """Source position, moment and dipole (SI) of internal states (..., n).
+    def _source(self, x, moment_scale=None, dipole_scale=1.0):
+        """Source position (m), moment and dipole of internal states (..., n).
 
-        With ``si_moment`` False the moment stays in internal units.
+        Moment and dipole are SI unless scales are given: the moment is then
+        ``x_m * moment_scale`` and the dipole ``p * dipole_scale`` (times the
+        course direction).
         """
         d = self._d
         q = np.empty(x.shape[:-1] + (3,), dtype=x.dtype)
@@ -138,29 +134,29 @@ class FieldModel:
         q[..., 2] = x[..., d["z"]] if d["z"] is not None else self.source_z
         moment = None
         if d["mom"] is not None:
-            moment = x[..., d["mom"]:d["mom"] + 3]
-            if si_moment:
-                moment = moment * self.moment_unit
+            moment = x[..., d["mom"]:d["mom"] + 3] * (self.moment_unit if moment_scale is None else moment_scale)
         dipole = None
         if d["z"] is not None:
             v = x[..., 2:4]
             speed = np.sqrt(np.sum(v * v, axis=-1, keepdims=True))
             vhat = v / np.where(speed > 0, speed, 1.0)
-            dipole = np.concatenate([x[..., d["z"] + 1, None] * vhat, np.zeros(x.shape[:-1] + (1,))], axis=-1)
+            p = x[..., d["z"] + 1, None] if dipole_scale == 1.0 else x[..., d["z"] + 1, None] * dipole_scale
+            dipole = np.concatenate([p * vhat, np.zeros(x.shape[:-1] + (1,))], axis=-1)
         return q, moment, dipole
 
     def h(self, x):
-        """Predicted measurements (internal units), (..., n) -> (..., m)."""
+        """Predicted measurements (internal units), (..., n) -> (..., m).
+
+        Every reading is homogeneous of degree one in the moment and in the
+        electric dipole (vector, magnitude and tmi fields; the field and its
+        envelope) or independent of them (bearings, in radians already), so
+        the channel units are folded into the sources: no pass over the output.
+        """
         x = np.asarray(x)
         x = x.astype(np.result_type(x, float), copy=False)
-        gain = self._d["mag_gain"]
-        if gain is not None:   # magnetometers only: one scaling pass instead of two
-            q, moment, _ = self._source(x, si_moment=False)
-            return self.array.measure(q, moment) * gain
-        q, moment, dipole = self._source(x)
-        y = self.array.measure(q, moment, dipole)
-        uniform = self._d["y_scale_uniform"]
-        return y / uniform if uniform is not None else y / self.y_scale
+        q, moment, dipole = self._source(x, self.moment_unit / CHANNEL_UNIT["magnetometer"],
+                                         1.0 / CHANNEL_UNIT["electrode"])
+        return self.array.measure(q, moment, dipole)
 
     def H(self, x):
         """Analytic Jacobian ``dh/dx`` (internal units), (..., n) -> (..., m, n)."""

@@ -34,7 +34,7 @@ class Belief(NamedTuple):
     def cov(self) -> np.ndarray:
         """Covariance ``L L^T`` (..., n, n)."""
         cached = getattr(self, "_cov", None)   # set by predict on the covariance it factorised
-        return cached if cached is not None else self.chol @ np.swapaxes(self.chol, -1, -2)
+        return cached if cached is not None else self.chol @ transposed(self.chol)
 
     @classmethod
     def from_cov(cls, mean, cov):
@@ -71,6 +71,15 @@ class Innovation(NamedTuple):
     loglik: np.ndarray
     nis: np.ndarray
     m: np.ndarray
+
+
+def transposed(a):
+    """``a^T`` over the last two axes as a contiguous array.
+
+    ``np.matmul`` on a batch of small matrices is several times slower when an
+    operand is a transposed view (4x for 768 7x7 products) than copying first.
+    """
+    return np.ascontiguousarray(np.swapaxes(a, -1, -2))
 
 
 def symmetrize(P):
@@ -177,7 +186,7 @@ def predict(belief: Belief, model, square_root: bool = False) -> Belief:
         chol = tria(np.concatenate([AL, np.broadcast_to(sq, AL.shape[:-2] + sq.shape)], axis=-1))
         ok = np.isfinite(chol).all(axis=(-1, -2))
     else:
-        P = AL @ np.swapaxes(AL, -1, -2)
+        P = AL @ transposed(AL)
         P += model.Q
         chol, ok = safe_cholesky(P)
         if ok.all():
@@ -265,13 +274,13 @@ def gain_update(belief: Belief, eps, Pxy, S, present, P=None):
     if int(np.prod(batch)) <= _LAPACK_SOLVE_MAX_BATCH and ok_s.all():
         X = np.linalg.solve(S if S.shape[:-2] == batch else np.broadcast_to(S, batch + S.shape[-2:]), rhs)
         mean = belief.mean + np.einsum("...mn,...m->...n", X[..., :n], eps)
-        P = P - np.swapaxes(X[..., :n], -1, -2) @ rhs[..., :n]
+        P = P - transposed(X[..., :n]) @ rhs[..., :n]
         nis = np.sum(eps * X[..., n], axis=-1)
     else:
         Z = solve_lower(Ls, rhs)                                                 # [W | w]
         W = Z[..., :n]
         mean = belief.mean + np.einsum("...mn,...m->...n", W, Z[..., n])
-        P = P - np.swapaxes(W, -1, -2) @ W
+        P = P - transposed(W) @ np.ascontiguousarray(W)
         nis = np.sum(Z[..., n] ** 2, axis=-1)
     L, ok = safe_cholesky(P)
     ok = ok & ok_s

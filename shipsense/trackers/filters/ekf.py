@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from shipsense.trackers.filters._core import Belief, gain_update, prepare
+from shipsense.trackers.filters._core import Belief, gain_update, prepare, transposed
 
 
 def linearised_terms(belief: Belief, y, model, present):
@@ -20,7 +20,7 @@ def linearised_terms(belief: Belief, y, model, present):
     H = np.where(present[..., :, None], model.H(x), 0.0)
     eps = np.where(present, model.residual(y, model.h(x)), 0.0)
     P = belief.cov
-    return eps, H, P, P @ np.swapaxes(H, -1, -2)
+    return eps, H, P, P @ transposed(H)
 
 
 def update(belief: Belief, y, model, mask=None):

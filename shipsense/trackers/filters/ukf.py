@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from shipsense.trackers.filters._core import Belief, gain_update, prepare
+from shipsense.trackers.filters._core import Belief, gain_update, prepare, transposed
 
 
 def merwe_weights(n, alpha=1.0, beta=2.0, kappa=0.0):
@@ -75,7 +75,7 @@ def sigma_statistics(belief: Belief, y, model, present, spread, Wm, Wc, center=T
     if not present.all():
         dY = dY * present[..., None, :]
     WdY = (dY.reshape(dY.shape[:-2] + (dY.shape[-2] * dY.shape[-1],)) * np.repeat(Wc, dY.shape[-1])).reshape(dY.shape)
-    Pyy = np.swapaxes(dY, -1, -2) @ WdY
+    Pyy = transposed(dY) @ WdY
     Pxy = belief.chol @ (WdY[..., c:c + n, :] - WdY[..., c + n:, :])
     if spread != 1.0:
         Pxy *= spread
