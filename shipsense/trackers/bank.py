@@ -136,6 +136,21 @@ class BankRun:
         return out
 
 
+def _project(belief, model):
+    """Means clipped into the model's physical ``state_bounds`` (e.g. the source stays in the water).
+
+    Projecting the estimate onto the constraint set is the simplest
+    state-constrained Kalman filter (Simon 2010, IET Control Theory Appl. 4(8)).
+    """
+    bounds = getattr(model, "state_bounds", None)
+    if bounds is None or not (np.isfinite(bounds[0]).any() or np.isfinite(bounds[1]).any()):
+        return belief
+    clipped = np.clip(belief.mean, *bounds)
+    if np.array_equal(clipped, belief.mean):
+        return belief
+    return Belief(clipped, belief.chol, belief.ok)
+
+
 class BankState:
     """The running state of a bank over R passages x H hypotheses: one flat batch, stepped one sample at a time.
 
@@ -208,6 +223,7 @@ class BankState:
         yy = np.asarray(y, dtype=float)[run] / self.model.y_scale
         mk = None if mask is None else np.asarray(mask)[run]
         new, inn = self.unit.update(b, yy, self.model, mk)
+        new = _project(new, self.model)
         if rows is None:
             self.belief = new
         else:

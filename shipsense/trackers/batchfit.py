@@ -24,13 +24,17 @@ def fit_passages(model, y, theta_init, steps, stride=1, iterations=40, return_in
 
     ``y`` (B or 1, K', m) are the measurements at steps ``0, stride, 2 stride, ...``;
     ``theta_init`` (B, n); NaN samples are ignored.  Returns the fitted
-    initial states (B, n) and their chi-square over the fitted samples (and,
+    initial states (B, n), kept within the model's ``state_bounds`` (projected
+    steps), and their chi-square over the fitted samples (and,
     with ``return_information``, the Gauss–Newton information ``J^T J`` (B, n, n)
     at the solution: the inverse of the batch-fit covariance).
     """
     Ak = powers(model.A, steps)[::stride]
     w = 1.0 / np.sqrt(model.R)
+    lo, hi = getattr(model, "state_bounds", (None, None))
     theta = np.array(theta_init, dtype=float)
+    if lo is not None:
+        theta = np.clip(theta, lo, hi)
     B, n = theta.shape
 
     present = np.isfinite(y)
@@ -51,6 +55,8 @@ def fit_passages(model, y, theta_init, steps, stride=1, iterations=40, return_in
         A = JtJ + lam[:, None, None] * (np.eye(n) * (D + 1e-12)[:, None, :])
         step = -np.linalg.solve(A, g[..., None])[..., 0]
         trial = theta + step
+        if lo is not None:   # projected steps: the fit stays physical (e.g. the source in the water)
+            trial = np.clip(trial, lo, hi)
         r_t, X_t = residual(trial)
         cost_t = np.sum(r_t * r_t, axis=-1)
         better = np.isfinite(cost_t) & (cost_t < cost)

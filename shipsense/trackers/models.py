@@ -32,6 +32,9 @@ from shipsense.physics.array import SensorArray, as_slice
 from shipsense.physics.motion import cv_transition, q_dwna, q_identity
 from shipsense.physics.seismic import wrap_axial
 
+DEPTH_MARGIN = 0.5
+"""Closest a source may come to the sea surface or the seabed in fits (m)."""
+
 CHANNEL_UNIT = {"magnetometer": 1e-9, "electrode": 1e-9, "accelerometer": 1.0}
 """SI value of one internal measurement unit per sensor type (nT, nV/m, rad)."""
 
@@ -99,6 +102,22 @@ class FieldModel:
     axial = property(lambda self: self._d["axial"], doc="Boolean (m,): bearing channels.")
     x_scale = property(lambda self: self._d["x_scale"], doc="SI value of one internal unit per state component.")
     y_scale = property(lambda self: self._d["y_scale"], doc="SI value of one internal unit per channel.")
+
+    @property
+    def state_bounds(self):
+        """Physical bounds ``(lo, hi)`` of the internal state (n,) each; infinite where there are none.
+
+        The source depth lies in the water (``-water_depth < z < 0``, with
+        :data:`DEPTH_MARGIN` from the surface and the seabed) and the keel
+        dipole ``p`` is non-negative (the envelope cannot see its sign).
+        """
+        lo, hi = np.full(self.n, -np.inf), np.full(self.n, np.inf)
+        d = self._d
+        if d["z"] is not None:
+            lo[d["z"]] = -self.array.medium.water_depth + DEPTH_MARGIN
+            hi[d["z"]] = -DEPTH_MARGIN
+            lo[d["z"] + 1] = 0.0
+        return lo, hi
 
     def state_from_truth(self, truth):
         """This model's state (SI) from simulation truth columns ``x, y, vx, vy, z, mx, my, mz, p`` (..., 9)."""
