@@ -180,6 +180,25 @@ def linear_basis(model, theta, steps, stride=1):
     return offset, basis
 
 
+def window_samples(model, K, window_s=15.0):
+    """Samples W of the fitted window: ``window_s`` seconds, at least 4, less than the K samples."""
+    return int(np.clip(round(window_s / model.period), 4, K - 1))
+
+
+def detection_start(model, measurements, snr_start=5.0, window=0):
+    """First sample (R,) at which some field channel exceeds ``snr_start`` noise standard deviations.
+
+    The adaptive start of :func:`global_init`'s window (0 if never; at most
+    ``K - window - 1`` so that the window fits).  ``measurements`` (R, K, m) SI.
+    """
+    y = np.asarray(measurements, dtype=float) / model.y_scale
+    K = y.shape[1]
+    snr = np.where(~model.axial, np.abs(np.nan_to_num(y)) / np.sqrt(model.R), 0.0).max(axis=-1)   # (R, K)
+    above = snr > snr_start
+    k0 = np.where(above.any(axis=1), np.argmax(above, axis=1), 0)
+    return np.minimum(k0, K - window - 1).clip(0)
+
+
 def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, course_step_deg=30.0,
                 window_s=15.0, grid_samples=16, keep=6, distinct_m=15.0, snr_start=5.0, inflate=2.0,
                 source_z=None, common_start=False, max_bytes=512e6):
@@ -217,15 +236,11 @@ def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, c
 
     y_si = np.asarray(measurements, dtype=float)
     R, K, m = y_si.shape
-    window = int(np.clip(round(window_s / model.period), 4, K - 1))
+    window = window_samples(model, K, window_s)
     stride = max(1, window // grid_samples)
     y = y_si / model.y_scale
     std = np.sqrt(model.R)
-    field = ~model.axial
-    snr = np.where(field, np.abs(np.nan_to_num(y)) / std, 0.0).max(axis=-1)              # (R, K)
-    above = snr > snr_start
-    k0 = np.where(above.any(axis=1), np.argmax(above, axis=1), 0)
-    k0 = np.minimum(k0, K - window - 1).clip(0)
+    k0 = detection_start(model, y_si, snr_start, window)
     if common_start:   # one bank start for the whole batch: every window starts at the latest detection
         k0 = np.full(R, k0.max())
     grid = candidate_grid(model, ranges, np.arange(0.0, 360.0, bearing_step_deg),
@@ -241,19 +256,30 @@ def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, c
     params = np.empty((R, C, P))
     # passages in chunks: the (chunk, C, W', m, P) arrays stay near max_bytes
     chunk = max(1, int(max_bytes // (8 * C * Wn * m * max(P, 1) * 3)))
+    Gf = G.reshape(C, Wn * m, P)                                                          # (C, W'm, P)
+    A_all = np.swapaxes(Gf, -1, -2) @ Gf + 1e-9 * np.eye(P)                               # shared by passages
     for lo in range(0, R, chunk):
         yw = yw_all[lo:lo + chunk]
         present = np.isfinite(yw)
         d = model.residual(np.where(present, yw, 0.0)[:, None], offset[None]) / std      # (r, C, W', m)
-        d = np.where(present[:, None], d, 0.0)
-        Gm = G[None] * present[:, None, ..., None]                                        # (r, C, W', m, P)
-        A = np.einsum("rcwmp,rcwmq->rcpq", Gm, Gm)
-        b = np.einsum("rcwmp,rcwm->rcp", Gm, d)
-        par = np.linalg.solve(A + 1e-9 * np.eye(P), b[..., None])[..., 0]
+        if present.all():   # every passage sees the same design: A = G^T G once, b = G^T d by matmul
+            df = d.reshape(d.shape[0], C, Wn * m)
+            b = np.matmul(np.swapaxes(df, 0, 1), Gf).swapaxes(0, 1)                       # (r, C, P)
+            A = A_all[None]
+        else:
+            d = np.where(present[:, None], d, 0.0)
+            Gm = G[None] * present[:, None, ..., None]                                    # (r, C, W', m, P)
+            A = np.einsum("rcwmp,rcwmq->rcpq", Gm, Gm) + 1e-9 * np.eye(P)
+            b = np.einsum("rcwmp,rcwm->rcp", Gm, d)
+        par = np.linalg.solve(A, b[..., None])[..., 0]
         if "p" in model.labels:                                   # the envelope needs p >= 0
             par[..., -1] = np.maximum(par[..., -1], 0.0)
-        fit = d - np.einsum("rcwmp,rcp->rcwm", Gm, par)
-        chi2[lo:lo + chunk] = np.sum(fit * fit, axis=(-1, -2))
+        if present.all():   # the fit G par by one batched matmul over candidates
+            fit = df - np.matmul(Gf, np.moveaxis(par, 0, -1)).transpose(2, 0, 1)         # (r, C, W'm)
+        else:
+            fit = d - np.einsum("rcwmp,rcp->rcwm", Gm, par)
+        chi2[lo:lo + chunk] = np.einsum("...,...->", fit, fit) if fit.size == 0 else np.sum(
+            (fit * fit).reshape(fit.shape[0], C, -1), axis=-1)
         params[lo:lo + chunk] = par
     slots = _parameter_slots(model)
     Ak = powers(model.A, window)

@@ -44,10 +44,13 @@ def test_keeps_the_mirror_minimum_of_a_collinear_envelope_array():
     model = model_from_scenario(sc)
     sim = simulate(sc, runs=1, seed=0)
     gi = global_init(model, sim.measurements, ranges=np.geomspace(20, 300, 8), speeds=[7.0, 10.0])
-    order = np.argsort(gi.loglik[0])[::-1]
-    a, b = gi.seeds[0, order[0], :2], gi.seeds[0, order[1], :2]
-    assert abs(a[0] + b[0]) < 3.0 and abs(a[1] - b[1]) < 3.0          # mirror images across x = 0
-    assert gi.loglik[0, order[0]] - gi.loglik[0, order[1]] < 1.0       # equally likely
+    best = int(np.argmax(gi.loglik[0]))
+    a = gi.seeds[0, best, :2]
+    # among the kept minima within 1 nat of the best (equally likely), one is its mirror image across x = 0
+    tied = np.flatnonzero(gi.loglik[0, best] - gi.loglik[0] < 1.0)
+    mirror = [abs(a[0] + gi.seeds[0, j, 0]) < 3.0 and abs(a[1] - gi.seeds[0, j, 1]) < 3.0 and abs(a[0]) > 3.0
+              for j in tied]
+    assert any(mirror), gi.seeds[0, tied, :2]
 
 
 def test_tracking_from_the_global_initialiser_converges_on_s2():
