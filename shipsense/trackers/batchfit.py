@@ -19,7 +19,7 @@ def powers(A, K):
     return out
 
 
-def fit_passages(model, y, theta_init, steps, stride=1, iterations=40, return_information=False):
+def fit_passages(model, y, theta_init, steps, stride=1, iterations=40, return_information=False, tol=1e-9):
     """Batched Levenberg–Marquardt fit of passages to measurements (internal units).
 
     ``y`` (B or 1, K', m) are the measurements at steps ``0, stride, 2 stride, ...``;
@@ -27,7 +27,10 @@ def fit_passages(model, y, theta_init, steps, stride=1, iterations=40, return_in
     initial states (B, n), kept within the model's ``state_bounds`` (projected
     steps), and their chi-square over the fitted samples (and,
     with ``return_information``, the Gauss–Newton information ``J^T J`` (B, n, n)
-    at the solution: the inverse of the batch-fit covariance).
+    at the solution: the inverse of the batch-fit covariance).  Stops after
+    ``iterations``; a fit stops earlier once it stalled three times in a row
+    (an accepted step gaining less than the relative ``tol``, or a rejected
+    step at a damping of 1e6 or more).
     """
     Ak = powers(model.A, steps)[::stride]
     w = 1.0 / np.sqrt(model.R)
@@ -39,32 +42,48 @@ def fit_passages(model, y, theta_init, steps, stride=1, iterations=40, return_in
 
     present = np.isfinite(y)
     y = np.where(present, y, 0.0)
+    shared = y.shape[0] == 1          # one measurement set for every fit
 
-    def residual(th):
+    def rows(a, idx):
+        return a if shared else a[idx]
+
+    def residual(th, idx):
         X = np.einsum("kij,bj->bki", Ak, th)
-        return (model.residual(model.h(X), y) * w * present).reshape(B, -1), X
+        return (model.residual(model.h(X), rows(y, idx)) * w * rows(present, idx)).reshape(len(th), -1), X
 
-    r, X = residual(theta)
+    everyone = np.arange(B)
+    r, X = residual(theta, everyone)
     cost = np.sum(r * r, axis=-1)
     lam = np.full(B, 1e-2)
+    stall = np.zeros(B, dtype=int)
     for _ in range(iterations):
-        Jac = (model.H(X) @ Ak * (w * present)[..., None]).reshape(B, -1, n)
+        # fits that stalled in 3 successive iterations are done: only the
+        # others are stepped (the late iterations of a few slow fits no longer cost a full batch)
+        a = np.flatnonzero(stall < 3)
+        if a.size == 0:
+            break
+        Jac = (model.H(X[a]) @ Ak * (w * rows(present, a))[..., None]).reshape(a.size, -1, n)
         JtJ = np.swapaxes(Jac, -1, -2) @ Jac
-        g = np.einsum("bmn,bm->bn", Jac, r)
+        g = np.einsum("bmn,bm->bn", Jac, r[a])
         D = np.diagonal(JtJ, axis1=-2, axis2=-1)
-        A = JtJ + lam[:, None, None] * (np.eye(n) * (D + 1e-12)[:, None, :])
+        A = JtJ + lam[a, None, None] * (np.eye(n) * (D + 1e-12)[:, None, :])
         step = -np.linalg.solve(A, g[..., None])[..., 0]
-        trial = theta + step
+        trial = theta[a] + step
         if lo is not None:   # projected steps: the fit stays physical (e.g. the source in the water)
             trial = np.clip(trial, lo, hi)
-        r_t, X_t = residual(trial)
+        r_t, X_t = residual(trial, a)
         cost_t = np.sum(r_t * r_t, axis=-1)
-        better = np.isfinite(cost_t) & (cost_t < cost)
-        theta = np.where(better[:, None], trial, theta)
-        r = np.where(better[:, None], r_t, r)
-        X = np.where(better[:, None, None], X_t, X)
-        cost = np.where(better, cost_t, cost)
-        lam = np.clip(np.where(better, lam / 3.0, lam * 5.0), 1e-9, 1e9)
+        better = np.isfinite(cost_t) & (cost_t < cost[a])
+        gain = np.where(better, (cost[a] - cost_t) / np.maximum(cost[a], 1e-300), 0.0)
+        ok = a[better]
+        theta[ok] = trial[better]
+        r[ok] = r_t[better]
+        X[ok] = X_t[better]
+        cost[ok] = cost_t[better]
+        lam[a] = np.clip(np.where(better, lam[a] / 3.0, lam[a] * 5.0), 1e-9, 1e9)
+        # a stall: an accepted step that gained less than tol, or a rejected one at a large damping
+        stalled = np.where(better, gain < tol, lam[a] >= 1e6)
+        stall[a] = np.where(stalled, stall[a] + 1, 0)
     if return_information:
         Jac = (model.H(X) @ Ak * (w * present)[..., None]).reshape(B, -1, n)
         return theta, cost, np.swapaxes(Jac, -1, -2) @ Jac

@@ -158,13 +158,34 @@ def candidate_grid(model, ranges, bearings_deg, courses_deg, speeds, source_z=No
     return theta
 
 
+_BASIS_CACHE: dict = {}
+_BASIS_CACHE_SIZE = 4
+
+
 def linear_basis(model, theta, steps, stride=1):
     """Offset (C, W, m) and unit-parameter basis (C, W, m, P) of candidate passages (internal units).
 
     The measurements are linear in the moment (and ``p``) for vector, tmi and
     envelope (``p >= 0``) channels: ``h = offset + basis @ params``; bearing
-    channels are in the offset.
+    channels are in the offset.  The last few results are kept (the grid and
+    window are the same for every batch of passages a study initialises);
+    treat them as read-only.
     """
+    theta = np.ascontiguousarray(theta, dtype=float)
+    key = (id(model), theta.shape, hash(theta.tobytes()), steps, stride)
+    hit = _BASIS_CACHE.get(key)
+    if hit is not None and hit[0] is model:
+        return hit[1], hit[2]
+    offset, basis = _linear_basis(model, theta, steps, stride)
+    offset.flags.writeable = False
+    basis.flags.writeable = False
+    if len(_BASIS_CACHE) >= _BASIS_CACHE_SIZE:
+        _BASIS_CACHE.pop(next(iter(_BASIS_CACHE)))
+    _BASIS_CACHE[key] = (model, offset, basis)
+    return offset, basis
+
+
+def _linear_basis(model, theta, steps, stride):
     from shipsense.trackers.batchfit import powers
 
     slots = _parameter_slots(model)
