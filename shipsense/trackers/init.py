@@ -220,6 +220,35 @@ def detection_start(model, measurements, snr_start=5.0, window=0):
     return np.minimum(k0, K - window - 1).clip(0)
 
 
+def _grid_fit_masked(model, yw_all, offset, G, std, max_bytes, clamp):
+    """Moment-eliminated chi-square (R, C) and moments (R, C, P) of every candidate, general case.
+
+    Handles bearing channels (non-zero offsets) and missing samples (each
+    passage its own masked design); passages in chunks so that the
+    (chunk, C, W', m, P) arrays stay near ``max_bytes``.
+    """
+    R, Wn, m = yw_all.shape
+    C, P = G.shape[0], G.shape[-1]
+    chi2 = np.empty((R, C))
+    params = np.empty((R, C, P))
+    chunk = max(1, int(max_bytes // (8 * C * Wn * m * max(P, 1) * 3)))
+    for lo in range(0, R, chunk):
+        yw = yw_all[lo:lo + chunk]
+        present = np.isfinite(yw)
+        d = model.residual(np.where(present, yw, 0.0)[:, None], offset[None]) / std      # (r, C, W', m)
+        d = np.where(present[:, None], d, 0.0)
+        Gm = G[None] * present[:, None, ..., None]                                        # (r, C, W', m, P)
+        A = np.einsum("rcwmp,rcwmq->rcpq", Gm, Gm) + 1e-9 * np.eye(P)
+        b = np.einsum("rcwmp,rcwm->rcp", Gm, d)
+        par = np.linalg.solve(A, b[..., None])[..., 0]
+        if clamp:
+            par[..., -1] = np.maximum(par[..., -1], 0.0)
+        fit = d - np.einsum("rcwmp,rcp->rcwm", Gm, par)
+        chi2[lo:lo + chunk] = np.sum(fit * fit, axis=(-1, -2))
+        params[lo:lo + chunk] = par
+    return chi2, params
+
+
 def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, course_step_deg=30.0,
                 window_s=15.0, grid_samples=16, keep=6, distinct_m=15.0, snr_start=5.0, inflate=2.0,
                 source_z=None, common_start=False, max_bytes=512e6):
@@ -273,35 +302,22 @@ def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, c
     G = basis / std[:, None]                                                              # (C, W', m, P)
     P = G.shape[-1]
     C = G.shape[0]
-    chi2 = np.empty((R, C))
-    params = np.empty((R, C, P))
-    # passages in chunks: the (chunk, C, W', m, P) arrays stay near max_bytes
-    chunk = max(1, int(max_bytes // (8 * C * Wn * m * max(P, 1) * 3)))
     Gf = G.reshape(C, Wn * m, P)                                                          # (C, W'm, P)
     A_all = np.swapaxes(Gf, -1, -2) @ Gf + 1e-9 * np.eye(P)                               # shared by passages
-    for lo in range(0, R, chunk):
-        yw = yw_all[lo:lo + chunk]
-        present = np.isfinite(yw)
-        d = model.residual(np.where(present, yw, 0.0)[:, None], offset[None]) / std      # (r, C, W', m)
-        if present.all():   # every passage sees the same design: A = G^T G once, b = G^T d by matmul
-            df = d.reshape(d.shape[0], C, Wn * m)
-            b = np.matmul(np.swapaxes(df, 0, 1), Gf).swapaxes(0, 1)                       # (r, C, P)
-            A = A_all[None]
-        else:
-            d = np.where(present[:, None], d, 0.0)
-            Gm = G[None] * present[:, None, ..., None]                                    # (r, C, W', m, P)
-            A = np.einsum("rcwmp,rcwmq->rcpq", Gm, Gm) + 1e-9 * np.eye(P)
-            b = np.einsum("rcwmp,rcwm->rcp", Gm, d)
-        par = np.linalg.solve(A, b[..., None])[..., 0]
-        if "p" in model.labels:                                   # the envelope needs p >= 0
-            par[..., -1] = np.maximum(par[..., -1], 0.0)
-        if present.all():   # the fit G par by one batched matmul over candidates
-            fit = df - np.matmul(Gf, np.moveaxis(par, 0, -1)).transpose(2, 0, 1)         # (r, C, W'm)
-        else:
-            fit = d - np.einsum("rcwmp,rcp->rcwm", Gm, par)
-        chi2[lo:lo + chunk] = np.einsum("...,...->", fit, fit) if fit.size == 0 else np.sum(
-            (fit * fit).reshape(fit.shape[0], C, -1), axis=-1)
-        params[lo:lo + chunk] = par
+    clamp = "p" in model.labels                                   # the envelope needs p >= 0
+    if not np.any(offset) and np.isfinite(yw_all).all():
+        # no offset (no bearing channels) and nothing missing: the whitened data d are the same for every
+        # candidate, so b = G^T d is one matmul and chi2 = |d|^2 - 2 par.b + par^T A par (no fit formed)
+        d = (yw_all / std).reshape(R, Wn * m)
+        b = np.matmul(np.swapaxes(Gf, -1, -2), d.T)                                       # (C, P, R)
+        par = np.linalg.inv(A_all) @ b
+        if clamp:
+            par[:, -1] = np.maximum(par[:, -1], 0.0)
+        chi2 = (np.sum(d * d, axis=-1)[None] - 2.0 * np.sum(par * b, axis=1)
+                + np.sum(par * (A_all @ par), axis=1)).T                                  # (R, C)
+        params = np.moveaxis(par, -1, 0)                                                  # (R, C, P)
+    else:
+        chi2, params = _grid_fit_masked(model, yw_all, offset, G, std, max_bytes, clamp)
     slots = _parameter_slots(model)
     Ak = powers(model.A, window)
     mid = Ak[window // 2][:2]
