@@ -108,6 +108,10 @@ def test_reproduce_wide_writes_the_documented_summary_keys(tmp_path):
         for method in ("miv_bank", "global_init"):
             assert {"convergence_rate", "mrmse_r_m", "rmse_over_pcrlb", "nees_mean",
                     "seconds_per_passage"} <= set(summary[family][method])
+    for name in ("S0", "S1-P2", "S2"):
+        c = summary["consistency"][name]
+        lo, hi = c["band"]
+        assert 0 < lo < 2 < hi and c["consistent"] == (c["nees_mean"] is not None and lo <= c["nees_mean"] <= hi)
 
 
 def test_check_exit_codes_and_json(capsys):

@@ -17,7 +17,15 @@ hypotheses seeded from the first sample, the scenario's filter) and
 then the same filter unit as a bank of the kept minima).  Both on the same
 passages.  Reported per family and method: convergence rate, MRMSE_r, RMSE
 over the second half / PCRLB there, mean position NEES over converged runs
-(second half), and seconds per passage (initialisation + filtering).
+(second half), and seconds per passage (initialisation + filtering; for
+``global_init`` also ``init_seconds_per_passage``, the initialiser alone, to
+compare with the bank's time).  The window's SNR start is per family (5 for
+the magnetometers, 50 for the envelope array and the single magnetometer:
+measured, EXPERIMENTS.md).
+
+``consistency``: NEES of the default tracker configuration (``ukf``, default
+process noise, global initialiser) on S0, S1-P2 and S2, against the 95 %
+chi-square band (:func:`consistency`).
 """
 
 from __future__ import annotations
@@ -109,6 +117,76 @@ def _metrics(est, covs_pos, truth, bound_pos, seconds, ends):
             "nees_mean": ne, "seconds_per_passage": seconds}
 
 
+def track_global(unit, model, y, sc, snr_start):
+    """Global initialiser then the bank, for passages grouped by detection step (one batch per group).
+
+    Returns estimates (R, K, n) SI, position covariances (R, K, 2, 2) (a
+    placeholder of (100 m)^2 inside the fitted window, which NEES does not
+    assess) and the seconds spent in the initialiser itself.
+    """
+    R, K = y.shape[:2]
+    est = np.full((R, K, model.n), np.nan)
+    pos_cov = np.full((R, K, 2, 2), np.nan)
+    ranges = np.geomspace(20.0, 1.2 * sc.prior.range[1], 8)
+    speeds = np.linspace(*sc.prior.speed, 3)
+    k0 = detection_start(model, y, snr_start, window_samples(model, K))
+    groups = {}
+    for r, k in enumerate(k0):
+        groups.setdefault(int(k) // 10, []).append(r)
+    t_init = 0.0
+    for members in groups.values():
+        idx = np.array(members)
+        t1 = time.perf_counter()
+        gi = global_init(model, y[idx], ranges=ranges, speeds=speeds, common_start=True, snr_start=snr_start)
+        t_init += time.perf_counter() - t1
+        e, b = track_with_global_init(unit, model, y[idx], gi)
+        est[idx] = e
+        start = int(gi.start[0])
+        pos_cov[idx, start:] = b.selected_pos_cov
+        pos_cov[idx, :start] = np.diag([1e4, 1e4])
+    return est, pos_cov, t_init
+
+
+CONSISTENCY_SCENARIOS = {"S0": None, "S1-P2": None, "S2": ["M1", "M2"]}
+
+
+def consistency(runs=100, seed=0):
+    """NEES of the default tracker configuration (issue 7) on S0, S1-P2 and S2 (the magnetometers).
+
+    Default configuration: the ``ukf`` unit with the default process noise
+    (``ProcessNoiseConfig()``), seeded by the global initialiser, on random
+    passages from each scenario's prior.  Position NEES is averaged over the
+    converged runs and the second half of the passage; ``band`` is the
+    two-sided 95 % chi-square band of a run average over that many runs (2
+    degrees of freedom); ``consistent`` says whether the time-averaged NEES
+    lies inside it.
+    """
+    from scipy import stats
+
+    from shipsense.config import ProcessNoiseConfig
+    from shipsense.trackers.filters import get_filter
+
+    out = {}
+    for name, sensors in CONSISTENCY_SCENARIOS.items():
+        sc = load_scenario(name)
+        model = model_from_scenario(sc, sensors=sensors, process_noise=ProcessNoiseConfig())
+        sim = simulate(sc, runs=runs, seed=seed, random=True)
+        cols = np.isin([c[0] for c in sim.channels], model.array.ids)
+        y = sim.measurements[..., cols]
+        truth = model.state_from_truth(sim.truth)
+        K = y.shape[1]
+        snr_start = 50.0 if "p" in model.labels else 5.0
+        est, pos_cov, _ = track_global(get_filter("ukf"), model, y, sc, snr_start)
+        m = _metrics(est, pos_cov, truth, np.ones(K), 0.0, np.full(runs, K - 1))
+        n_conv = int(round(m["convergence_rate"] * runs))
+        band = [float(stats.chi2.ppf(q, 2 * max(n_conv, 1)) / max(n_conv, 1)) for q in (0.025, 0.975)]
+        ne = m["nees_mean"]
+        out[name] = {"filter": "ukf", "process_noise": "default", "runs": runs,
+                     "convergence_rate": m["convergence_rate"], "nees_mean": ne, "band": band,
+                     "consistent": bool(ne is not None and band[0] <= ne <= band[1])}
+    return out
+
+
 def run_family(name, passages, seed):
     sc, model = family_scenario(name)
     snr_start = FAMILIES[name][-1]
@@ -128,26 +206,8 @@ def run_family(name, passages, seed):
     out["miv_bank"] = _metrics(bank.selected_means, bank.selected_pos_cov, truth, bound, t_bank, ends)
     # the global initialiser: passages grouped by detection step, one batch per group
     t0 = time.perf_counter()
-    est = np.full_like(truth, np.nan)
-    pos_cov = np.full(truth.shape[:-1] + (2, 2), np.nan)
-    ranges = np.geomspace(20.0, 1.2 * sc.prior.range[1], 8)
-    speeds = np.linspace(*sc.prior.speed, 3)
-    k0 = detection_start(model, y, snr_start, window_samples(model, y.shape[1]))
-    groups = {}
-    for r, k in enumerate(k0):
-        groups.setdefault(int(k) // 10, []).append(r)
-    t_init = 0.0
-    for members in groups.values():
-        idx = np.array(members)
-        t1 = time.perf_counter()
-        gi = global_init(model, y[idx], ranges=ranges, speeds=speeds, common_start=True, snr_start=snr_start)
-        t_init += time.perf_counter() - t1
-        e, b = track_with_global_init(unit, model, y[idx], gi)
-        est[idx] = e
-        start = int(gi.start[0])
-        pos_cov[idx, start:] = b.selected_pos_cov
-        pos_cov[idx, :start] = np.diag([1e4, 1e4])          # the batch window: not assessed by NEES
-    t_global = (time.perf_counter() - t0) / passages + 0.0
+    est, pos_cov, t_init = track_global(unit, model, y, sc, snr_start)
+    t_global = (time.perf_counter() - t0) / passages
     out["global_init"] = _metrics(est, pos_cov, truth, bound, t_global, ends)
     # the initialiser alone (grid + batch fits), against the 12-hypothesis bank over the whole passage
     out["global_init"]["init_seconds_per_passage"] = t_init / passages
@@ -157,7 +217,7 @@ def run_family(name, passages, seed):
 def run(runs=500, out="results/wide", seed=0, progress=True):
     """Run the wide-prior benchmark; returns the summary (also written to ``out/summary.json``)."""
     o = Output(out)
-    st = Stages(list(FAMILIES), "wide", progress)
+    st = Stages([*FAMILIES, "consistency"], "wide", progress)
     summary = {}
     rows = []
     for name in FAMILIES:
@@ -167,7 +227,13 @@ def run(runs=500, out="results/wide", seed=0, progress=True):
             rows.append([name, method, m["convergence_rate"], m["mrmse_r_m"], m["rmse_over_pcrlb"],
                          m["nees_mean"], m["seconds_per_passage"]])
         st.done()
+    st.step("consistency")
+    summary["consistency"] = consistency(min(runs, 100), seed)
+    st.done()
     elapsed = st.close()
+    o.csv("consistency.csv", ["scenario", "convergence_rate", "nees_mean", "band_lo", "band_hi", "consistent"],
+          [[k, v["convergence_rate"], v["nees_mean"], *v["band"], v["consistent"]]
+           for k, v in summary["consistency"].items()])
     o.csv("wide.csv", ["family", "method", "convergence_rate", "mrmse_r_m", "rmse_over_pcrlb", "nees_mean",
                        "seconds_per_passage"], rows)
     o.summary({**summary, "runs": runs, "seed": seed, "seconds": elapsed})
