@@ -250,7 +250,7 @@ def _grid_fit_masked(model, yw_all, offset, G, std, max_bytes, clamp):
 
 
 def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, course_step_deg=30.0,
-                window_s=15.0, grid_samples=16, keep=6, distinct_m=15.0, snr_start=5.0, inflate=2.0,
+                window_s=15.0, grid_samples=16, keep=5, distinct_m=15.0, snr_start=5.0, inflate=2.0,
                 source_z=None, common_start=False, max_bytes=512e6):
     """Global initialisation of passages from a grid search with the moment eliminated in closed form.
 
@@ -267,7 +267,8 @@ def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, c
         Duration (s) fitted from the detection on (W samples); the grid search
         uses about ``grid_samples`` of them, the refinement all.
     keep : int
-        Distinct minima kept per passage (M): the best ones more than ``distinct_m`` apart.
+        Distinct minima kept per passage (M): the best ones more than ``distinct_m`` apart (5: on the
+        wide study, 4 lost two-magnetometer passages and 6 cost more than the bank, EXPERIMENTS.md).
     snr_start : float
         The window starts at the first sample with some channel above this SNR (adaptive start).
     inflate : float

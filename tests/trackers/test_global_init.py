@@ -36,7 +36,7 @@ def test_recovers_random_passages_without_a_prior_on_position(name, sensors, tol
     at = np.minimum(gi.start, sc.steps - 1)
     err = np.hypot(*(gi.seeds[np.arange(8), best, :2] - truth[np.arange(8), at, :2]).T)
     assert np.all(err < tol), err
-    assert gi.P0.shape == (8, 6, model.n, model.n) and np.all(np.linalg.eigvalsh(gi.P0) > 0)
+    assert gi.P0.shape == (8, 5, model.n, model.n) and np.all(np.linalg.eigvalsh(gi.P0) > 0)
 
 
 def test_keeps_the_mirror_minimum_of_a_collinear_envelope_array():
