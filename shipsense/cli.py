@@ -157,7 +157,6 @@ def cmd_track(args) -> int:
     if args.filter is not None and args.filter not in FILTER_NAMES:
         raise _BadInput(f"--filter must be one of {', '.join(FILTER_NAMES)}, got {args.filter!r}")
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     truth = None
     if args.data:
         try:
@@ -171,6 +170,7 @@ def cmd_track(args) -> int:
         times, y, truth = sim.times, sim.measurements[0], sim.truth[0]
         used_seed = sc.seed if args.seed is None else args.seed
         source = f"simulated {'random' if args.random else 'nominal'} passage of {sc.name} (seed {used_seed})"
+    out.mkdir(parents=True, exist_ok=True)   # only once the input is known to be good
     try:
         tr = track_passage(sc, y, args.filter, progress=True)
     except ValueError as err:

@@ -67,7 +67,8 @@ def test_track_a_simulated_and_a_recorded_passage(tmp_path, capsys):
 def test_track_bad_input_exits_2(tmp_path, capsys):
     bad = tmp_path / "bad.csv"
     bad.write_text("time,sensor,channel,value\n0.0,NOPE,bx,1e-9\n")
-    assert main(["track", "S2", "--data", str(bad)]) == 2
+    assert main(["track", "S2", "--data", str(bad), "--out", str(tmp_path / "never")]) == 2
+    assert not (tmp_path / "never").exists()              # a rejected input leaves no output directory
     assert "unknown sensor id" in capsys.readouterr().err
     assert main(["track", "S2", "--filter", "kalman"]) == 2
 
