@@ -93,6 +93,9 @@ def test_reproduce_writes_the_documented_summary_keys(tmp_path):
     s1 = json.loads((tmp_path / "S1" / "summary.json").read_text())
     assert {"hypotheses", "selection_accuracy", "ambiguous_pairs"} <= set(s1["P1"])
     assert set(s1["raw_chain"]) >= {"ideal_mrmse_r_m", "raw_mrmse_r_m"}
+    # the project's tracker (global initialiser + the scenario's unit) tracks S0 and S1-P2 to a few metres
+    assert s0["global_init"]["final_error_median_m"] < 3.0 and s0["global_init"]["convergence_rate"] == 1.0
+    assert s1["P2_global_init"]["final_error_median_m"] < 3.0 and s1["P2_global_init"]["convergence_rate"] == 1.0
     s2 = json.loads((tmp_path / "S2" / "summary.json").read_text())
     assert set(s2["one_vs_two"]["ekf"]) >= {"one_mrmse_r_m", "two_mrmse_r_m"}
     assert set(s2["outliers"]["0.1"]) == {"ukf_mrmse_r_m", "huber_ukf_mrmse_r_m"}

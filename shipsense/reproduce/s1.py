@@ -8,7 +8,7 @@ from shipsense.config import load_scenario
 from shipsense.physics.array import SensorArray
 from shipsense.physics.motion import cv_positions
 from shipsense.plotting import draw_array, plt
-from shipsense.reproduce.common import Output, Stages, bank_summary, bar_charts, rmse_plot
+from shipsense.reproduce.common import Output, Stages, bank_summary, bar_charts, global_init_summary, rmse_plot
 from shipsense.simulator import simulate
 from shipsense.trackers.bank import run_bank
 from shipsense.trackers.filters import get_filter
@@ -92,7 +92,7 @@ def bank_for(sc, runs, seed, unit, o=None, tag=None, chain=None):
 def run(runs=100, out="results/S1", seed=0, progress=True):
     """Run the S1 experiment set; returns the summary dictionary (also written to ``out/summary.json``)."""
     o = Output(out)
-    st = Stages(["symmetry", "P1", "P2", "filters", "raw"], "S1", progress)
+    st = Stages(["symmetry", "P1", "P2", "filters", "raw", "global"], "S1", progress)
     p1, p2 = load_scenario("S1-P1"), load_scenario("S1-P2")
     unit = get_filter(p2.tracker.filter, n_pu=p2.tracker.n_pu)
     st.step("symmetry")
@@ -128,6 +128,12 @@ def run(runs=100, out="results/S1", seed=0, progress=True):
                  "raw_mrmse_r_m": raw["selected_mrmse_m"]["r"],
                  "raw_convergence_rate": raw["convergence_rate"]}
     st.done()
+    # beyond the source: the project's tracker on P2 (global initialiser seeding the same PUEKF)
+    st.step("global initialiser")
+    sim = simulate(p2, runs=runs, seed=seed)
+    model = model_from_scenario(p2)
+    gi = global_init_summary(unit, model, sim.measurements, model.state_from_truth(sim.truth), p2, snr_start=50.0)
+    st.done()
     fig, ax = plt.subplots(1, 2, figsize=(11, 5), layout="constrained")
     for a, tag, sc in ((ax[0], "P1", p1), (ax[1], "P2", p2)):
         draw_array(a, sc.array())
@@ -138,6 +144,6 @@ def run(runs=100, out="results/S1", seed=0, progress=True):
     elapsed = st.close()
     summary = {"scenario": "S1", "runs": runs, "seed": seed, "seconds": elapsed, "filter": unit.name,
                "n_pu": p2.tracker.n_pu, **result, "symmetry_table": sym, "raw_chain": raw_chain,
-               "P2_filters": compare}
+               "P2_filters": compare, "P2_global_init": gi}
     o.summary(summary)
     return summary

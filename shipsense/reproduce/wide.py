@@ -35,16 +35,10 @@ import time
 import numpy as np
 
 from shipsense.config import BankConfig, load_scenario
-from shipsense.reproduce.common import Output, Stages
+from shipsense.reproduce.common import Output, Stages, track_global
 from shipsense.simulator import simulate
 from shipsense.trackers.bank import run_bank
-from shipsense.trackers.init import (
-    detection_start,
-    global_init,
-    seed_hypotheses,
-    track_with_global_init,
-    window_samples,
-)
+from shipsense.trackers.init import seed_hypotheses
 from shipsense.trackers.metrics import position_error
 from shipsense.trackers.models import model_from_scenario
 from shipsense.tracking import scenario_tracker
@@ -115,36 +109,6 @@ def _metrics(est, covs_pos, truth, bound_pos, seconds, ends):
     return {"convergence_rate": float(conv.mean()), "mrmse_r_m": float(np.mean(rmse_k)),
             "rmse_over_pcrlb": (rmse / bound) if rmse is not None and bound else None,
             "nees_mean": ne, "seconds_per_passage": seconds}
-
-
-def track_global(unit, model, y, sc, snr_start):
-    """Global initialiser then the bank, for passages grouped by detection step (one batch per group).
-
-    Returns estimates (R, K, n) SI, position covariances (R, K, 2, 2) (a
-    placeholder of (100 m)^2 inside the fitted window, which NEES does not
-    assess) and the seconds spent in the initialiser itself.
-    """
-    R, K = y.shape[:2]
-    est = np.full((R, K, model.n), np.nan)
-    pos_cov = np.full((R, K, 2, 2), np.nan)
-    ranges = np.geomspace(20.0, 1.2 * sc.prior.range[1], 8)
-    speeds = np.linspace(*sc.prior.speed, 3)
-    k0 = detection_start(model, y, snr_start, window_samples(model, K))
-    groups = {}
-    for r, k in enumerate(k0):
-        groups.setdefault(int(k) // 10, []).append(r)
-    t_init = 0.0
-    for members in groups.values():
-        idx = np.array(members)
-        t1 = time.perf_counter()
-        gi = global_init(model, y[idx], ranges=ranges, speeds=speeds, common_start=True, snr_start=snr_start)
-        t_init += time.perf_counter() - t1
-        e, b = track_with_global_init(unit, model, y[idx], gi)
-        est[idx] = e
-        start = int(gi.start[0])
-        pos_cov[idx, start:] = b.selected_pos_cov
-        pos_cov[idx, :start] = np.diag([1e4, 1e4])
-    return est, pos_cov, t_init
 
 
 CONSISTENCY_SCENARIOS = {"S0": None, "S1-P2": None, "S2": ["M1", "M2"]}
