@@ -146,6 +146,10 @@ def rmse_plot(out, name, title, times, curves, ylabel="RMSE_k [m]"):
     return out.figure(fig, name)
 
 
+GROUP_STEPS = 10
+"""Passages whose detections fall in the same block of this many samples share one bank (:func:`track_global`)."""
+
+
 def track_global(unit, model, y, sc, snr_start):
     """Global initialiser then the bank, for passages grouped by detection step (one batch per group).
 
@@ -163,7 +167,7 @@ def track_global(unit, model, y, sc, snr_start):
     k0 = detection_start(model, y, snr_start, window_samples(model, K))
     groups = {}
     for r, k in enumerate(k0):
-        groups.setdefault(int(k) // 10, []).append(r)
+        groups.setdefault(int(k) // GROUP_STEPS, []).append(r)
     t_init = 0.0
     for members in groups.values():
         idx = np.array(members)
