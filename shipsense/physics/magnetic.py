@@ -54,6 +54,14 @@ def dipole_field(sensors, sources, moments):
     # component-wise: every operation runs over the whole batch at unit stride (about 1.6x faster
     # than working on (..., 3) rows, which matters inside sigma-point filters)
     r = [np.subtract(s[..., i], q[..., i], dtype=dtype) for i in range(3)]
+    B = np.empty(np.broadcast_shapes(r[0].shape, m.shape[:-1]) + (3,), dtype=dtype)
+    _field_into(B, r, m)
+    return B
+
+
+def _field_into(out, r, m):
+    """Write the dipole field into ``out`` (X + (3,)) from components ``r`` (3 arrays broadcasting to X)
+    and moments ``m`` (..., 3) broadcasting to X; NaN where ``r = 0``."""
     r2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2]
     m_dot_r = m[..., 0] * r[0] + m[..., 1] * r[1] + m[..., 2] * r[2]
     singular = r2 == 0.0
@@ -62,14 +70,11 @@ def dipole_field(sensors, sources, moments):
     inv_r5 = MU0_OVER_4PI / (r2 * r2 * np.sqrt(r2))
     a = 3.0 * m_dot_r * inv_r5
     b = r2 * inv_r5
-    shape = np.broadcast_shapes(a.shape, m.shape[:-1])
-    B = np.empty(shape + (3,), dtype=dtype)
     for i in range(3):
-        np.multiply(a, r[i], out=B[..., i])
-        B[..., i] -= b * m[..., i]
+        np.multiply(a, r[i], out=out[..., i])
+        out[..., i] -= b * m[..., i]
     if singular.any():
-        B[singular] = np.nan
-    return B
+        out[singular] = np.nan
 
 
 def dipole_field_at(sensors, sources, moments):
@@ -96,21 +101,8 @@ def dipole_field_at(sensors, sources, moments):
     batch = np.broadcast_shapes(q.shape[:-1], m.shape[:-1])
     col = (slice(None),) + (None,) * len(batch)                 # sensor axis first, then the batch
     r = [np.subtract(s[col + (i,)], q[..., i], dtype=dtype) for i in range(3)]   # (S, ...)
-    r2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2]
-    m_dot_r = m[..., 0] * r[0] + m[..., 1] * r[1] + m[..., 2] * r[2]
-    singular = r2 == 0.0
-    if singular.any():
-        r2 = np.where(singular, 1.0, r2)
-    inv_r5 = MU0_OVER_4PI / (r2 * r2 * np.sqrt(r2))
-    a = 3.0 * m_dot_r * inv_r5
-    b = r2 * inv_r5
     B = np.empty(batch + (s.shape[0], 3), dtype=dtype)
-    out = np.moveaxis(B, -2, 0)                                   # (S, ..., 3) view
-    for i in range(3):
-        np.multiply(a, r[i], out=out[..., i])
-        out[..., i] -= b * m[..., i]
-    if singular.any():
-        out[singular] = np.nan
+    _field_into(np.moveaxis(B, -2, 0), r, m)                     # written through an (S, ..., 3) view
     return B
 
 

@@ -3,7 +3,13 @@
 import numpy as np
 import pytest
 
-from shipsense.physics.magnetic import dipole_field, earth_field_direction, magnitude_reading, tmi_reading
+from shipsense.physics.magnetic import (
+    dipole_field,
+    dipole_field_at,
+    earth_field_direction,
+    magnitude_reading,
+    tmi_reading,
+)
 
 MU = 1e-7
 
@@ -100,3 +106,16 @@ def test_jacobian_matches_complex_step():
         e[j] = h
         np.testing.assert_allclose(dipole_field(s, q + 1j * e, m).imag / h, dq[..., j], rtol=1e-10, atol=1e-22)
         np.testing.assert_allclose(dipole_field(s, q, m + 1j * e).imag / h, dm[..., j], rtol=1e-10, atol=1e-22)
+
+
+def test_sensor_major_kernel_equals_the_broadcast_kernel_and_flags_coincidence():
+    rng = np.random.default_rng(4)
+    sensors = rng.normal(size=(3, 3)) * 10
+    q = rng.normal(size=(5, 7, 3)) * 50
+    m = rng.normal(size=(5, 7, 3)) * 1e6
+    np.testing.assert_allclose(dipole_field_at(sensors, q, m), dipole_field(sensors, q[..., None, :], m[..., None, :]),
+                               rtol=1e-13, atol=0)
+    q[2, 3] = sensors[1]                                   # a source on sensor 1
+    B = dipole_field_at(sensors, q, m)
+    assert np.isnan(B[2, 3, 1]).all() and np.isfinite(np.delete(B[2, 3], 1, axis=0)).all()
+    assert np.isfinite(np.delete(B.reshape(-1, 3, 3), 2 * 7 + 3, axis=0)).all()
