@@ -29,28 +29,33 @@ REPEATS = 3
 """Each rate is the best of this many timed runs (the machine is shared; the best run is the least disturbed)."""
 
 
-def single_rate(env, steps, action):
+def best_rate(reset, run, frames):
+    """Best frames per second of ``REPEATS`` timed calls of ``run()``, each after ``reset()``."""
     best = 0.0
     for _ in range(REPEATS):
-        env.reset(seed=0)
+        reset()
         t0 = time.perf_counter()
+        run()
+        best = max(best, frames / (time.perf_counter() - t0))
+    return best
+
+
+def single_rate(env, steps, action):
+    def run():
         for _ in range(steps):
             _, _, term, trunc, _ = env.step(action)
             if term or trunc:
                 env.reset()
-        best = max(best, steps / (time.perf_counter() - t0))
-    return best
+
+    return best_rate(lambda: env.reset(seed=0), run, steps)
 
 
 def vector_rate(envs, steps, actions):
-    best = 0.0
-    for _ in range(REPEATS):
-        envs.reset(seed=0)
-        t0 = time.perf_counter()
+    def run():
         for _ in range(steps):
             envs.step(actions)
-        best = max(best, steps * envs.num_envs / (time.perf_counter() - t0))
-    return best
+
+    return best_rate(lambda: envs.reset(seed=0), run, steps * envs.num_envs)
 
 
 def main(argv=None):

@@ -159,7 +159,7 @@ class FieldModel:
             v = x[..., 2:4]
             speed = np.sqrt(np.sum(v * v, axis=-1, keepdims=True))
             vhat = v / np.where(speed > 0, speed, 1.0)
-            p = x[..., d["z"] + 1, None] if dipole_scale == 1.0 else x[..., d["z"] + 1, None] * dipole_scale
+            p = x[..., d["z"] + 1, None] * dipole_scale
             dipole = np.concatenate([p * vhat, np.zeros(x.shape[:-1] + (1,))], axis=-1)
         return q, moment, dipole
 
