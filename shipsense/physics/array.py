@@ -46,6 +46,14 @@ def as_slice(idx):
     return idx
 
 
+def _block(a, batch):
+    """Per-sensor readings (..., S, w) as one flat block (*batch, S * w), broadcast to the batch if needed."""
+    shape = batch + (a.shape[-2] * a.shape[-1],)
+    if a.shape[:-2] != batch:
+        return np.broadcast_to(a, batch + a.shape[-2:]).reshape(shape)
+    return a.reshape(shape)
+
+
 @dataclass(frozen=True, eq=False)
 class SensorArray:
     """Positions, types and measurement kinds of an array of seabed sensors.
@@ -103,14 +111,19 @@ class SensorArray:
         mag_code = np.array([_SCALAR_KIND_CODE.get(self.kinds[i], 0) for i in groups["magnetometer"]], dtype=int)
         env = np.array([self.kinds[i] == "envelope" for i in groups["electrode"]], dtype=bool)
         identity = np.allclose(self.orientations, np.eye(3), rtol=0, atol=0)
+        # measure() stacks the sensor types' blocks (magnetometers and electrodes 3 slots per sensor, bearings 1)
+        block = {"magnetometer": 0, "electrode": 3 * groups["magnetometer"].size,
+                 "accelerometer": 3 * (groups["magnetometer"].size + groups["electrode"].size)}
+        width = {"magnetometer": 3, "electrode": 3, "accelerometer": 1}
+        group_gather = [block[self.types[g // 3]] + width[self.types[g // 3]] * int(np.flatnonzero(
+            groups[self.types[g // 3]] == g // 3)[0]) + g % 3 for g in gather]
         object.__setattr__(self, "_index", {
-            "gather": np.array(gather, dtype=int), "gather_identity": list(gather) == list(range(3 * len(self.ids))),
+            "gather": np.array(gather, dtype=int),
             "channels": tuple(channels), "groups": groups,
             "mag_code": mag_code, "envelope": env, "identity": identity,
             "mag_vector_only": bool(mag_code.size) and not mag_code.any(),
-            # the same indices as slices where they are consecutive (views instead of gathers)
-            "group_sel": {t: as_slice(g) for t, g in groups.items()},
-            "gather_sel": as_slice(np.array(gather, dtype=int)),
+            "group_gather": None if group_gather == list(range(block["accelerometer"] + groups["accelerometer"].size))
+            else as_slice(np.array(group_gather, dtype=int)),
         })
 
     @property
@@ -170,39 +183,34 @@ class SensorArray:
         groups = self._index["groups"]
         batch = np.broadcast_shapes(sources.shape[:-1],
                                     *(np.shape(a)[:-1] for a in (moments, dipoles) if a is not None))
+        parts = []   # per sensor type, (..., channels of that type's block) in group order
         idx = groups["magnetometer"]
-        if idx.size and moments is None:
-            raise ValueError("this array has magnetometers: moments are required")
-        if idx.size and self._index["mag_vector_only"] and len(idx) == len(self.ids):
-            # the hot path inside the filters: vector magnetometers only, no slot table
-            B = dipole_field_at(self.positions, sources, moments)
-            vec = B if self._index["identity"] else np.einsum("sji,...sj->...si", self.orientations, B)
-            vec = vec.reshape(batch + (3 * len(self.ids),))
-            return vec if self._index["gather_identity"] else vec[..., self._index["gather"]]
-        slots = np.zeros(batch + (len(self.ids), 3), dtype=dtype)
-        sel = self._index["group_sel"]
         if idx.size:
+            if moments is None:
+                raise ValueError("this array has magnetometers: moments are required")
             B = dipole_field_at(self.positions[idx], sources, moments)
             vec = B if self._index["identity"] else np.einsum("sji,...sj->...si", self.orientations[idx], B)
-            if self._index["mag_vector_only"]:
-                slots[..., sel["magnetometer"], :] = vec
-            else:
+            if not self._index["mag_vector_only"]:
                 code = self._index["mag_code"]
                 scalar = np.sqrt(np.sum(B * B, axis=-1))
                 if np.any(code == 2):
                     scalar = np.where(code == 2, B @ self.earth_direction, scalar)
-                slots[..., sel["magnetometer"], :] = np.where((code == 0)[:, None], vec,
-                                              np.stack([scalar, 0 * scalar, 0 * scalar], axis=-1))
+                vec = np.where((code == 0)[:, None], vec, np.stack([scalar, 0 * scalar, 0 * scalar], axis=-1))
+            parts.append(_block(vec, batch))
         idx = groups["electrode"]
         if idx.size:
             if dipoles is None:
                 raise ValueError("this array has electrodes: dipoles are required")
             E = self.electric_field(sources, dipoles)
-            slots[..., sel["electrode"], :] = np.where(self._index["envelope"][:, None], np.abs(E), E)
+            parts.append(_block(np.where(self._index["envelope"][:, None], np.abs(E), E), batch))
         idx = groups["accelerometer"]
         if idx.size:
-            slots[..., sel["accelerometer"], 0] = bearing(self.positions[idx], sources[..., None, :])
-        return slots.reshape(batch + (3 * len(self.ids),))[..., self._index["gather_sel"]]
+            parts.append(_block(bearing(self.positions[idx], sources[..., None, :])[..., None], batch))
+        if not parts:
+            return np.zeros(batch + (0,), dtype=dtype)
+        flat = parts[0] if len(parts) == 1 else np.concatenate(parts, axis=-1)
+        g = self._index["group_gather"]
+        return flat if g is None else flat[..., g]
 
     def measure_jacobian(self, sources, moments=None, dipoles=None):
         """Measurements and their derivatives with respect to the source's position and moments.

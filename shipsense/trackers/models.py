@@ -100,6 +100,8 @@ class FieldModel:
     m = property(lambda self: self.array.n_channels, doc="Measurement dimension.")
     A = property(lambda self: self._d["A"], doc="Transition matrix (n, n).")
     axial = property(lambda self: self._d["axial"], doc="Boolean (m,): bearing channels.")
+    axial_cols = property(lambda self: self._d["axial_cols"],
+                          doc="The bearing channels as a slice or indices (None if there are none).")
     x_scale = property(lambda self: self._d["x_scale"], doc="SI value of one internal unit per state component.")
     y_scale = property(lambda self: self._d["y_scale"], doc="SI value of one internal unit per channel.")
 
@@ -216,6 +218,7 @@ class LinearModel:
     n = property(lambda self: self.A.shape[0])
     m = property(lambda self: self.C.shape[0])
     axial = property(lambda self: np.zeros(self.C.shape[0], dtype=bool))
+    axial_cols = None
 
     def h(self, x):
         return np.asarray(x) @ self.C.T

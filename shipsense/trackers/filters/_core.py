@@ -9,6 +9,7 @@ the batch is unaffected).
 
 from __future__ import annotations
 
+import math
 from functools import lru_cache
 from typing import NamedTuple
 
@@ -250,6 +251,16 @@ def prepare(y, model, mask):
     return y, present, R
 
 
+def add_noise(M, R):
+    """``M + diag(R)`` for M (..., m, m) and variances R (..., m); M is consumed (its diagonal is updated in
+    place when it has R's batch shape and owns its memory)."""
+    m = M.shape[-1]
+    if M.shape[:-1] != R.shape or not (M.flags.c_contiguous and M.flags.owndata and M.flags.writeable):
+        return M + R[..., :, None] * np.eye(m)
+    M.reshape(M.shape[:-2] + (m * m,))[..., ::m + 1] += R
+    return M
+
+
 def gain_update(belief: Belief, eps, Pxy, S, present, P=None):
     """Kalman update from an innovation ``eps`` (..., m), cross-covariance ``Pxy`` (..., n, m) and ``S``.
 
@@ -271,7 +282,7 @@ def gain_update(belief: Belief, eps, Pxy, S, present, P=None):
         PyxT = np.broadcast_to(PyxT, batch + PyxT.shape[-2:])
         eps = np.broadcast_to(eps, batch + eps.shape[-1:])
     rhs = np.concatenate([PyxT, eps[..., None]], axis=-1)
-    if int(np.prod(batch)) <= _LAPACK_SOLVE_MAX_BATCH and ok_s.all():
+    if math.prod(batch) <= _LAPACK_SOLVE_MAX_BATCH and ok_s.all():
         X = np.linalg.solve(S if S.shape[:-2] == batch else np.broadcast_to(S, batch + S.shape[-2:]), rhs)
         mean = belief.mean + np.einsum("...mn,...m->...n", X[..., :n], eps)
         P = P - transposed(X[..., :n]) @ rhs[..., :n]

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from shipsense.trackers.filters._core import Belief, gain_update, prepare, transposed
+from shipsense.trackers.filters._core import Belief, add_noise, gain_update, prepare, transposed
 from shipsense.trackers.filters.ukf import sigma_points
 
 H_STIRLING = float(np.sqrt(3.0))
@@ -41,5 +41,5 @@ def update(belief: Belief, y, model, mask=None, h=H_STIRLING):
     """CDKF measurement update; returns ``(belief, innovation)``."""
     y, present, R = prepare(y, model, mask)
     eps, Pxy, Y1, Y2 = difference_terms(belief, y, model, present, h)
-    S = transposed(Y1) @ Y1 + transposed(Y2) @ Y2 + R[..., :, None] * np.eye(R.shape[-1])
+    S = add_noise(transposed(Y1) @ Y1 + transposed(Y2) @ Y2, R)
     return gain_update(belief, eps, Pxy, S, present)

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from shipsense.trackers.filters._core import Belief, gain_update, prepare
+from shipsense.trackers.filters._core import Belief, add_noise, gain_update, prepare
 from shipsense.trackers.filters.ukf import sigma_statistics
 
 
@@ -18,4 +18,4 @@ def update(belief: Belief, y, model, mask=None):
     n = belief.mean.shape[-1]
     W = np.full(2 * n, 0.5 / n)
     eps, Pxy, Pyy = sigma_statistics(belief, y, model, present, np.sqrt(n), W, W, center=False)
-    return gain_update(belief, eps, Pxy, Pyy + R[..., :, None] * np.eye(R.shape[-1]), present)
+    return gain_update(belief, eps, Pxy, add_noise(Pyy, R), present)

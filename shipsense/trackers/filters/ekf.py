@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from shipsense.trackers.filters._core import Belief, gain_update, prepare, transposed
+from shipsense.trackers.filters._core import Belief, add_noise, gain_update, prepare, transposed
 
 
 def linearised_terms(belief: Belief, y, model, present):
@@ -27,5 +27,5 @@ def update(belief: Belief, y, model, mask=None):
     """EKF measurement update; returns ``(belief, innovation)``."""
     y, present, R = prepare(y, model, mask)
     eps, H, P, Pxy = linearised_terms(belief, y, model, present)
-    S = H @ Pxy + R[..., :, None] * np.eye(R.shape[-1])
+    S = add_noise(H @ Pxy, R)
     return gain_update(belief, eps, Pxy, S, present, P)

@@ -12,13 +12,17 @@ update is the Kalman filter's.
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
-from shipsense.trackers.filters._core import Belief, gain_update, prepare, transposed
+from shipsense.physics.seismic import wrap_axial
+from shipsense.trackers.filters._core import Belief, add_noise, gain_update, prepare, transposed
 
 
+@lru_cache(maxsize=32)
 def merwe_weights(n, alpha=1.0, beta=2.0, kappa=0.0):
-    """Spread ``sqrt(n + lambda)`` and weights ``(Wm, Wc)`` of the scaled unscented transform."""
+    """Spread ``sqrt(n + lambda)`` and weights ``(Wm, Wc)`` (read-only) of the scaled unscented transform."""
     lam = alpha**2 * (n + kappa) - n
     if n + lam <= 0:
         raise ValueError(f"alpha^2 (n + kappa) must be > 0, got alpha={alpha}, kappa={kappa}, n={n}")
@@ -26,7 +30,8 @@ def merwe_weights(n, alpha=1.0, beta=2.0, kappa=0.0):
     Wm[0] = lam / (n + lam)
     Wc = Wm.copy()
     Wc[0] += 1.0 - alpha**2 + beta
-    return np.sqrt(n + lam), Wm, Wc
+    Wm.flags.writeable = Wc.flags.writeable = False
+    return float(np.sqrt(n + lam)), Wm, Wc
 
 
 def sigma_points(x, chol, spread, center=True):
@@ -60,18 +65,19 @@ def sigma_statistics(belief: Belief, y, model, present, spread, Wm, Wc, center=T
     """
     n = belief.mean.shape[-1]
     c = int(center)
-    if not np.all(Wc[c:] == Wc[c]):
+    if Wc[c:].min() != Wc[c:].max():
         raise ValueError("sigma_statistics needs equal weights on the off-centre points")
     Y = model.h(sigma_points(belief.mean, belief.chol, spread, center))     # (..., N, m)
-    if model.axial.any():  # average angles as residuals about the first point's prediction
-        ref = Y[..., :1, :]
-        yhat = ref[..., 0, :] + (Wm @ model.residual(Y, ref))
-        dY = model.residual(Y, yhat[..., None, :])
-    else:
-        yhat = Wm @ Y
-        N, m = Y.shape[-2:]
-        # flat (..., N*m) rows: contiguous inner loops instead of rows of length m
-        dY = (Y.reshape(Y.shape[:-2] + (N * m,)) - np.tile(yhat, N)).reshape(Y.shape)
+    N, m = Y.shape[-2:]
+    yhat = Wm @ Y
+    cols = model.axial_cols
+    if cols is not None:   # average angles as residuals about the first point's prediction
+        Ya = Y[..., cols]
+        yhat[..., cols] = Ya[..., 0, :] + Wm @ wrap_axial(Ya - Ya[..., :1, :])
+    # flat (..., N*m) rows: contiguous inner loops instead of rows of length m
+    dY = (Y.reshape(Y.shape[:-2] + (N * m,)) - np.tile(yhat, N)).reshape(Y.shape)
+    if cols is not None:
+        dY[..., cols] = wrap_axial(dY[..., cols])
     if not present.all():
         dY = dY * present[..., None, :]
     WdY = (dY.reshape(dY.shape[:-2] + (dY.shape[-2] * dY.shape[-1],)) * np.repeat(Wc, dY.shape[-1])).reshape(dY.shape)
@@ -88,4 +94,4 @@ def update(belief: Belief, y, model, mask=None, alpha=1.0, beta=2.0, kappa=0.0):
     y, present, R = prepare(y, model, mask)
     spread, Wm, Wc = merwe_weights(belief.mean.shape[-1], alpha, beta, kappa)
     eps, Pxy, Pyy = sigma_statistics(belief, y, model, present, spread, Wm, Wc)
-    return gain_update(belief, eps, Pxy, Pyy + R[..., :, None] * np.eye(R.shape[-1]), present)
+    return gain_update(belief, eps, Pxy, add_noise(Pyy, R), present)
