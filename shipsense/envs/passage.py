@@ -103,6 +103,9 @@ class PassageCore:
         self.obs_dim = 7 + self.H + self.S
         self.y = np.zeros((self.E, self.K, self.model.m))
         self.truth = np.zeros((self.E, self.K, self.model.n))
+        self._snr_obs = np.zeros((self.E, self.K, self.S))
+        self._env_index = np.arange(self.E)
+        self._row_base = self._env_index * self.H
         self.k = np.zeros(self.E, dtype=int)
         self.last_read = np.zeros((self.E, self.S), dtype=bool)
         self.bank = None
@@ -129,6 +132,7 @@ class PassageCore:
                 sim = simulate(self.scenario, runs=PASSAGE_BLOCK, seed=int(s), random=True)
                 queue.extend(zip(sim.measurements, self.model.state_from_truth(sim.truth)))
             self.y[e], self.truth[e] = queue.pop(0)
+            self._snr_obs[e] = self._snr_feature(self.y[e])
             x0, P0 = seed_hypotheses(self.model, self.y[e][None, 0], self.bank_cfg)
             seeds_.append(x0[0])
         seeds_ = np.array(seeds_)
@@ -141,6 +145,11 @@ class PassageCore:
         self.last_read[envs] = True
         return self._observe()[envs]
 
+    def _snr_feature(self, y):
+        """``log10(1 + SNR) / 5`` of every sensor's strongest channel, per sample (K, S)."""
+        snr = np.abs(np.where(np.isfinite(y), y, 0.0)) / self.std
+        return np.log10(1.0 + np.maximum.reduceat(snr, self.first_channel, axis=1)) / 5.0
+
     def step(self, actions, envs=None):
         """Advance environments ``envs`` (default all) by one sample with actions (E, S).
 
@@ -148,25 +157,32 @@ class PassageCore:
         entries of environments that did not step are meaningless.
         """
         want = np.asarray(actions).astype(bool).reshape(self.E, self.S)
-        order = np.cumsum(want, axis=1)
-        read = want & (order <= self.max_reads)                     # the trimming rule: first max_reads in order
-        trimmed = want.sum(axis=1) - read.sum(axis=1)
-        envs = np.arange(self.E) if envs is None else np.asarray(envs, dtype=int)
-        self.k[envs] += 1
-        y = self.y[np.arange(self.E), self.k]
+        if self.max_reads < self.S:
+            read = want & (np.cumsum(want, axis=1) <= self.max_reads)  # the trimming rule: first max_reads in order
+            trimmed = want.sum(axis=1) - read.sum(axis=1)
+        else:
+            read, trimmed = want, np.zeros(self.E, dtype=int)
+        if envs is None:
+            self.k += 1
+        else:
+            self.k[np.asarray(envs, dtype=int)] += 1
+        y = self.y[self._env_index, self.k]
         mask = read[:, self.sensor_of]
-        self.bank.step(y, mask, runs=None if len(envs) == self.E else envs)
-        self.last_read[envs] = read[envs]
+        self.bank.step(y, mask, runs=None if envs is None or len(envs) == self.E else envs)
+        if envs is None:
+            self.last_read[:] = read
+        else:
+            self.last_read[envs] = read[envs]
         return self._rewards(read, trimmed)
 
     def _selected(self):
         sel = self.bank.selected()
-        rows = np.arange(self.E) * self.H + sel
+        rows = self._row_base + sel
         return sel, self.bank.means(rows), self.bank.position_cov(rows)
 
     def _rewards(self, read, trimmed):
         self._cache = sel, est, cov = self._selected()
-        truth = self.truth[np.arange(self.E), self.k]
+        truth = self.truth[self._env_index, self.k]
         d = est[:, :2] - truth[:, :2]
         error = np.hypot(d[:, 0], d[:, 1])
         a, b, c = cov[:, 0, 0], cov[:, 0, 1], cov[:, 1, 1]     # 2 x 2 inverse in closed form
@@ -182,20 +198,28 @@ class PassageCore:
     def _observe(self):
         cached, self._cache = getattr(self, "_cache", None), None
         sel, est, cov = cached if cached is not None else self._selected()
-        obs = np.zeros((self.E, self.obs_dim))
-        obs[:, 0:2] = (est[:, :2] - self.centre) / self.position_scale
-        obs[:, 2:4] = est[:, 2:4] / 10.0
-        obs[:, 4:6] = np.log10(np.sqrt(np.maximum(np.diagonal(cov, axis1=-2, axis2=-1), 1e-12))) / 3.0
-        norm = self.bank.cum - self.bank.cum.max(axis=1, keepdims=True)
-        obs[:, 6:6 + self.H] = np.clip(np.where(np.isfinite(norm), norm / 50.0, -1.0), -1.0, 0.0)
-        y = self.y[np.arange(self.E), self.k]
-        snr = np.abs(np.where(np.isfinite(y), y, 0.0)) / self.std
-        per_sensor = np.maximum.reduceat(snr, self.first_channel, axis=1)
-        obs[:, 6 + self.H:6 + self.H + self.S] = np.where(self.last_read, np.log10(1.0 + per_sensor) / 5.0, 0.0)
-        obs[:, -1] = self.k / max(self.K - 1, 1)
-        if not np.isfinite(obs).all():
+        obs = np.empty((self.E, self.obs_dim))
+        obs[:, 0:2] = est[:, :2]
+        obs[:, 0:2] -= self.centre
+        obs[:, 0:2] /= self.position_scale
+        np.multiply(est[:, 2:4], 0.1, out=obs[:, 2:4])
+        var = obs[:, 4:6]
+        var[:, 0], var[:, 1] = cov[:, 0, 0], cov[:, 1, 1]
+        np.log10(np.maximum(var, 1e-12, out=var), out=var)
+        var /= 6.0                                                   # log10(std) / 3
+        cum = self.bank.cum
+        np.subtract(cum, cum.max(axis=1, keepdims=True), out=obs[:, 6:6 + self.H])
+        obs[:, 6:6 + self.H] /= 50.0
+        np.multiply(self._snr_obs[self._env_index, self.k], self.last_read, out=obs[:, 6 + self.H:-1])
+        obs[:, -1] = self.k
+        obs[:, -1] /= max(self.K - 1, 1)
+        np.clip(obs, -1.0, 1.0, out=obs)
+        obs = obs.astype(np.float32)
+        if not np.isfinite(obs.sum()):   # rare: a run with no finite likelihood gets -1 there, other NaN 0
+            ll = obs[:, 6:6 + self.H]
+            ll[np.isnan(ll)] = -1.0
             obs = np.nan_to_num(obs)
-        return np.clip(obs, -1.0, 1.0).astype(np.float32)
+        return obs
 
     def render(self, e=0):
         """RGB picture of environment ``e``: array, truth, hypotheses and the selected estimate."""
@@ -313,7 +337,7 @@ class PassageVectorEnv(VectorEnv):
             self.core.reset_envs(idx, [int(self._rngs[i].integers(SEED_HIGH)) for i in idx])
         live = np.flatnonzero(~done)
         # environments that just reset do not step; the others advance together
-        rewards, terminated, info = self.core.step(actions, envs=live)
+        rewards, terminated, info = self.core.step(actions, envs=live if done.any() else None)
         rewards = np.where(done, 0.0, rewards)
         terminated = np.where(done, False, terminated)
         obs = self.core._observe()

@@ -143,7 +143,7 @@ def _project(belief, model):
     state-constrained Kalman filter (Simon 2010, IET Control Theory Appl. 4(8)).
     """
     bounds = getattr(model, "state_bounds", None)
-    if bounds is None or not (np.isfinite(bounds[0]).any() or np.isfinite(bounds[1]).any()):
+    if bounds is None:
         return belief
     clipped = np.clip(belief.mean, *bounds)
     if np.array_equal(clipped, belief.mean):
@@ -230,7 +230,10 @@ class BankState:
             for arr, part in zip(self.belief, new):
                 arr[rows] = part
             self.belief = Belief(*self.belief)   # written in place: drop a filter's covariance cache
-        self.cum[run, hyp] += inn.loglik
+        if rows is None and len(self.idx) == self.R * self.H:
+            self.cum += inn.loglik.reshape(self.R, self.H)
+        else:
+            self.cum[run, hyp] += inn.loglik
         self.steps += 1
         return inn
 

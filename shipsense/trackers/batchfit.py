@@ -34,7 +34,7 @@ def fit_passages(model, y, theta_init, steps, stride=1, iterations=40, return_in
     """
     Ak = powers(model.A, steps)[::stride]
     w = 1.0 / np.sqrt(model.R)
-    lo, hi = getattr(model, "state_bounds", (None, None))
+    lo, hi = getattr(model, "state_bounds", None) or (None, None)
     theta = np.array(theta_init, dtype=float)
     if lo is not None:
         theta = np.clip(theta, lo, hi)

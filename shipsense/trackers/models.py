@@ -112,13 +112,15 @@ class FieldModel:
         The source depth lies in the water (``-water_depth < z < 0``, with
         :data:`DEPTH_MARGIN` from the surface and the seabed) and the keel
         dipole ``p`` is non-negative (the envelope cannot see its sign).
+        ``None`` for a state with no bounded component (no electrodes).
         """
-        lo, hi = np.full(self.n, -np.inf), np.full(self.n, np.inf)
         d = self._d
-        if d["z"] is not None:
-            lo[d["z"]] = -self.array.medium.water_depth + DEPTH_MARGIN
-            hi[d["z"]] = -DEPTH_MARGIN
-            lo[d["z"] + 1] = 0.0
+        if d["z"] is None:
+            return None
+        lo, hi = np.full(self.n, -np.inf), np.full(self.n, np.inf)
+        lo[d["z"]] = -self.array.medium.water_depth + DEPTH_MARGIN
+        hi[d["z"]] = -DEPTH_MARGIN
+        lo[d["z"] + 1] = 0.0
         return lo, hi
 
     def state_from_truth(self, truth):

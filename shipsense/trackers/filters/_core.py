@@ -113,7 +113,8 @@ def safe_cholesky(P):
     else:
         try:
             L = np.linalg.cholesky(P)  # raises on an indefinite element; NaN propagates to the diagonal
-            if np.isfinite(np.diagonal(L, axis1=-2, axis2=-1)).all():
+            n = L.shape[-1]
+            if math.isfinite(L.reshape(-1, n * n)[:, ::n + 1].sum()):   # the diagonals' sum: finite iff all are
                 return L, np.ones(L.shape[:-2], dtype=bool)
         except np.linalg.LinAlgError:
             pass
@@ -171,7 +172,7 @@ def predict(belief: Belief, model, square_root: bool = False) -> Belief:
     is formed and factorised (cheaper for small states).
     """
     A = model.A
-    mean = _transition(A, belief.mean[..., None])[..., 0]
+    mean = belief.mean @ A.T
     cached = getattr(belief, "_cov", None)
     if cached is not None and not square_root:   # A P A^T + Q from the covariance the update formed
         P = _transition(A, cached, both_sides=True)
@@ -276,7 +277,9 @@ def gain_update(belief: Belief, eps, Pxy, S, present, P=None):
     if P is None:
         P = belief.cov
     n = Pxy.shape[-2]
-    batch = np.broadcast_shapes(S.shape[:-2], Pxy.shape[:-2], eps.shape[:-1])
+    batch = S.shape[:-2]
+    if Pxy.shape[:-2] != batch or eps.shape[:-1] != batch:
+        batch = np.broadcast_shapes(batch, Pxy.shape[:-2], eps.shape[:-1])
     PyxT = np.swapaxes(Pxy, -1, -2)
     if PyxT.shape[:-2] != batch or eps.shape[:-1] != batch:
         PyxT = np.broadcast_to(PyxT, batch + PyxT.shape[-2:])
