@@ -121,6 +121,7 @@ class SensorArray:
             "gather": np.array(gather, dtype=int),
             "channels": tuple(channels), "groups": groups,
             "mag_code": mag_code, "envelope": env, "identity": identity,
+            "positions": {t: pos[g] for t, g in groups.items()},
             "mag_vector_only": bool(mag_code.size) and not mag_code.any(),
             "group_gather": None if group_gather == list(range(block["accelerometer"] + groups["accelerometer"].size))
             else as_slice(np.array(group_gather, dtype=int)),
@@ -178,8 +179,10 @@ class SensorArray:
             Stacked channels in :attr:`channels` order, SI units.
         """
         # complex inputs pass through the magnetic and bearing paths (complex-step derivatives)
-        dtype = np.result_type(np.asarray(sources), *(np.asarray(a) for a in (moments,) if a is not None), float)
-        sources = np.asarray(sources, dtype=dtype)
+        sources = np.asarray(sources)
+        moments = None if moments is None else np.asarray(moments)
+        dtype = np.result_type(sources, float) if moments is None else np.result_type(sources, moments, float)
+        sources = sources.astype(dtype, copy=False)
         groups = self._index["groups"]
         batch = np.broadcast_shapes(sources.shape[:-1],
                                     *(np.shape(a)[:-1] for a in (moments, dipoles) if a is not None))
@@ -188,7 +191,7 @@ class SensorArray:
         if idx.size:
             if moments is None:
                 raise ValueError("this array has magnetometers: moments are required")
-            B = dipole_field_at(self.positions[idx], sources, moments)
+            B = dipole_field_at(self._index["positions"]["magnetometer"], sources, moments)
             vec = B if self._index["identity"] else np.einsum("sji,...sj->...si", self.orientations[idx], B)
             if not self._index["mag_vector_only"]:
                 code = self._index["mag_code"]
@@ -205,7 +208,8 @@ class SensorArray:
             parts.append(_block(np.where(self._index["envelope"][:, None], np.abs(E), E), batch))
         idx = groups["accelerometer"]
         if idx.size:
-            parts.append(_block(bearing(self.positions[idx], sources[..., None, :])[..., None], batch))
+            parts.append(_block(bearing(self._index["positions"]["accelerometer"], sources[..., None, :])[..., None],
+                                batch))
         if not parts:
             return np.zeros(batch + (0,), dtype=dtype)
         flat = parts[0] if len(parts) == 1 else np.concatenate(parts, axis=-1)

@@ -148,6 +148,8 @@ def _project(belief, model):
     clipped = np.clip(belief.mean, *bounds)
     if np.array_equal(clipped, belief.mean):
         return belief
+    if hasattr(belief, "with_mean"):   # keeps a filter's covariance cache (and a pending factor pending)
+        return belief.with_mean(clipped)
     return Belief(clipped, belief.chol, belief.ok)
 
 
@@ -179,12 +181,17 @@ class BankState:
         self.steps = 0
 
     @property
-    def run_of(self):
-        return self.idx // self.H
+    def idx(self):
+        """Flat indices (run * H + hypothesis) of the active (not pruned) elements."""
+        return self._idx
 
-    @property
-    def hyp_of(self):
-        return self.idx % self.H
+    @idx.setter
+    def idx(self, value):
+        self._idx = value
+        self._run_of, self._hyp_of = value // self.H, value % self.H
+
+    run_of = property(lambda self: self._run_of, doc="Run of every active element (read-only use).")
+    hyp_of = property(lambda self: self._hyp_of, doc="Hypothesis of every active element (read-only use).")
 
     def reset_runs(self, runs, seeds, P0):
         """Re-seed the hypotheses of some runs (all elements must be active)."""
@@ -260,8 +267,13 @@ class BankState:
 
     def position_cov(self, rows=None):
         """Posterior position covariances of the active elements (or rows ``rows``), SI (len(idx), 2, 2)."""
+        xs = self.model.x_scale[:2]
+        cached = getattr(self.belief, "_cov", None)   # a filter's covariance: no factor needed
+        if cached is not None:
+            P = cached[:, :2, :2] if rows is None else cached[rows, :2, :2]
+            return P * (xs[:, None] * xs)
         chol = self.belief.chol if rows is None else self.belief.chol[rows]
-        L = chol[:, :2, :] * self.model.x_scale[:2, None]
+        L = chol[:, :2, :] * xs[:, None]
         return L @ np.swapaxes(L, -1, -2)
 
     def selected(self):

@@ -51,3 +51,33 @@ def test_predict_from_a_cached_covariance_equals_predict_from_the_factor():
     a, b = predict(first, model), predict(plain, model)
     np.testing.assert_allclose(a.mean, b.mean, rtol=1e-14)
     np.testing.assert_allclose(a.cov, b.cov, rtol=1e-10, atol=1e-12)
+
+
+def test_a_posterior_is_factorised_on_first_use_like_an_eager_one():
+    """The update's covariance is factorised only when needed; every way of reading the belief sees the factor."""
+    import pickle
+
+    from shipsense.trackers.filters import get_filter
+    from shipsense.trackers.filters._core import _Posterior
+
+    rng = np.random.default_rng(4)
+    model = LinearModel(cv_transition(0.5, 3), 0.1 * np.eye(7), rng.standard_normal((3, 7)), np.ones(3))
+    prior = predict(Belief.from_cov(rng.standard_normal((40, 7)), spd(rng, 40, 7)), model)
+    post, _ = get_filter("ukf").update(prior, rng.standard_normal((40, 3)), model)
+    assert tuple.__getitem__(post, 1) is None                       # nothing factorised yet
+    nxt = predict(post, model)                                      # the time update does not need the factor
+    assert tuple.__getitem__(post, 1) is None
+    L, ok = safe_cholesky(post.cov)
+    np.testing.assert_array_equal(post.chol, L)
+    assert post.ok.all() and ok.all()
+    mean, chol, flag = post                                         # unpacking, indexing and pickling see it too
+    assert chol is post.chol and post[1] is post.chol and flag is post.ok
+    again = pickle.loads(pickle.dumps(post))
+    np.testing.assert_array_equal(again.chol, L)
+    np.testing.assert_array_equal(Belief(*again).mean, mean)
+    np.testing.assert_allclose(predict(Belief(*post), model).cov, nxt.cov, rtol=1e-10, atol=1e-12)
+    # an indefinite posterior covariance is flagged (and repaired) when the factor is read
+    cov = post.cov.copy()
+    cov[3] = -np.eye(7)
+    bad = _Posterior.pending(post.mean, np.ones(40, bool), cov)
+    assert np.flatnonzero(~bad.ok).tolist() == [3] and np.isfinite(bad.chol).all()

@@ -60,6 +60,63 @@ class _BeliefWithCov(Belief):
         out._cov = cov
         return out
 
+    def with_mean(self, mean):
+        """The same covariance (and its cache) with another mean."""
+        return type(self).with_cov(mean, self.chol, self.ok, self._cov)
+
+
+class _Posterior(_BeliefWithCov):
+    """A belief after a gain update, whose factor is computed from its covariance on first use.
+
+    The next time update forms ``A P A^T + Q`` from the covariance and
+    factorises that, so a filter that only steps never needs this factor
+    (one of the three Cholesky factorisations of a UKF step).  Reading
+    ``chol`` or ``ok``, iterating, indexing or pickling factorises (once); an
+    element whose covariance is then found not positive definite is flagged
+    and repaired as by :func:`safe_cholesky` (its mean keeps the update, whose
+    gain came from a valid innovation covariance).
+    """
+
+    @classmethod
+    def pending(cls, mean, ok, cov):
+        out = tuple.__new__(cls, (mean, None, ok))
+        out._cov = cov
+        return out
+
+    def _factor(self):
+        f = self.__dict__.get("_f")
+        if f is None:
+            chol, health = tuple.__getitem__(self, 1), tuple.__getitem__(self, 2)
+            if chol is None:
+                L, ok = safe_cholesky(self._cov)
+                f = (L, health & ok)
+            else:   # built from three fields (e.g. unpickled)
+                f = (chol, health)
+            self._f = f
+        return f
+
+    chol = property(lambda self: self._factor()[0])
+    ok = property(lambda self: self._factor()[1])
+
+    def __iter__(self):
+        return iter((self.mean, self.chol, self.ok))
+
+    def __getitem__(self, i):
+        return tuple(self)[i]
+
+    def __getnewargs__(self):
+        return tuple(self)
+
+    def with_mean(self, mean):
+        if "_f" in self.__dict__:
+            return _BeliefWithCov.with_cov(mean, self.chol, self.ok, self._cov)
+        return _Posterior.pending(mean, tuple.__getitem__(self, 2), self._cov)
+
+
+def prior_health(belief):
+    """The health flag a belief carries without factorising a pending posterior (see :class:`_Posterior`)."""
+    return tuple.__getitem__(belief, 2)
+
 
 class Innovation(NamedTuple):
     """What an update saw: innovation ``eps`` (..., m), its covariance ``S`` (..., m, m),
@@ -178,9 +235,10 @@ def predict(belief: Belief, model, square_root: bool = False) -> Belief:
         P = _transition(A, cached, both_sides=True)
         P += model.Q
         chol, ok = safe_cholesky(P)
+        health = prior_health(belief)
         if ok.all():
-            return _BeliefWithCov.with_cov(mean, chol, belief.ok, P)
-        return Belief(mean, chol, belief.ok & ok)
+            return _BeliefWithCov.with_cov(mean, chol, health, P)
+        return Belief(mean, chol, health & ok)
     AL = _transition(A, belief.chol)
     if square_root:
         sq = _sqrt_psd(model.Q)
@@ -266,7 +324,8 @@ def gain_update(belief: Belief, eps, Pxy, S, present, P=None):
     """Kalman update from an innovation ``eps`` (..., m), cross-covariance ``Pxy`` (..., n, m) and ``S``.
 
     ``x+ = x + K eps``, ``P+ = P - K S K^T`` with ``K = Pxy S^-1``; the new
-    covariance is factorised with :func:`safe_cholesky`.  With ``S = Ls Ls^T``
+    covariance is factorised with :func:`safe_cholesky` when its factor is
+    first needed (:class:`_Posterior`).  With ``S = Ls Ls^T``
     and ``[W | w] = Ls^-1 [Pxy^T | eps]`` (one forward substitution) this is
     ``x+ = x + W^T w``, ``P+ = P - W^T W`` and ``eps^T S^-1 eps = |w|^2``.
     Small batches solve with ``S`` by one LAPACK call instead (a Python loop
@@ -296,11 +355,11 @@ def gain_update(belief: Belief, eps, Pxy, S, present, P=None):
         mean = belief.mean + np.einsum("...mn,...m->...n", W, Z[..., n])
         P = P - transposed(W) @ np.ascontiguousarray(W)
         nis = np.sum(Z[..., n] ** 2, axis=-1)
+    inn = innovation(eps, S, Ls, present, nis)
+    if ok_s.all():   # the factor of P+ is computed when first needed (a time update does not need it)
+        return _Posterior.pending(mean, prior_health(belief), P), inn
     L, ok = safe_cholesky(P)
     ok = ok & ok_s
-    inn = innovation(eps, S, Ls, present, nis)
-    if ok.all():
-        return _BeliefWithCov.with_cov(mean, L, belief.ok, P), inn
     mean = np.where(ok[..., None], mean, np.nan_to_num(belief.mean))   # a failed element keeps its prior mean
     return Belief(mean, L, belief.ok & ok), inn
 
