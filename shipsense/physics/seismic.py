@@ -19,7 +19,8 @@ import numpy as np
 
 def wrap_axial(angle):
     """Wrap an axial angle (defined modulo pi) into [-pi/2, pi/2)."""
-    return np.remainder(np.asarray(angle) + 0.5 * np.pi, np.pi) - 0.5 * np.pi
+    a = np.asarray(angle)
+    return a - np.pi * np.floor((a + 0.5 * np.pi) / np.pi)
 
 
 def bearing(sensors, sources):
