@@ -108,14 +108,18 @@ def test_jacobian_matches_complex_step():
         np.testing.assert_allclose(dipole_field(s, q, m + 1j * e).imag / h, dm[..., j], rtol=1e-10, atol=1e-22)
 
 
-def test_sensor_major_kernel_equals_the_broadcast_kernel_and_flags_coincidence():
+@pytest.mark.parametrize("batch", [(5, 7), (40, 30)], ids=["rows", "components"])   # both sides of _ROWS_MAX
+def test_sensor_major_kernel_equals_the_broadcast_kernel_and_flags_coincidence(batch):
     rng = np.random.default_rng(4)
     sensors = rng.normal(size=(3, 3)) * 10
-    q = rng.normal(size=(5, 7, 3)) * 50
-    m = rng.normal(size=(5, 7, 3)) * 1e6
+    q = rng.normal(size=batch + (3,)) * 50
+    m = rng.normal(size=batch + (3,)) * 1e6
     np.testing.assert_allclose(dipole_field_at(sensors, q, m), dipole_field(sensors, q[..., None, :], m[..., None, :]),
                                rtol=1e-13, atol=0)
     q[2, 3] = sensors[1]                                   # a source on sensor 1
     B = dipole_field_at(sensors, q, m)
     assert np.isnan(B[2, 3, 1]).all() and np.isfinite(np.delete(B[2, 3], 1, axis=0)).all()
-    assert np.isfinite(np.delete(B.reshape(-1, 3, 3), 2 * 7 + 3, axis=0)).all()
+    assert np.isfinite(np.delete(B.reshape(-1, 3, 3), 2 * batch[1] + 3, axis=0)).all()
+    # a moment shared by the batch broadcasts like the broadcast kernel
+    np.testing.assert_allclose(dipole_field_at(sensors, q, m[0, 0]), dipole_field(sensors, q[..., None, :], m[0, 0]),
+                               rtol=1e-13, atol=0)
