@@ -297,6 +297,9 @@ class PassageVectorEnv(VectorEnv):
 
     Sub-environment ``i`` reset with ``seed`` behaves exactly like a single
     :class:`PassageEnv` reset with ``seed + i``.  Autoreset mode: next step.
+    With many environments a step makes temporaries of 0.1-1 MB; on glibc,
+    call :func:`shipsense.tune_allocator` once in the training process (about
+    25 % more steps per second at 64 environments; ``shipsense train`` does).
     """
 
     metadata = {"render_modes": ["rgb_array"], "autoreset_mode": AutoresetMode.NEXT_STEP}
