@@ -68,37 +68,55 @@ def crlb(J):
     return np.linalg.pinv(J, hermitian=True)
 
 
-def pcrlb(model, states, J0):
+def pcrlb(model, states, J0, *, per_run=False, Q=None):
     """Posterior CRLB information matrices over time (Tichavský et al. 1998).
 
     Parameters
     ----------
     model : model with ``A``, ``Q``, ``H``, ``R`` (internal units)
     states : ndarray, shape (R, K, n)
-        True state trajectories (internal units) over which the measurement
-        information is averaged.
+        True state trajectories (internal units).
     J0 : ndarray, shape (n, n)
         Prior information at step 0 (inverse of the initial covariance).
+    per_run : bool
+        False: the measurement information is averaged over the R
+        trajectories (one bound for the population, the Monte Carlo PCRLB).
+        True: one bound per trajectory, from its own information.  For a
+        population of different passages the mean of the per-passage bounds
+        is the tighter figure (the inverse of a mean information is at most
+        the mean of the inverses).
+    Q : ndarray, shape (n, n), optional
+        Process noise of the bound (default ``model.Q``); zero gives the CRLB
+        of a deterministic trajectory (computed in information form).
 
     Returns
     -------
-    bounds : ndarray, shape (K, n, n)
+    bounds : ndarray, shape (K, n, n), or (R, K, n, n) with ``per_run``
         The bound ``J_k^-1`` on the error covariance at every step (step 0
         includes the first measurement, as the filters' first update does).
     """
     states = np.asarray(states, dtype=float)
     H = model.H(states)                                        # (R, K, m, n)
     Hw = H / np.sqrt(model.R)[:, None]
-    info = np.einsum("rkcn,rkcp->knp", Hw, Hw) / states.shape[0]
-    A, Q = model.A, model.Q
+    if per_run:
+        info = np.einsum("rkcn,rkcp->rknp", Hw, Hw)
+    else:
+        info = np.einsum("rkcn,rkcp->knp", Hw, Hw)[None] / states.shape[0]
+    A = model.A
+    Q = model.Q if Q is None else np.asarray(Q, dtype=float)
+    deterministic = not np.any(Q)
+    Ainv = np.linalg.inv(A)
     K = states.shape[1]
-    out = np.empty((K,) + A.shape)
-    J = J0 + info[0]
-    out[0] = np.linalg.inv(J)
+    out = np.empty(info.shape)
+    J = J0 + info[:, 0]
+    out[:, 0] = np.linalg.inv(J)
     for k in range(1, K):
-        J = np.linalg.inv(Q + A @ out[k - 1] @ A.T) + info[k]
-        out[k] = np.linalg.inv(J)
-    return out
+        if deterministic:   # J_k = A^-T J_{k-1} A^-1 + I_k
+            J = Ainv.T @ J @ Ainv + info[:, k]
+        else:
+            J = np.linalg.inv(Q + A @ out[:, k - 1] @ A.T) + info[:, k]
+        out[:, k] = np.linalg.inv(J)
+    return out if per_run else out[0]
 
 
 def bound_map(model, xs, ys, velocity, params, steps=21):

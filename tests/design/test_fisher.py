@@ -57,6 +57,25 @@ def test_pcrlb_equals_the_kalman_covariance_for_a_linear_gaussian_model():
         np.testing.assert_allclose(bounds[k], P, rtol=1e-9, atol=1e-12)
 
 
+def test_per_passage_bounds_and_the_deterministic_limit():
+    """Per run: each run's own Kalman covariance; their mean is at least the pooled bound (Jensen);
+    with Q = 0 the information form equals the covariance recursion with a vanishing Q."""
+    model = model_from_scenario("S0")
+    states = model.to_internal(np.array([[[40.0 + 5 * k, -60.0 + 2 * k, 5.0, 2.0, 1e6, 2e6, -1e6] for k in range(30)],
+                                         [[-200.0 + 6 * k, 35.0, 6.0, 0.0, 5e6, 0.0, 3e6] for k in range(30)]]))
+    J0 = np.linalg.inv(np.diag([400.0, 400.0, 4.0, 4.0, 10.0, 10.0, 10.0]))
+    each = pcrlb(model, states, J0, per_run=True)
+    assert each.shape == (2, 30, 7, 7)
+    for r in range(2):
+        np.testing.assert_allclose(each[r], pcrlb(model, states[r:r + 1], J0), rtol=1e-10)
+    pooled = pcrlb(model, states, J0)
+    assert np.all(each[:, :, 0, 0].mean(axis=0) >= pooled[:, 0, 0] * (1 - 1e-9))
+    det = pcrlb(model, states, J0, per_run=True, Q=np.zeros((7, 7)))
+    tiny = pcrlb(model, states, J0, per_run=True, Q=1e-12 * np.eye(7))
+    np.testing.assert_allclose(det, tiny, rtol=1e-4, atol=1e-12)
+    assert np.all(det[:, -1, 0, 0] <= each[:, -1, 0, 0])     # no process noise: never a larger bound
+
+
 def test_bound_map_is_smaller_inside_the_array_than_far_out():
     model = model_from_scenario("S1-P2")
     xs = np.array([0.0, 150.0])
