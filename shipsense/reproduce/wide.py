@@ -128,17 +128,19 @@ def _metrics(est, covs_pos, truth, bounds, seconds, ends):
         else:
             bound = float(np.sqrt(np.mean(b[used]))) if used.any() else None
         ratios[name] = rmse / bound if rmse is not None and bound else None
-    ne = None
+    ne = ne_run = None
     if conv.any():
         d = (est[..., :2] - truth[..., :2])
         a, b, c = covs_pos[..., 0, 0], covs_pos[..., 0, 1], covs_pos[..., 1, 1]
         q = (c * d[..., 0] ** 2 - 2 * b * d[..., 0] * d[..., 1] + a * d[..., 1] ** 2) / (a * c - b * b)
-        ne = float(np.nanmean(np.where(second[conv], q[conv], np.nan)))
+        qs = np.where(second[conv], q[conv], np.nan)
+        ne = float(np.nanmean(qs))
+        ne_run = float(np.median(np.nanmean(qs, axis=1)))   # the typical run (the mean is a few runs' tail)
     # MRMSE_r: the time average of RMSE_k over the samples where passages are still running
     running = valid.any(axis=0)
     rmse_k = np.sqrt(np.nanmean(err[:, running] ** 2, axis=0))
     return {"convergence_rate": float(conv.mean()), "mrmse_r_m": float(np.mean(rmse_k)), **ratios,
-            "nees_mean": ne, "seconds_per_passage": seconds}
+            "nees_mean": ne, "nees_median_run": ne_run, "seconds_per_passage": seconds}
 
 
 CONSISTENCY_SCENARIOS = {"S0": None, "S1-P2": None, "S2": ["M1", "M2"]}
@@ -153,7 +155,9 @@ def consistency(runs=100, seed=0):
     converged runs and the second half of the passage; ``band`` is the
     two-sided 95 % chi-square band of a run average over that many runs (2
     degrees of freedom); ``consistent`` says whether the time-averaged NEES
-    lies inside it.
+    lies inside it.  ``nees_median_run`` is the median over converged runs of
+    each run's own time average: the typical run, where the mean is often set
+    by a few overconfident runs.
     """
     from scipy import stats
 
@@ -176,7 +180,8 @@ def consistency(runs=100, seed=0):
         band = [float(stats.chi2.ppf(q, 2 * max(n_conv, 1)) / max(n_conv, 1)) for q in (0.025, 0.975)]
         ne = m["nees_mean"]
         out[name] = {"filter": "ukf", "process_noise": "default", "runs": runs,
-                     "convergence_rate": m["convergence_rate"], "nees_mean": ne, "band": band,
+                     "convergence_rate": m["convergence_rate"], "nees_mean": ne,
+                     "nees_median_run": m["nees_median_run"], "band": band,
                      "consistent": bool(ne is not None and band[0] <= ne <= band[1])}
     return out
 
@@ -226,8 +231,9 @@ def run(runs=500, out="results/wide", seed=0, progress=True):
     summary["consistency"] = consistency(min(runs, 100), seed)
     st.done()
     elapsed = st.close()
-    o.csv("consistency.csv", ["scenario", "convergence_rate", "nees_mean", "band_lo", "band_hi", "consistent"],
-          [[k, v["convergence_rate"], v["nees_mean"], *v["band"], v["consistent"]]
+    o.csv("consistency.csv", ["scenario", "convergence_rate", "nees_mean", "nees_median_run", "band_lo", "band_hi",
+                              "consistent"],
+          [[k, v["convergence_rate"], v["nees_mean"], v["nees_median_run"], *v["band"], v["consistent"]]
            for k, v in summary["consistency"].items()])
     o.csv("wide.csv", ["family", "method", "convergence_rate", "mrmse_r_m", "rmse_over_pcrlb",
                        "rmse_over_pcrlb_pooled", "rmse_over_crlb_deterministic", "nees_mean", "seconds_per_passage"],
