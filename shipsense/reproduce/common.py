@@ -150,12 +150,13 @@ GROUP_STEPS = 10
 """Passages whose detections fall in the same block of this many samples share one bank (:func:`track_global`)."""
 
 
-def track_global(unit, model, y, sc, snr_start):
+def track_global(unit, model, y, sc, snr_start, through_peak=None):
     """Global initialiser then the bank, for passages grouped by detection step (one batch per group).
 
-    Returns estimates (R, K, n) SI, position covariances (R, K, 2, 2) (a
-    placeholder of (100 m)^2 inside the fitted window, which NEES does not
-    assess) and the seconds spent in the initialiser itself.
+    Returns estimates (R, K, n) SI, position covariances (R, K, 2, 2) (NaN
+    inside the fitted stretch, before the bank starts: NEES assesses the
+    bank) and the seconds spent in the initialiser itself.  ``through_peak``
+    is passed to :func:`~shipsense.trackers.init.global_init`.
     """
     from shipsense.trackers.init import detection_start, global_init, track_with_global_init, window_samples
 
@@ -172,13 +173,13 @@ def track_global(unit, model, y, sc, snr_start):
     for members in groups.values():
         idx = np.array(members)
         t1 = time.perf_counter()
-        gi = global_init(model, y[idx], ranges=ranges, speeds=speeds, common_start=True, snr_start=snr_start)
+        gi = global_init(model, y[idx], ranges=ranges, speeds=speeds, common_start=True, snr_start=snr_start,
+                         through_peak=through_peak)
         t_init += time.perf_counter() - t1
         e, b = track_with_global_init(unit, model, y[idx], gi)
         est[idx] = e
         start = int(gi.start[0])
         pos_cov[idx, start:] = b.selected_pos_cov
-        pos_cov[idx, :start] = np.diag([1e4, 1e4])
     return est, pos_cov, t_init
 
 

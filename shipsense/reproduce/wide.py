@@ -133,9 +133,11 @@ def _metrics(est, covs_pos, truth, bounds, seconds, ends):
         d = (est[..., :2] - truth[..., :2])
         a, b, c = covs_pos[..., 0, 0], covs_pos[..., 0, 1], covs_pos[..., 1, 1]
         q = (c * d[..., 0] ** 2 - 2 * b * d[..., 0] * d[..., 1] + a * d[..., 1] ** 2) / (a * c - b * b)
-        qs = np.where(second[conv], q[conv], np.nan)
-        ne = float(np.nanmean(qs))
-        ne_run = float(np.median(np.nanmean(qs, axis=1)))   # the typical run (the mean is a few runs' tail)
+        qs = np.where(second[conv], q[conv], np.nan)   # NaN also where a method gives no covariance
+        n = np.isfinite(qs).sum(axis=1)
+        if n.any():
+            ne = float(np.nansum(qs) / n.sum())
+            ne_run = float(np.median(np.nansum(qs, axis=1)[n > 0] / n[n > 0]))   # the typical run
     # MRMSE_r: the time average of RMSE_k over the samples where passages are still running
     running = valid.any(axis=0)
     rmse_k = np.sqrt(np.nanmean(err[:, running] ** 2, axis=0))

@@ -220,6 +220,25 @@ def detection_start(model, measurements, snr_start=5.0, window=0):
     return np.minimum(k0, K - window - 1).clip(0)
 
 
+def fit_end(model, measurements, k0, window, through_peak=None):
+    """End (exclusive, (R,)) of the refinement window that starts at ``k0``: ``k0 + window``, or with
+    ``through_peak`` (a fraction) the first later sample at which the strongest channel's SNR has
+    fallen below that fraction of its maximum since ``k0`` -- the fit then spans the closest
+    approach -- if the passage gets there (else ``k0 + window``); at most ``K - 1``."""
+    y = np.asarray(measurements, dtype=float) / model.y_scale
+    R, K = y.shape[:2]
+    k0 = np.asarray(k0, dtype=int)
+    end = np.minimum(k0 + window, K - 1)
+    if through_peak is None:
+        return end
+    snr = np.where(~model.axial, np.abs(np.nan_to_num(y)) / np.sqrt(model.R), 0.0).max(axis=-1)   # (R, K)
+    k = np.arange(K)[None, :]
+    since = np.where(k >= k0[:, None], snr, 0.0)
+    peak = np.maximum.accumulate(since, axis=1)
+    past = (k >= end[:, None]) & (since < through_peak * peak) & (k < K - 1)
+    return np.where(past.any(axis=1), np.argmax(past, axis=1), end)
+
+
 def _grid_fit_masked(model, yw_all, offset, G, std, max_bytes, clamp):
     """Moment-eliminated chi-square (R, C) and moments (R, C, P) of every candidate, general case.
 
@@ -251,7 +270,7 @@ def _grid_fit_masked(model, yw_all, offset, G, std, max_bytes, clamp):
 
 def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, course_step_deg=30.0,
                 window_s=15.0, grid_samples=16, keep=5, distinct_m=15.0, snr_start=5.0, inflate=2.0,
-                source_z=None, common_start=False, max_bytes=512e6):
+                source_z=None, common_start=False, max_bytes=512e6, through_peak=None):
     """Global initialisation of passages from a grid search with the moment eliminated in closed form.
 
     Parameters
@@ -278,6 +297,11 @@ def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, c
         that one bank runs them all (:func:`track_with_global_init`).
     max_bytes : float
         Memory for the grid stage; passages are processed in chunks within it.
+    through_peak : float, optional
+        Extend the refinement (not the grid search) past the window until the
+        strongest channel has fallen below this fraction of its peak
+        (:func:`fit_end`): the batch fit then spans the closest approach, and
+        the bank starts after it.
 
     Returns
     -------
@@ -341,15 +365,25 @@ def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, c
     yfit = y[np.arange(R)[:, None], k0[:, None] + np.arange(window)[None, :]]           # (R, W, m)
     theta, chi2_fit, info = fit_passages(model, np.repeat(yfit, M, axis=0), starts.reshape(R * M, -1),
                                          window, return_information=True)
+    end = fit_end(model, y_si, k0, window, through_peak)
+    if common_start:
+        end = np.full(R, end.max())
+    Wf = int((end - k0).max())
+    if Wf > window:   # continue every fit through the closest approach, from the window's solution
+        ks = k0[:, None] + np.arange(Wf)[None, :]
+        yfit = y[np.arange(R)[:, None], np.minimum(ks, K - 1)]                           # (R, Wf, m)
+        yfit = np.where((ks < end[:, None])[..., None], yfit, np.nan)                   # each passage to its end
+        theta, chi2_fit, info = fit_passages(model, np.repeat(yfit, M, axis=0), theta, Wf, return_information=True)
     theta = theta.reshape(R, M, -1)
     cov = np.linalg.pinv(info, hermitian=True).reshape(R, M, model.n, model.n) * inflate
-    # propagate to the first sample after the window
-    Aw = Ak[-1] @ model.A
-    seeds = np.einsum("ij,rmj->rmi", Aw, theta)
-    P0 = Aw @ cov @ Aw.T + window * model.Q
-    traj = np.einsum("kij,rmj->rmki", Ak, theta)
+    # propagate to the first sample after the fitted stretch
+    Ak = powers(model.A, Wf + 1)
+    Aw = Ak[np.minimum(end - k0, Wf)]                                                   # (R, n, n)
+    seeds = np.einsum("rij,rmj->rmi", Aw, theta)
+    P0 = Aw[:, None] @ cov @ np.swapaxes(Aw, -1, -2)[:, None] + (end - k0)[:, None, None, None] * model.Q
+    traj = np.einsum("kij,rmj->rmki", Ak[:Wf], theta)
     xs = model.x_scale
-    return GlobalInit(start=k0 + window, seeds=seeds * xs, P0=P0 * np.outer(xs, xs),
+    return GlobalInit(start=end, seeds=seeds * xs, P0=P0 * np.outer(xs, xs),
                       loglik=-0.5 * chi2_fit.reshape(R, M), window=traj * xs, k0=k0)
 
 

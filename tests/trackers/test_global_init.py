@@ -63,3 +63,32 @@ def test_tracking_from_the_global_initialiser_converges_on_s2():
     truth = model.state_from_truth(sim.truth)
     final = np.hypot(*(est[:, -1, :2] - truth[:, -1, :2]).T)
     assert est.shape == truth.shape and np.all(final < 5.0), final
+
+
+def test_fit_through_the_peak_spans_the_closest_approach_and_seeds_after_it():
+    from shipsense.trackers.init import detection_start, fit_end, window_samples
+
+    sc = load_scenario("S1-P2")
+    model = model_from_scenario(sc)
+    sim = simulate(sc, runs=6, seed=5, random=True)
+    y, truth = sim.measurements, model.state_from_truth(sim.truth)
+    K = y.shape[1]
+    W = window_samples(model, K)
+    k0 = detection_start(model, y, 50.0, W)
+    np.testing.assert_array_equal(fit_end(model, y, k0, W), k0 + W)
+    end = fit_end(model, y, k0, W, through_peak=0.5)
+    assert np.any(end > k0 + W)
+    snr = (np.abs(y) / sc.channel_std).max(axis=-1)
+    for r in range(6):
+        assert k0[r] + W <= end[r] < K
+        if end[r] > k0[r] + W:   # the first sample after the window below half the peak since k0
+            peak = snr[r, k0[r]:end[r] + 1].max()
+            assert snr[r, end[r]] < 0.5 * peak
+            assert np.all(snr[r, k0[r] + W:end[r]] >= 0.5 * np.maximum.accumulate(snr[r, k0[r]:end[r]])[W:])
+    gi = global_init(model, y, ranges=np.geomspace(20, 1.2 * sc.prior.range[1], 8),
+                     speeds=np.linspace(*sc.prior.speed, 3), snr_start=50.0, through_peak=0.5)
+    np.testing.assert_array_equal(gi.start, end)
+    best = np.argmax(gi.loglik, axis=1)
+    at = np.minimum(gi.start, K - 1)
+    err = np.hypot(*(gi.seeds[np.arange(6), best, :2] - truth[np.arange(6), at, :2]).T)
+    assert np.all(err < 3.0), err       # the fit has seen the closest approach: seeds within metres
