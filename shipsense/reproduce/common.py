@@ -147,7 +147,8 @@ def rmse_plot(out, name, title, times, curves, ylabel="RMSE_k [m]"):
 
 
 GROUP_STEPS = 10
-"""Passages whose detections fall in the same block of this many samples share one bank (:func:`track_global`)."""
+"""Passages whose detections (and fits' ends) fall in the same blocks of this many samples share one bank
+(:func:`track_global`)."""
 
 
 def track_global(unit, model, y, sc, snr_start, through_peak=None):
@@ -158,17 +159,21 @@ def track_global(unit, model, y, sc, snr_start, through_peak=None):
     bank) and the seconds spent in the initialiser itself.  ``through_peak``
     is passed to :func:`~shipsense.trackers.init.global_init`.
     """
-    from shipsense.trackers.init import detection_start, global_init, track_with_global_init, window_samples
+    from shipsense.trackers.init import detection_start, fit_end, global_init, track_with_global_init, window_samples
 
     R, K = y.shape[:2]
     est = np.full((R, K, model.n), np.nan)
     pos_cov = np.full((R, K, 2, 2), np.nan)
     ranges = np.geomspace(20.0, 1.2 * sc.prior.range[1], 8)
     speeds = np.linspace(*sc.prior.speed, 3)
-    k0 = detection_start(model, y, snr_start, window_samples(model, K))
+    W = window_samples(model, K)
+    k0 = detection_start(model, y, snr_start, W)
+    keys = k0 // GROUP_STEPS
+    if through_peak is not None:   # group by the fit's end too: a batch fits every passage to its latest end
+        keys = keys * K + fit_end(model, y, k0, W, through_peak) // GROUP_STEPS
     groups = {}
-    for r, k in enumerate(k0):
-        groups.setdefault(int(k) // GROUP_STEPS, []).append(r)
+    for r, key in enumerate(keys):
+        groups.setdefault(int(key), []).append(r)
     t_init = 0.0
     for members in groups.values():
         idx = np.array(members)
