@@ -206,6 +206,11 @@ def window_samples(model, K, window_s=15.0):
     return int(np.clip(round(window_s / model.period), 4, K - 1))
 
 
+def _snr(model, y):
+    """The strongest field channel's SNR per sample (R, K) of measurements in internal units (R, K, m)."""
+    return np.where(~model.axial, np.abs(np.nan_to_num(y)) / np.sqrt(model.R), 0.0).max(axis=-1)
+
+
 def detection_start(model, measurements, snr_start=5.0, window=0):
     """First sample (R,) at which some field channel exceeds ``snr_start`` noise standard deviations.
 
@@ -214,7 +219,7 @@ def detection_start(model, measurements, snr_start=5.0, window=0):
     """
     y = np.asarray(measurements, dtype=float) / model.y_scale
     K = y.shape[1]
-    snr = np.where(~model.axial, np.abs(np.nan_to_num(y)) / np.sqrt(model.R), 0.0).max(axis=-1)   # (R, K)
+    snr = _snr(model, y)
     above = snr > snr_start
     k0 = np.where(above.any(axis=1), np.argmax(above, axis=1), 0)
     return np.minimum(k0, K - window - 1).clip(0)
@@ -231,7 +236,7 @@ def fit_end(model, measurements, k0, window, through_peak=None):
     end = np.minimum(k0 + window, K - 1)
     if through_peak is None:
         return end
-    snr = np.where(~model.axial, np.abs(np.nan_to_num(y)) / np.sqrt(model.R), 0.0).max(axis=-1)   # (R, K)
+    snr = _snr(model, y)
     k = np.arange(K)[None, :]
     since = np.where(k >= k0[:, None], snr, 0.0)
     peak = np.maximum.accumulate(since, axis=1)
