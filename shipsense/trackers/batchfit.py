@@ -19,11 +19,16 @@ def powers(A, K):
     return out
 
 
-def fit_passages(model, y, theta_init, steps, stride=1, iterations=40, return_information=False, tol=1e-9):
+def fit_passages(model, y, theta_init, steps, stride=1, iterations=40, return_information=False, tol=1e-9,
+                 prior=None):
     """Batched Levenberg–Marquardt fit of passages to measurements (internal units).
 
     ``y`` (B or 1, K', m) are the measurements at steps ``0, stride, 2 stride, ...``;
-    ``theta_init`` (B, n); NaN samples are ignored.  Returns the fitted
+    ``theta_init`` (B, n); NaN samples are ignored.  ``prior``, optional, is a
+    Gaussian prior ``(mean (n,) or (B, n), information (n,))`` on the initial
+    state with a diagonal information (zero where a component has none): the
+    fit is then the MAP estimate, and its chi-square and information include
+    the prior's term.  Returns the fitted
     initial states (B, n), kept within the model's ``state_bounds`` (projected
     steps), and their chi-square over the fitted samples (and,
     with ``return_information``, the Gauss–Newton information ``J^T J`` (B, n, n)
@@ -47,9 +52,22 @@ def fit_passages(model, y, theta_init, steps, stride=1, iterations=40, return_in
     def rows(a, idx):
         return a if shared else a[idx]
 
+    if prior is not None:
+        mu = np.broadcast_to(np.asarray(prior[0], dtype=float), (B, n))
+        root = np.sqrt(np.asarray(prior[1], dtype=float))                 # (n,): the prior's rows
+
     def residual(th, idx):
         X = np.einsum("kij,bj->bki", Ak, th)
-        return (model.residual(model.h(X), rows(y, idx)) * w * rows(present, idx)).reshape(len(th), -1), X
+        r = (model.residual(model.h(X), rows(y, idx)) * w * rows(present, idx)).reshape(len(th), -1)
+        if prior is not None:
+            r = np.concatenate([r, root * (th - mu[idx])], axis=-1)
+        return r, X
+
+    def jacobian(X, idx):
+        J = (model.H(X) @ Ak * (w * rows(present, idx))[..., None]).reshape(len(X), -1, n)
+        if prior is not None:
+            J = np.concatenate([J, np.broadcast_to(np.diag(root), (len(X), n, n))], axis=1)
+        return J
 
     everyone = np.arange(B)
     r, X = residual(theta, everyone)
@@ -62,7 +80,7 @@ def fit_passages(model, y, theta_init, steps, stride=1, iterations=40, return_in
         a = np.flatnonzero(stall < 3)
         if a.size == 0:
             break
-        Jac = (model.H(X[a]) @ Ak * (w * rows(present, a))[..., None]).reshape(a.size, -1, n)
+        Jac = jacobian(X[a], a)
         JtJ = np.swapaxes(Jac, -1, -2) @ Jac
         g = np.einsum("bmn,bm->bn", Jac, r[a])
         D = np.diagonal(JtJ, axis1=-2, axis2=-1)
@@ -85,6 +103,6 @@ def fit_passages(model, y, theta_init, steps, stride=1, iterations=40, return_in
         stalled = np.where(better, gain < tol, lam[a] >= 1e6)
         stall[a] = np.where(stalled, stall[a] + 1, 0)
     if return_information:
-        Jac = (model.H(X) @ Ak * (w * present)[..., None]).reshape(B, -1, n)
+        Jac = jacobian(X, everyone)
         return theta, cost, np.swapaxes(Jac, -1, -2) @ Jac
     return theta, cost

@@ -273,9 +273,23 @@ def _grid_fit_masked(model, yw_all, offset, G, std, max_bytes, clamp):
     return chi2, params
 
 
+def _distinct(chi2, positions, M, distinct_m):
+    """Indices of the ``M`` lowest ``chi2`` whose ``positions`` (N, 2) are more than ``distinct_m`` apart.
+
+    A short greedy pass per passage; when fewer than ``M`` are distinct the best one fills the rest.
+    """
+    chosen = []
+    for c in np.argsort(chi2):
+        if all(np.hypot(*(positions[c] - positions[o])) > distinct_m for o in chosen):
+            chosen.append(c)
+            if len(chosen) == M:
+                break
+    return chosen + [chosen[0]] * (M - len(chosen))
+
+
 def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, course_step_deg=30.0,
                 window_s=15.0, grid_samples=16, keep=5, distinct_m=15.0, snr_start=5.0, inflate=2.0,
-                source_z=None, common_start=False, max_bytes=512e6, through_peak=None):
+                source_z=None, common_start=False, max_bytes=512e6, through_peak=None, z_std=None, refine=None):
     """Global initialisation of passages from a grid search with the moment eliminated in closed form.
 
     Parameters
@@ -293,10 +307,22 @@ def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, c
     keep : int
         Distinct minima kept per passage (M): the best ones more than ``distinct_m`` apart (5: on the
         wide study, 4 lost two-magnetometer passages and 6 cost more than the bank, EXPERIMENTS.md).
+    refine : int, optional
+        Distinct grid minima refined by the batch fit (default ``keep``); the
+        best ``keep`` distinct refined fits seed the bank.  At high SNR the
+        global minimum's basin can be narrower than the grid spacing, so it
+        may not be among the ``keep`` best grid points (EXPERIMENTS.md).
     snr_start : float
         The window starts at the first sample with some channel above this SNR (adaptive start).
     inflate : float
         Factor on the batch-fit covariance (linearisation of a nonlinear fit).
+    z_std : float, optional
+        Standard deviation (m) of a Gaussian prior on the source depth around
+        ``source_z`` (models with electrodes): the batch fits are then MAP fits
+        and their covariances include it.  The envelope fits otherwise often
+        settle on a wrong depth, the depth and ``p`` trading off in the far
+        field (EXPERIMENTS.md); the studies' bank starts with the same prior
+        (``BankConfig.z_std``).
     common_start : bool
         Start every passage's window at the latest detection of the batch, so
         that one bank runs them all (:func:`track_with_global_init`).
@@ -351,25 +377,31 @@ def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, c
     slots = _parameter_slots(model)
     Ak = powers(model.A, window)
     mid = Ak[window // 2][:2]
-    M = keep
+    mid_grid = grid @ mid.T                                                              # (C, 2)
+    M = max(keep, refine or keep)
     starts = np.zeros((R, M, model.n))
-    for r in range(R):   # choosing distinct minima is a short greedy pass per passage (not a filter loop)
-        order = np.argsort(chi2[r])
-        chosen = []
-        for c in order:
-            pos = mid @ grid[c]
-            if all(np.hypot(*(pos - mid @ grid[o])) > distinct_m for o in chosen):
-                chosen.append(c)
-                if len(chosen) == M:
-                    break
+    for r in range(R):
+        chosen = _distinct(chi2[r], mid_grid, M, distinct_m)
         th = grid[chosen].copy()
         th[:, slots] = params[r, chosen]
-        starts[r, : len(chosen)] = th
-        starts[r, len(chosen):] = th[0]
+        starts[r] = th
+    prior = None
+    if z_std is not None and "z" in model.labels:
+        iz = model.labels.index("z")
+        mean, weight = np.zeros(model.n), np.zeros(model.n)
+        mean[iz] = (model.source_z if source_z is None else source_z) / model.x_scale[iz]
+        weight[iz] = (model.x_scale[iz] / z_std) ** 2
+        prior = (mean, weight)
     # refine every kept minimum by a batch Levenberg-Marquardt fit over the whole window
     yfit = y[np.arange(R)[:, None], k0[:, None] + np.arange(window)[None, :]]           # (R, W, m)
     theta, chi2_fit, info = fit_passages(model, np.repeat(yfit, M, axis=0), starts.reshape(R * M, -1),
-                                         window, return_information=True)
+                                         window, return_information=True, prior=prior)
+    if M > keep:   # the best ``keep`` distinct refined fits seed the bank
+        theta, chi2_fit, info = (a.reshape((R, M) + a.shape[1:]) for a in (theta, chi2_fit, info))
+        sel = np.array([_distinct(chi2_fit[r], theta[r] @ mid.T, keep, distinct_m) for r in range(R)])
+        pick = (np.arange(R)[:, None], sel)
+        theta, chi2_fit, info = (a[pick].reshape((R * keep,) + a.shape[2:]) for a in (theta, chi2_fit, info))
+        M = keep
     end = fit_end(model, y_si, k0, window, through_peak)
     if common_start:
         end = np.full(R, end.max())
@@ -378,7 +410,8 @@ def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, c
         ks = k0[:, None] + np.arange(Wf)[None, :]
         yfit = y[np.arange(R)[:, None], np.minimum(ks, K - 1)]                           # (R, Wf, m)
         yfit = np.where((ks < end[:, None])[..., None], yfit, np.nan)                   # each passage to its end
-        theta, chi2_fit, info = fit_passages(model, np.repeat(yfit, M, axis=0), theta, Wf, return_information=True)
+        theta, chi2_fit, info = fit_passages(model, np.repeat(yfit, M, axis=0), theta, Wf, return_information=True,
+                                             prior=prior)
     theta = theta.reshape(R, M, -1)
     cov = np.linalg.pinv(info, hermitian=True).reshape(R, M, model.n, model.n) * inflate
     # propagate to the first sample after the fitted stretch
@@ -395,27 +428,47 @@ def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, c
 def track_with_global_init(unit, model, measurements, gi: GlobalInit):
     """Run the bank from the global initialiser's hypotheses; returns ``(estimates (R, K, n) SI, BankRun)``.
 
-    Before the bank starts, the estimate is the best batch fit's trajectory
-    (propagated backwards before the detection).  All passages must share the
-    bank's start (the study uses a common start, ``max(gi.start)``).
+    Every passage's bank starts at its own ``gi.start``: the measurements are
+    aligned on it (bank step j processes sample ``start + j`` of each
+    passage; passages that end earlier are padded with missing samples), so
+    all passages are one batch whatever their starts.  The returned
+    ``BankRun`` is on that aligned axis (step j of passage r is its sample
+    ``gi.start[r] + j``).  Before the bank starts, the estimate is the best
+    batch fit's trajectory (constant velocity, propagated backwards before
+    the detection).
     """
     from shipsense.trackers.bank import run_bank
 
     y = np.asarray(measurements, dtype=float)
     R, K, _ = y.shape
-    start = int(gi.start.max())
-    if np.any(gi.start != start):
-        raise ValueError("all passages must share the bank's start; use a common window")
-    if start >= K:
-        raise ValueError(f"the passage ({K} samples) ends inside the fitted window ({start} samples)")
-    bank = run_bank(unit, model, y[:, start:], gi.seeds, gi.P0, initial_loglik=gi.loglik)
-    est = np.empty((R, K, model.n))
-    est[:, start:] = bank.selected_means
+    start = np.asarray(gi.start, dtype=int)
+    if np.any(start >= K):
+        raise ValueError(f"a passage ({K} samples) ends inside its fitted window (bank start {int(start.max())})")
+    J = K - int(start.min())                                                  # aligned bank steps
+    j = np.arange(J)[None, :]
+    src = start[:, None] + j                                                  # (R, J): sample of step j
+    inside = src < K
+    aligned = np.where(inside[..., None], y[np.arange(R)[:, None], np.minimum(src, K - 1)], np.nan)
+    bank = run_bank(unit, model, aligned, gi.seeds, gi.P0, initial_loglik=gi.loglik)
+    est = unalign(bank.selected_means, start, K)
     best = np.argmax(gi.loglik, axis=1)
     theta0 = gi.window[np.arange(R), best, 0] / model.x_scale                 # internal, at k0
-    ks = np.arange(start)[None, :] - gi.k0[:, None]                           # steps relative to k0
+    ks = np.arange(K)[None, :] - gi.k0[:, None]                               # steps relative to k0
     # constant velocity forwards and backwards: x_k = x_0 + k T v for the kinematic block
-    traj = np.repeat(theta0[:, None, :], start, axis=1)
+    traj = np.repeat(theta0[:, None, :], K, axis=1)
     traj[..., 0:2] += ks[..., None] * model.period * theta0[:, None, 2:4]
-    est[:, :start] = traj * model.x_scale
+    before = np.arange(K)[None, :] < start[:, None]
+    est[before] = (traj * model.x_scale)[before]
     return est, bank
+
+
+def unalign(values, start, K, fill=np.nan):
+    """Values on a bank's aligned axis (R, J, ...) (:func:`track_with_global_init`) back on the samples (R, K, ...)."""
+    values = np.asarray(values)
+    R, J = values.shape[:2]
+    out = np.full((R, K) + values.shape[2:], fill, dtype=np.result_type(values, np.asarray(fill)))
+    src = np.asarray(start, dtype=int)[:, None] + np.arange(J)[None, :]
+    inside = src < K
+    rows = np.broadcast_to(np.arange(R)[:, None], src.shape)
+    out[rows[inside], src[inside]] = values[inside]
+    return out

@@ -92,3 +92,69 @@ def test_fit_through_the_peak_spans_the_closest_approach_and_seeds_after_it():
     at = np.minimum(gi.start, K - 1)
     err = np.hypot(*(gi.seeds[np.arange(6), best, :2] - truth[np.arange(6), at, :2]).T)
     assert np.all(err < 3.0), err       # the fit has seen the closest approach: seeds within metres
+
+
+def test_depth_prior_makes_the_fit_a_map_fit_with_the_prior_in_its_information():
+    from shipsense.design.fisher import passage_fim, trajectory
+    from shipsense.trackers.batchfit import fit_passages
+
+    model = model_from_scenario("S1-P2")
+    steps = 40
+    theta = model.to_internal(np.array([-150.0, -120.0, 6.0, 0.0, -6.8, 100.0]))   # far from the array
+    rng = np.random.default_rng(1)
+    clean = model.h(trajectory(model, theta, steps))
+    y = (clean + rng.standard_normal(clean.shape) * np.sqrt(model.R))[None]
+    iz = model.labels.index("z")
+    mean, weight = np.zeros(model.n), np.zeros(model.n)
+    mean[iz], weight[iz] = theta[iz], 1.0                 # 1 m around the nominal depth
+    free, chi2_free = fit_passages(model, y, theta[None], steps)
+    map_, chi2_map, info = fit_passages(model, y, theta[None], steps, prior=(mean, weight), return_information=True)
+    # far from the array depth and p trade off: the free fit drifts metres off in depth, the MAP fit does not
+    assert abs(free[0, iz] - theta[iz]) > 3.0 and abs(map_[0, iz] - theta[iz]) < 0.5, (free[0, iz], map_[0, iz])
+    assert chi2_map[0] >= chi2_free[0] - 1e-6 * chi2_free[0]
+    # the information is the data's Fisher information (computed independently) plus the prior's
+    expected = passage_fim(model, map_[0], steps) + np.diag(weight)
+    np.testing.assert_allclose(info[0], expected, rtol=1e-8, atol=1e-10 * np.abs(expected).max())
+
+
+def test_bank_from_per_passage_starts_equals_each_passage_run_alone():
+    from dataclasses import replace
+
+    from shipsense.trackers.init import unalign
+
+    sc = load_scenario("S2")
+    model = model_from_scenario(sc, sensors=["M1", "M2"])
+    sim = simulate(sc, runs=4, seed=5, random=True)
+    y = sim.measurements[..., :6]
+    gi = global_init(model, y, ranges=np.geomspace(20, 150, 8), speeds=np.linspace(3, 7, 3))
+    assert len(np.unique(gi.start)) > 1                    # the passages' banks start at different samples
+    unit = get_filter("ukf")
+    est, bank = track_with_global_init(unit, model, y, gi)
+    cov = unalign(bank.selected_pos_cov, gi.start, y.shape[1])
+    for r in range(4):
+        alone = replace(gi, **{f: getattr(gi, f)[r:r + 1] for f in ("start", "seeds", "P0", "loglik", "window", "k0")})
+        e, b = track_with_global_init(unit, model, y[r:r + 1], alone)
+        np.testing.assert_allclose(est[r], e[0], rtol=1e-9, atol=1e-9)
+        c = unalign(b.selected_pos_cov, alone.start, y.shape[1])[0]
+        np.testing.assert_allclose(cov[r], c, rtol=1e-9, atol=1e-12)
+        assert np.isnan(cov[r, : gi.start[r]]).all() and np.isfinite(cov[r, gi.start[r]:]).all()
+
+
+def test_refining_more_grid_minima_finds_a_narrow_global_minimum():
+    """P2 passage that starts near the array: its global minimum is not among the 5 best grid points."""
+    from shipsense.reproduce.wide import family_scenario
+
+    sc, model = family_scenario("envelope_p2")
+    sim = simulate(sc, runs=64, seed=0, random=True)      # prefix-stable: passage 63 of the wide study
+    y, truth = sim.measurements[63:64], model.state_from_truth(sim.truth[63:64])
+    kw = dict(ranges=np.geomspace(20.0, 1.2 * sc.prior.range[1], 8), speeds=np.linspace(*sc.prior.speed, 3),
+              snr_start=50.0, z_std=1.0)
+    errs, best_ll = [], []
+    for refine in (None, 10):
+        gi = global_init(model, y, refine=refine, **kw)
+        assert gi.seeds.shape == (1, 5, model.n)
+        b = int(np.argmax(gi.loglik[0]))
+        errs.append(float(np.hypot(*(gi.seeds[0, b, :2] - truth[0, gi.start[0], :2]))))
+        best_ll.append(gi.loglik[0, b])
+    assert best_ll[1] >= best_ll[0]
+    assert errs[0] > 3.0 and errs[1] < 0.5, errs
