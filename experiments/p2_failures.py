@@ -1,11 +1,13 @@
-"""Where the global initialiser's P2 failures come from: the same passages tracked as the study
-groups them and each alone, which passages fail in each, and the failures' heading errors.
+"""Where the global initialiser's P2 failures come from: the same passages with the initialiser's
+envelope options switched on one at a time, and what the remaining failures look like.
 
-Run:  python experiments/p2_failures.py [--runs 200] [--seed 0]     (about 6 minutes for 200)
+Run:  python experiments/p2_failures.py [--runs 200] [--seed 0]     (about 3 minutes for 200)
 
-Grouped and alone differ only at rounding level (other batch sizes take other small-batch code
-paths); if the failure sets differ while the rates agree, the failures are a property of the
-filter near close approaches rather than of particular passages or seeds.
+Every passage's bank starts from its own window (``track_with_global_init`` aligns them).  The
+variants: no depth prior and five refined grid minima (the first version's initialiser); the bank's
+depth prior (``z_std``); and ten refined minima on top (``refine=10``, the wide study's setting).
+For every failure it prints the best fit's chi-square and depth and the best seed's error: a failed
+fit (chi-square far above the number of samples) or a good fit the bank then loses.
 """
 
 import argparse
@@ -15,6 +17,7 @@ import numpy as np
 from shipsense.reproduce import wide
 from shipsense.reproduce.common import track_global
 from shipsense.simulator import simulate
+from shipsense.trackers.init import global_init
 from shipsense.trackers.metrics import position_error
 from shipsense.tracking import scenario_tracker
 
@@ -38,27 +41,29 @@ def main(argv=None):
     name = "envelope_p2"
     sc, model = wide.family_scenario(name)
     unit, _ = scenario_tracker(sc)
-    snr_start = wide.FAMILIES[name][-1]
     sim = simulate(sc, runs=args.runs, seed=args.seed, random=True)
     y = sim.measurements[..., np.isin([c[0] for c in sim.channels], model.array.ids)]
     truth = model.state_from_truth(sim.truth)
-    centre = model.array.positions[:, :2].mean(axis=0)
-    ends = wide.passage_ends(truth, centre, sc.period)
-    grouped, _, _ = track_global(unit, model, y, sc, snr_start)
-    alone = np.concatenate([track_global(unit, model, y[[r]], sc, snr_start)[0] for r in range(args.runs)])
-    ok_g, ok_a = converged(grouped, truth, ends), converged(alone, truth, ends)
-    fail_g, fail_a = np.flatnonzero(~ok_g), np.flatnonzero(~ok_a)
-    print(f"grouped: {ok_g.mean():.3f} converged, failures {fail_g.tolist()}")
-    print(f"alone:   {ok_a.mean():.3f} converged, failures {fail_a.tolist()}")
-    print(f"failing in both: {np.intersect1d(fail_g, fail_a).tolist()}")
-    print("grouped failures, 10 samples after the closest approach:")
-    for r in fail_g:
-        k = min(int(ends[r]) // 2 + 10, truth.shape[1] - 1)
-        ve, vt = grouped[r, k, 2:4], truth[r, k, 2:4]
-        heading = (np.degrees(np.arctan2(ve[1], ve[0]) - np.arctan2(vt[1], vt[0])) + 180.0) % 360.0 - 180.0
-        cpa = np.hypot(*(truth[r, :, :2] - centre).T).min()
-        print(f"  passage {r}: closest approach {cpa:.1f} m from the array centre, "
-              f"heading error {heading:+.1f} deg, speed {np.hypot(*ve):.2f} (true {np.hypot(*vt):.2f}) m/s")
+    ends = wide.passage_ends(truth, model.array.positions[:, :2].mean(axis=0), sc.period)
+    full = wide.init_options(name, sc)
+    variants = {"first version (no depth prior, 5 refined)": {"snr_start": full["snr_start"]},
+                "depth prior": {"snr_start": full["snr_start"], "z_std": full["z_std"]},
+                "depth prior + 10 refined (study)": full}
+    grid = dict(ranges=np.geomspace(20.0, 1.2 * sc.prior.range[1], 8), speeds=np.linspace(*sc.prior.speed, 3))
+    iz = model.labels.index("z")
+    for label, opts in variants.items():
+        est, _, _ = track_global(unit, model, y, sc, **opts)
+        fail = np.flatnonzero(~converged(est, truth, ends))
+        print(f"{label}: {1 - fail.size / args.runs:.3f} converged, failures {fail.tolist()}")
+        if fail.size:
+            gi = global_init(model, y[fail], **grid, **opts)
+            b = np.argmax(gi.loglik, axis=1)
+            seed = gi.seeds[np.arange(fail.size), b]
+            err = np.hypot(*(seed[:, :2] - truth[fail, gi.start, :2]).T)
+            for i, r in enumerate(fail):
+                print(f"  passage {r}: window from sample {gi.k0[i]}, best fit chi2 {-2 * gi.loglik[i, b[i]]:.3g} "
+                      f"over {(gi.start[i] - gi.k0[i]) * model.m} values, depth {seed[i, iz]:.2f} m "
+                      f"(true {truth[r, 0, iz]:.2f}), seed error {err[i]:.2f} m")
 
 
 if __name__ == "__main__":

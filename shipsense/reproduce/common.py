@@ -146,53 +146,32 @@ def rmse_plot(out, name, title, times, curves, ylabel="RMSE_k [m]"):
     return out.figure(fig, name)
 
 
-GROUP_STEPS = 10
-"""Passages whose detections (and fits' ends) fall in the same blocks of this many samples share one bank
-(:func:`track_global`)."""
-
-
-def track_global(unit, model, y, sc, snr_start, through_peak=None):
-    """Global initialiser then the bank, for passages grouped by detection step (one batch per group).
+def track_global(unit, model, y, sc, **options):
+    """Global initialiser then the bank, every passage from its own window (one batch).
 
     Returns estimates (R, K, n) SI, position covariances (R, K, 2, 2) (NaN
     inside the fitted stretch, before the bank starts: NEES assesses the
-    bank) and the seconds spent in the initialiser itself.  ``through_peak``
-    is passed to :func:`~shipsense.trackers.init.global_init`.
+    bank) and the seconds spent in the initialiser itself.  ``options`` (e.g.
+    ``snr_start``, ``z_std``, ``refine``, ``through_peak``) go to
+    :func:`~shipsense.trackers.init.global_init`.
     """
-    from shipsense.trackers.init import detection_start, fit_end, global_init, track_with_global_init, window_samples
+    from shipsense.trackers.init import global_init, track_with_global_init, unalign
 
-    R, K = y.shape[:2]
-    est = np.full((R, K, model.n), np.nan)
-    pos_cov = np.full((R, K, 2, 2), np.nan)
+    K = y.shape[1]
     ranges = np.geomspace(20.0, 1.2 * sc.prior.range[1], 8)
     speeds = np.linspace(*sc.prior.speed, 3)
-    W = window_samples(model, K)
-    k0 = detection_start(model, y, snr_start, W)
-    keys = k0 // GROUP_STEPS
-    if through_peak is not None:   # group by the fit's end too: a batch fits every passage to its latest end
-        keys = keys * K + fit_end(model, y, k0, W, through_peak) // GROUP_STEPS
-    groups = {}
-    for r, key in enumerate(keys):
-        groups.setdefault(int(key), []).append(r)
-    t_init = 0.0
-    for members in groups.values():
-        idx = np.array(members)
-        t1 = time.perf_counter()
-        gi = global_init(model, y[idx], ranges=ranges, speeds=speeds, common_start=True, snr_start=snr_start,
-                         through_peak=through_peak)
-        t_init += time.perf_counter() - t1
-        e, b = track_with_global_init(unit, model, y[idx], gi)
-        est[idx] = e
-        start = int(gi.start[0])
-        pos_cov[idx, start:] = b.selected_pos_cov
-    return est, pos_cov, t_init
+    t1 = time.perf_counter()
+    gi = global_init(model, y, ranges=ranges, speeds=speeds, **options)
+    t_init = time.perf_counter() - t1
+    est, bank = track_with_global_init(unit, model, y, gi)
+    return est, unalign(bank.selected_pos_cov, gi.start, K), t_init
 
 
 def global_init_summary(unit, model, y, truth, sc, snr_start=5.0):
     """The project's tracker on a scenario's runs: global initialiser, then ``unit`` as a bank of its minima."""
     from shipsense.trackers.metrics import position_error
 
-    est, _, _ = track_global(unit, model, y, sc, snr_start)
+    est, _, _ = track_global(unit, model, y, sc, snr_start=snr_start)
     return {"convergence_rate": convergence_rate(est, truth), "selected_mrmse_m": mrmse(est, truth),
             "final_error_median_m": float(np.median(position_error(est, truth)[:, -1])),
             "filter": unit.name, "snr_start": snr_start}
