@@ -16,21 +16,7 @@ import numpy as np
 
 from shipsense.reproduce import wide
 from shipsense.reproduce.common import track_global
-from shipsense.simulator import simulate
 from shipsense.trackers.init import global_init
-from shipsense.trackers.metrics import position_error
-from shipsense.tracking import scenario_tracker
-
-
-def converged(est, truth, ends):
-    """The wide study's rule: error below 10 m over the last 10 % of each passage's own samples."""
-    K = truth.shape[1]
-    k = np.arange(K)[None, :]
-    valid = k <= ends[:, None]
-    err = np.where(valid, position_error(est, truth), np.nan)
-    hold = np.maximum(1, (0.1 * (ends + 1)).astype(int))
-    tail = valid & (k > (ends - hold)[:, None])
-    return np.all(np.where(tail, err < 10.0, True), axis=1)
 
 
 def main(argv=None):
@@ -39,12 +25,7 @@ def main(argv=None):
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args(argv)
     name = "envelope_p2"
-    sc, model = wide.family_scenario(name)
-    unit, _ = scenario_tracker(sc)
-    sim = simulate(sc, runs=args.runs, seed=args.seed, random=True)
-    y = sim.measurements[..., np.isin([c[0] for c in sim.channels], model.array.ids)]
-    truth = model.state_from_truth(sim.truth)
-    ends = wide.passage_ends(truth, model.array.positions[:, :2].mean(axis=0), sc.period)
+    sc, model, unit, y, truth, ends = wide.family_passages(name, args.runs, args.seed)
     full = wide.init_options(name, sc)
     variants = {"first version (no depth prior, 5 refined)": {"snr_start": full["snr_start"]},
                 "depth prior": {"snr_start": full["snr_start"], "z_std": full["z_std"]},
@@ -53,7 +34,7 @@ def main(argv=None):
     iz = model.labels.index("z")
     for label, opts in variants.items():
         est, _, _ = track_global(unit, model, y, sc, **opts)
-        fail = np.flatnonzero(~converged(est, truth, ends))
+        fail = np.flatnonzero(~wide.converged(est, truth, ends)[0])
         print(f"{label}: {1 - fail.size / args.runs:.3f} converged, failures {fail.tolist()}")
         if fail.size:
             gi = global_init(model, y[fail], **grid, **opts)

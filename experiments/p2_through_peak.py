@@ -11,14 +11,10 @@ studies' 12-hypothesis bank's seconds per passage on the same passages.
 import argparse
 import time
 
-import numpy as np
-
 from shipsense.reproduce import wide
 from shipsense.reproduce.common import track_global
-from shipsense.simulator import simulate
 from shipsense.trackers.bank import run_bank
 from shipsense.trackers.init import seed_hypotheses
-from shipsense.tracking import scenario_tracker
 
 
 def main(argv=None):
@@ -28,12 +24,7 @@ def main(argv=None):
     ap.add_argument("--through-peak", type=float, default=0.5)
     args = ap.parse_args(argv)
     name = "envelope_p2"
-    sc, model = wide.family_scenario(name)
-    unit, _ = scenario_tracker(sc)
-    sim = simulate(sc, runs=args.runs, seed=args.seed, random=True)
-    y = sim.measurements[..., np.isin([c[0] for c in sim.channels], model.array.ids)]
-    truth = model.state_from_truth(sim.truth)
-    ends = wide.passage_ends(truth, model.array.positions[:, :2].mean(axis=0), sc.period)
+    sc, model, unit, y, truth, ends = wide.family_passages(name, args.runs, args.seed)
     seeds, P0 = seed_hypotheses(model, y[:, 0], sc.tracker.bank)
     t0 = time.perf_counter()
     run_bank(unit, model, y, seeds, P0)

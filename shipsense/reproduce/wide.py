@@ -118,14 +118,31 @@ def passage_ends(truth, centre, period):
     return np.minimum(np.round(2 * t_cpa / period).astype(int), truth.shape[1] - 1)
 
 
-def _metrics(est, covs_pos, truth, bounds, seconds, ends):
-    K = truth.shape[1]
-    k = np.arange(K)[None, :]
+def family_passages(name, passages, seed):
+    """A family's scenario, model, filter unit, and ``passages`` random passages: y (SI), truth and ends."""
+    sc, model = family_scenario(name)
+    unit, _ = scenario_tracker(sc)
+    sim = simulate(sc, runs=passages, seed=seed, random=True)
+    y = sim.measurements[..., np.isin([c[0] for c in sim.channels], model.array.ids)]
+    truth = model.state_from_truth(sim.truth)
+    ends = passage_ends(truth, model.array.positions[:, :2].mean(axis=0), sc.period)
+    return sc, model, unit, y, truth, ends
+
+
+def converged(est, truth, ends):
+    """The study's rule per passage: error below 10 m over the last 10 % of its own samples; also the
+    position errors (NaN after each passage's end) and the mask of its samples."""
+    k = np.arange(truth.shape[1])[None, :]
     valid = k <= ends[:, None]
     err = np.where(valid, position_error(est, truth), np.nan)
     hold = np.maximum(1, (0.1 * (ends + 1)).astype(int))
     tail = valid & (k > (ends - hold)[:, None])
-    conv = np.all(np.where(tail, err < 10.0, True), axis=1)
+    return np.all(np.where(tail, err < 10.0, True), axis=1), err, valid
+
+
+def _metrics(est, covs_pos, truth, bounds, seconds, ends):
+    k = np.arange(truth.shape[1])[None, :]
+    conv, err, valid = converged(est, truth, ends)
     second = valid & (k >= (ends // 2)[:, None])
     rmse = float(np.sqrt(np.nanmean(np.where(second[conv], err[conv], np.nan) ** 2))) if conv.any() else None
     used = second & conv[:, None]   # the (passage, sample) pairs of the RMSE
@@ -208,14 +225,8 @@ def consistency(runs=100, seed=0, sigma_a=None):
 
 
 def run_family(name, passages, seed):
-    sc, model = family_scenario(name)
+    sc, model, unit, y, truth, ends = family_passages(name, passages, seed)
     opts = init_options(name, sc)
-    unit, _ = scenario_tracker(sc)
-    sim = simulate(sc, runs=passages, seed=seed, random=True)
-    cols = np.isin([c[0] for c in sim.channels], model.array.ids)
-    y = sim.measurements[..., cols]
-    truth = model.state_from_truth(sim.truth)
-    ends = passage_ends(truth, model.array.positions[:, :2].mean(axis=0), sc.period)
     out = {}
     # the source studies' bank
     t0 = time.perf_counter()
