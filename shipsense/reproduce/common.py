@@ -146,25 +146,44 @@ def rmse_plot(out, name, title, times, curves, ylabel="RMSE_k [m]"):
     return out.figure(fig, name)
 
 
-def track_global(unit, model, y, sc, **options):
+def track_global(unit, model, y, sc, refit_peak=None, return_init=False, **options):
     """Global initialiser then the bank, every passage from its own window (one batch).
 
     Returns estimates (R, K, n) SI, position covariances (R, K, 2, 2) (NaN
     inside the fitted stretch, before the bank starts: NEES assesses the
-    bank) and the seconds spent in the initialiser itself.  ``options`` (e.g.
-    ``snr_start``, ``z_std``, ``refine``, ``through_peak``) go to
-    :func:`~shipsense.trackers.init.global_init`.
+    bank) and the seconds spent in the initialiser itself (and, with
+    ``return_init``, the :class:`~shipsense.trackers.init.GlobalInit`).
+    ``options`` (e.g. ``snr_start``, ``z_std``, ``refine``, ``through_peak``)
+    go to :func:`~shipsense.trackers.init.global_init`.  With ``refit_peak``
+    the tracker continues with :func:`refit_stage`.
     """
     from shipsense.trackers.init import global_init, track_with_global_init, unalign
 
-    K = y.shape[1]
     ranges = np.geomspace(20.0, 1.2 * sc.prior.range[1], 8)
     speeds = np.linspace(*sc.prior.speed, 3)
     t1 = time.perf_counter()
     gi = global_init(model, y, ranges=ranges, speeds=speeds, **options)
     t_init = time.perf_counter() - t1
     est, bank = track_with_global_init(unit, model, y, gi)
-    return est, unalign(bank.selected_pos_cov, gi.start, K), t_init
+    cov = unalign(bank.selected_pos_cov, gi.start, y.shape[1])
+    if refit_peak is not None:
+        est, cov = refit_stage(unit, model, y, gi, est, cov, refit_peak, options.get("z_std"))
+    return (est, cov, t_init, gi) if return_init else (est, cov, t_init)
+
+
+def refit_stage(unit, model, y, gi, est, cov, refit_peak, z_std=None):
+    """After the closest approach: each passage re-fitted once its signal has fallen to ``refit_peak`` of
+    its peak (:func:`~shipsense.trackers.init.refit_after_peak`, with the depth prior ``z_std``), then a
+    bank without process noise from the fit.  Returns the estimates and position covariances with the
+    samples from the refit on replaced."""
+    from shipsense.trackers.init import depth_prior, refit_after_peak, track_with_global_init, unalign
+
+    K = y.shape[1]
+    again = refit_after_peak(model, y, gi, est, refit_peak, prior=depth_prior(model, z_std))
+    est2, bank2 = track_with_global_init(unit, model.without_process_noise(), y, again)
+    after = np.arange(K)[None, :] >= again.start[:, None]
+    return (np.where(after[..., None], est2, est),
+            np.where(after[..., None, None], unalign(bank2.selected_pos_cov, again.start, K), cov))
 
 
 def global_init_summary(unit, model, y, truth, sc, snr_start=5.0):

@@ -273,6 +273,19 @@ def _grid_fit_masked(model, yw_all, offset, G, std, max_bytes, clamp):
     return chi2, params
 
 
+def depth_prior(model, z_std, source_z=None):
+    """Gaussian prior ``(mean, information)`` (internal units) on the source depth around ``source_z``
+    (default the model's) with standard deviation ``z_std`` (m), for :func:`fit_passages`; None when
+    ``z_std`` is None or the model has no depth."""
+    if z_std is None or "z" not in model.labels:
+        return None
+    iz = model.labels.index("z")
+    mean, weight = np.zeros(model.n), np.zeros(model.n)
+    mean[iz] = (model.source_z if source_z is None else source_z) / model.x_scale[iz]
+    weight[iz] = (model.x_scale[iz] / z_std) ** 2
+    return mean, weight
+
+
 def _distinct(chi2, positions, M, distinct_m):
     """Indices of the ``M`` lowest ``chi2`` whose ``positions`` (N, 2) are more than ``distinct_m`` apart.
 
@@ -385,13 +398,7 @@ def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, c
         th = grid[chosen].copy()
         th[:, slots] = params[r, chosen]
         starts[r] = th
-    prior = None
-    if z_std is not None and "z" in model.labels:
-        iz = model.labels.index("z")
-        mean, weight = np.zeros(model.n), np.zeros(model.n)
-        mean[iz] = (model.source_z if source_z is None else source_z) / model.x_scale[iz]
-        weight[iz] = (model.x_scale[iz] / z_std) ** 2
-        prior = (mean, weight)
+    prior = depth_prior(model, z_std, source_z)
     # refine every kept minimum by a batch Levenberg-Marquardt fit over the whole window
     yfit = y[np.arange(R)[:, None], k0[:, None] + np.arange(window)[None, :]]           # (R, W, m)
     theta, chi2_fit, info = fit_passages(model, np.repeat(yfit, M, axis=0), starts.reshape(R * M, -1),
@@ -472,3 +479,44 @@ def unalign(values, start, K, fill=np.nan):
     rows = np.broadcast_to(np.arange(R)[:, None], src.shape)
     out[rows[inside], src[inside]] = values[inside]
     return out
+
+
+def refit_after_peak(model, measurements, gi: GlobalInit, estimates, through_peak=0.5, prior=None, inflate=1.0):
+    """One hypothesis per passage for a second bank after the closest approach (causal).
+
+    At each passage's sample ``e`` where the strongest channel has fallen
+    below ``through_peak`` of its peak since the window start (:func:`fit_end`;
+    passages that never get there are refitted at their last sample), the
+    first bank's estimate at ``e - 1`` is moved back to the window start
+    ``gi.k0`` along its constant-velocity track and re-fitted by
+    Levenberg–Marquardt to every sample from ``gi.k0`` to ``e - 1``: a batch
+    fit across the closest approach, warm-started from a track that has
+    followed it (a fit of that stretch from the window's solution falls into
+    local minima more often, EXPERIMENTS.md).  Returns a :class:`GlobalInit`
+    starting at ``e`` with the fit and its covariance (``inflate`` times the
+    inverse Gauss–Newton information); ``prior`` as for :func:`fit_passages`.
+    """
+    from shipsense.trackers.batchfit import fit_passages, powers
+
+    y_si = np.asarray(measurements, dtype=float)
+    R, K, _ = y_si.shape
+    y = y_si / model.y_scale
+    k0 = np.asarray(gi.k0, dtype=int)
+    end = np.minimum(fit_end(model, y_si, k0, np.asarray(gi.start) - k0, through_peak), K - 1)
+    end = np.where(end > np.asarray(gi.start), end, K - 1)    # never before the first bank has started
+    Wf = int((end - k0).max())
+    xs = model.x_scale
+    last = np.asarray(estimates)[np.arange(R), end - 1] / xs                         # (R, n) at e - 1
+    back = powers(np.linalg.inv(model.A), Wf)[end - 1 - k0]                          # A^-(e-1-k0)
+    theta = np.einsum("rij,rj->ri", back, last)
+    ks = k0[:, None] + np.arange(Wf)[None, :]
+    yfit = np.where((ks < end[:, None])[..., None], y[np.arange(R)[:, None], np.minimum(ks, K - 1)], np.nan)
+    theta, chi2, info = fit_passages(model, yfit, theta, Wf, return_information=True, prior=prior)
+    cov = np.linalg.pinv(info, hermitian=True) * inflate
+    Ak = powers(model.A, Wf + 1)
+    Ae = Ak[end - k0]                                                                  # (R, n, n)
+    seeds = np.einsum("rij,rj->ri", Ae, theta)
+    P0 = Ae @ cov @ np.swapaxes(Ae, -1, -2)
+    traj = np.einsum("kij,rj->rki", Ak[:Wf], theta)
+    return GlobalInit(start=end, seeds=(seeds * xs)[:, None], P0=(P0 * np.outer(xs, xs))[:, None],
+                      loglik=-0.5 * chi2[:, None], window=(traj * xs)[:, None], k0=k0)

@@ -24,7 +24,7 @@ array's channels.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -104,6 +104,10 @@ class FieldModel:
                           doc="The bearing channels as a slice or indices (None if there are none).")
     x_scale = property(lambda self: self._d["x_scale"], doc="SI value of one internal unit per state component.")
     y_scale = property(lambda self: self._d["y_scale"], doc="SI value of one internal unit per channel.")
+
+    def without_process_noise(self) -> FieldModel:
+        """The same model with Q = 0: a straight, constant-velocity passage with a constant source."""
+        return replace(self, Q=np.zeros_like(self.Q))
 
     @property
     def state_bounds(self):

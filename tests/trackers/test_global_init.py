@@ -158,3 +158,32 @@ def test_refining_more_grid_minima_finds_a_narrow_global_minimum():
         best_ll.append(gi.loglik[0, b])
     assert best_ll[1] >= best_ll[0]
     assert errs[0] > 3.0 and errs[1] < 0.5, errs
+
+
+def test_refit_after_the_peak_is_causal_and_lands_on_the_passage():
+    from shipsense.trackers.init import detection_start, fit_end, refit_after_peak
+
+    sc = load_scenario("S2")
+    model = model_from_scenario(sc, sensors=["M1", "M2"])
+    sim = simulate(sc, runs=4, seed=5, random=True)
+    y, truth = sim.measurements[..., :6], model.state_from_truth(sim.truth)
+    K = y.shape[1]
+    gi = global_init(model, y, ranges=np.geomspace(20, 150, 8), speeds=np.linspace(3, 7, 3))
+    est, _ = track_with_global_init(get_filter("ukf"), model, y, gi)
+    again = refit_after_peak(model, y, gi, est, 0.5)
+    end = fit_end(model, y, gi.k0, gi.start - gi.k0, 0.5)
+    np.testing.assert_array_equal(again.start, np.where(end > gi.start, end, K - 1))
+    assert np.all(again.start > gi.start) and np.all(detection_start(model, y, 5.0) <= gi.k0)
+    err = np.hypot(*(again.seeds[:, 0, :2] - truth[np.arange(4), again.start, :2]).T)
+    assert np.all(err < 0.5), err                       # a batch fit across the closest approach
+    assert np.all(np.linalg.eigvalsh(again.P0[:, 0]) > 0)
+    # causal: samples after the refit's start (it is decided on its sample) and the estimates from it on
+    # do not change it
+    late = np.arange(K)[None, :] > again.start[:, None]
+    y2 = np.where(late[..., None], y + 1e-6, y)
+    est2 = np.where((np.arange(K)[None, :] >= again.start[:, None])[..., None], est + 5.0, est)
+    other = refit_after_peak(model, y2, gi, est2, 0.5)
+    np.testing.assert_array_equal(other.start, again.start)
+    np.testing.assert_allclose(other.seeds, again.seeds, rtol=1e-12, atol=1e-12)
+    # the second bank runs without process noise
+    assert not np.any(model.without_process_noise().Q) and np.any(model.Q)
