@@ -146,7 +146,7 @@ def rmse_plot(out, name, title, times, curves, ylabel="RMSE_k [m]"):
     return out.figure(fig, name)
 
 
-def track_global(unit, model, y, sc, refit_peak=None, return_init=False, **options):
+def track_global(unit, model, y, sc, *, refit_peak=None, return_init=False, **options):
     """Global initialiser then the bank, every passage from its own window (one batch).
 
     Returns estimates (R, K, n) SI, position covariances (R, K, 2, 2) (NaN
