@@ -17,6 +17,7 @@ import numpy as np
 from shipsense.reproduce import wide
 from shipsense.reproduce.common import refit_stage, track_global
 from shipsense.trackers.init import depth_prior, refit_after_peak, seed_hypotheses
+from shipsense.trackers.metrics import nees
 
 
 def main(argv=None):
@@ -37,8 +38,7 @@ def main(argv=None):
     conv, err, valid = wide.converged(est2, truth, ends)
     k = np.arange(y.shape[1])[None, :]
     second = valid & (k >= (ends // 2)[:, None]) & conv[:, None]
-    d = est2[..., :2] - truth[..., :2]
-    q = np.einsum("rki,rkij,rkj->rk", d, np.linalg.inv(np.where(np.isfinite(cov2), cov2, np.eye(2))), d)
+    q = nees(est2, np.where(np.isfinite(cov2), cov2, np.eye(2)), truth)   # masked to finite covariances below
     print(f"{args.family}, {args.runs} passages, {conv.mean():.3f} converged")
     after = k >= start[:, None]
     parts = {"second halves": second, "closest approach to refit (first bank)": second & ~after,
