@@ -124,6 +124,10 @@ class GlobalInit:
         The fitted trajectories over the window (estimates before ``start``).
     k0 : ndarray of int, shape (R,)
         First sample of the window (the detection).
+    fit_ok : ndarray of bool, shape (R,), optional
+        Whether the passage's best fit passes the chi-square goodness-of-fit
+        test (:func:`global_init`'s ``gof``); a failed passage is still seeded
+        from its best fit, with the covariance scaled by its reduced chi-square.
     """
 
     start: np.ndarray
@@ -132,6 +136,7 @@ class GlobalInit:
     loglik: np.ndarray
     window: np.ndarray
     k0: np.ndarray
+    fit_ok: np.ndarray | None = None
 
 
 def _parameter_slots(model):
@@ -286,13 +291,42 @@ def depth_prior(model, z_std, source_z=None):
     return mean, weight
 
 
+def _refine_stages(refine, keep):
+    """Cumulative numbers of grid minima refined per stage (each at least ``keep``, increasing)."""
+    if refine is None:
+        return [keep]
+    stages = [int(refine)] if np.isscalar(refine) else [int(r) for r in refine]
+    if any(r < 1 for r in stages) or any(b <= a for a, b in zip(stages, stages[1:])):
+        raise ValueError(f"refine must be a positive count or increasing counts, got {refine!r}")
+    return [max(keep, r) for r in stages]
+
+
+def _dof(model, yfit, prior):
+    """Degrees of freedom (R,) of passage fits to ``yfit`` (R, W, m): samples present, plus the prior's
+    rows, minus the states."""
+    rows = 0 if prior is None else int(np.count_nonzero(prior[1]))
+    return np.maximum(np.isfinite(yfit).sum(axis=(1, 2)) + rows - model.n, 1)
+
+
+def _chi2_limit(model, yfit, prior, gof):
+    """Chi-square (R,) above which a fit to ``yfit`` fails the goodness-of-fit test at level ``gof``."""
+    from scipy import stats
+
+    if gof is None:
+        return np.full(yfit.shape[0], np.inf)
+    return stats.chi2.isf(gof, _dof(model, yfit, prior))
+
+
 def _distinct(chi2, positions, M, distinct_m):
     """Indices of the ``M`` lowest ``chi2`` whose ``positions`` (N, 2) are more than ``distinct_m`` apart.
 
-    A short greedy pass per passage; when fewer than ``M`` are distinct the best one fills the rest.
+    A short greedy pass per passage over the finite ``chi2``; when fewer than ``M`` are distinct the
+    best one fills the rest.
     """
     chosen = []
     for c in np.argsort(chi2):
+        if not np.isfinite(chi2[c]):   # not fitted (staged refinement) or failed
+            break
         if all(np.hypot(*(positions[c] - positions[o])) > distinct_m for o in chosen):
             chosen.append(c)
             if len(chosen) == M:
@@ -302,7 +336,8 @@ def _distinct(chi2, positions, M, distinct_m):
 
 def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, course_step_deg=30.0,
                 window_s=15.0, grid_samples=16, keep=5, distinct_m=15.0, snr_start=5.0, inflate=2.0,
-                source_z=None, common_start=False, max_bytes=512e6, through_peak=None, z_std=None, refine=None):
+                source_z=None, common_start=False, max_bytes=512e6, through_peak=None, z_std=None, refine=None,
+                gof=0.01):
     """Global initialisation of passages from a grid search with the moment eliminated in closed form.
 
     Parameters
@@ -320,11 +355,24 @@ def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, c
     keep : int
         Distinct minima kept per passage (M): the best ones more than ``distinct_m`` apart (5: on the
         wide study, 4 lost two-magnetometer passages and 6 cost more than the bank, EXPERIMENTS.md).
-    refine : int, optional
+    refine : int or sequence of int, optional
         Distinct grid minima refined by the batch fit (default ``keep``); the
         best ``keep`` distinct refined fits seed the bank.  At high SNR the
         global minimum's basin can be narrower than the grid spacing, so it
         may not be among the ``keep`` best grid points (EXPERIMENTS.md).
+        Increasing counts, e.g. ``(5, 20, 60)``, refine in stages: the first
+        count for every passage, each further one only for the passages whose
+        best fit so far fails the chi-square test (``gof``), so that the cost
+        goes to the passages that need it.
+    gof : float or None
+        Level of the chi-square goodness-of-fit test of the fits (default
+        1 %): a fit whose chi-square exceeds the ``1 - gof`` quantile for
+        its degrees of freedom has not explained the data to the noise
+        level (a local minimum, or a source the model does not describe).
+        At 0.1 % a single-magnetometer fit 21 m off passed (EXPERIMENTS.md).
+        It drives the staged ``refine`` and gives ``GlobalInit.fit_ok``.
+        Every fit's covariance is also scaled by its reduced chi-square
+        where that exceeds one (the Birge ratio).
     snr_start : float
         The window starts at the first sample with some channel above this SNR (adaptive start).
     inflate : float
@@ -391,7 +439,8 @@ def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, c
     Ak = powers(model.A, window)
     mid = Ak[window // 2][:2]
     mid_grid = grid @ mid.T                                                              # (C, 2)
-    M = max(keep, refine or keep)
+    stages = _refine_stages(refine, keep)
+    M = stages[-1]
     starts = np.zeros((R, M, model.n))
     for r in range(R):
         chosen = _distinct(chi2[r], mid_grid, M, distinct_m)
@@ -399,16 +448,29 @@ def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, c
         th[:, slots] = params[r, chosen]
         starts[r] = th
     prior = depth_prior(model, z_std, source_z)
-    # refine every kept minimum by a batch Levenberg-Marquardt fit over the whole window
+    # refine grid minima by batch Levenberg-Marquardt fits over the whole window, stage by stage: a
+    # passage whose best fit so far fails the chi-square test gets the next stage's minima
     yfit = y[np.arange(R)[:, None], k0[:, None] + np.arange(window)[None, :]]           # (R, W, m)
-    theta, chi2_fit, info = fit_passages(model, np.repeat(yfit, M, axis=0), starts.reshape(R * M, -1),
-                                         window, return_information=True, prior=prior)
+    limit = _chi2_limit(model, yfit, prior, gof)
+    theta = np.zeros((R, M, model.n))
+    chi2_fit = np.full((R, M), np.inf)
+    info = np.zeros((R, M, model.n, model.n))
+    todo, lo = np.arange(R), 0
+    for hi in stages:
+        t, c, j = fit_passages(model, np.repeat(yfit[todo], hi - lo, axis=0), starts[todo, lo:hi].reshape(-1, model.n),
+                               window, return_information=True, prior=prior)
+        theta[todo, lo:hi] = t.reshape(todo.size, hi - lo, -1)
+        chi2_fit[todo, lo:hi] = np.where(np.isfinite(c), c, np.inf).reshape(todo.size, hi - lo)
+        info[todo, lo:hi] = j.reshape(todo.size, hi - lo, model.n, model.n)
+        todo, lo = np.flatnonzero(chi2_fit.min(axis=1) > limit), hi
+        if todo.size == 0:
+            break
     if M > keep:   # the best ``keep`` distinct refined fits seed the bank
-        theta, chi2_fit, info = (a.reshape((R, M) + a.shape[1:]) for a in (theta, chi2_fit, info))
         sel = np.array([_distinct(chi2_fit[r], theta[r] @ mid.T, keep, distinct_m) for r in range(R)])
         pick = (np.arange(R)[:, None], sel)
-        theta, chi2_fit, info = (a[pick].reshape((R * keep,) + a.shape[2:]) for a in (theta, chi2_fit, info))
+        theta, chi2_fit, info = (a[pick] for a in (theta, chi2_fit, info))
         M = keep
+    theta, chi2_fit, info = (a.reshape((R * M,) + a.shape[2:]) for a in (theta, chi2_fit, info))
     end = fit_end(model, y_si, k0, window, through_peak)
     if common_start:
         end = np.full(R, end.max())
@@ -419,8 +481,12 @@ def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, c
         yfit = np.where((ks < end[:, None])[..., None], yfit, np.nan)                   # each passage to its end
         theta, chi2_fit, info = fit_passages(model, np.repeat(yfit, M, axis=0), theta, Wf, return_information=True,
                                              prior=prior)
-    theta = theta.reshape(R, M, -1)
-    cov = np.linalg.pinv(info, hermitian=True).reshape(R, M, model.n, model.n) * inflate
+        limit = _chi2_limit(model, yfit, prior, gof)
+    theta, chi2_fit = theta.reshape(R, M, -1), chi2_fit.reshape(R, M)
+    # the fit's covariance, scaled by its reduced chi-square where that exceeds 1 (the Birge ratio: a
+    # fit that does not explain the data to the noise level claims no more than it explains)
+    birge = np.maximum(1.0, chi2_fit / _dof(model, yfit, prior)[:, None])
+    cov = np.linalg.pinv(info, hermitian=True).reshape(R, M, model.n, model.n) * (inflate * birge)[..., None, None]
     # propagate to the first sample after the fitted stretch
     Ak = powers(model.A, Wf + 1)
     Aw = Ak[np.minimum(end - k0, Wf)]                                                   # (R, n, n)
@@ -429,7 +495,7 @@ def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, c
     traj = np.einsum("kij,rmj->rmki", Ak[:Wf], theta)
     xs = model.x_scale
     return GlobalInit(start=end, seeds=seeds * xs, P0=P0 * np.outer(xs, xs),
-                      loglik=-0.5 * chi2_fit.reshape(R, M), window=traj * xs, k0=k0)
+                      loglik=-0.5 * chi2_fit, window=traj * xs, k0=k0, fit_ok=chi2_fit.min(axis=1) <= limit)
 
 
 def track_with_global_init(unit, model, measurements, gi: GlobalInit):
@@ -481,7 +547,8 @@ def unalign(values, start, K, fill=np.nan):
     return out
 
 
-def refit_after_peak(model, measurements, gi: GlobalInit, estimates, through_peak=0.5, prior=None, inflate=1.0):
+def refit_after_peak(model, measurements, gi: GlobalInit, estimates, through_peak=0.5, prior=None, inflate=1.0,
+                     gof=0.01):
     """One hypothesis per passage for a second bank after the closest approach (causal).
 
     At each passage's sample ``e`` where the strongest channel has fallen
@@ -494,7 +561,9 @@ def refit_after_peak(model, measurements, gi: GlobalInit, estimates, through_pea
     followed it (a fit of that stretch from the window's solution falls into
     local minima more often, EXPERIMENTS.md).  Returns a :class:`GlobalInit`
     starting at ``e`` with the fit and its covariance (``inflate`` times the
-    inverse Gauss–Newton information); ``prior`` as for :func:`fit_passages`.
+    inverse Gauss–Newton information, times the reduced chi-square where that
+    exceeds one) and ``fit_ok`` from the chi-square test at level ``gof``
+    (as in :func:`global_init`); ``prior`` as for :func:`fit_passages`.
     """
     from shipsense.trackers.batchfit import fit_passages, powers
 
@@ -512,11 +581,13 @@ def refit_after_peak(model, measurements, gi: GlobalInit, estimates, through_pea
     ks = k0[:, None] + np.arange(Wf)[None, :]
     yfit = np.where((ks < end[:, None])[..., None], y[np.arange(R)[:, None], np.minimum(ks, K - 1)], np.nan)
     theta, chi2, info = fit_passages(model, yfit, theta, Wf, return_information=True, prior=prior)
-    cov = np.linalg.pinv(info, hermitian=True) * inflate
+    birge = np.maximum(1.0, chi2 / _dof(model, yfit, prior))
+    cov = np.linalg.pinv(info, hermitian=True) * (inflate * birge)[:, None, None]
     Ak = powers(model.A, Wf + 1)
     Ae = Ak[end - k0]                                                                  # (R, n, n)
     seeds = np.einsum("rij,rj->ri", Ae, theta)
     P0 = Ae @ cov @ np.swapaxes(Ae, -1, -2)
     traj = np.einsum("kij,rj->rki", Ak[:Wf], theta)
     return GlobalInit(start=end, seeds=(seeds * xs)[:, None], P0=(P0 * np.outer(xs, xs))[:, None],
-                      loglik=-0.5 * chi2[:, None], window=(traj * xs)[:, None], k0=k0)
+                      loglik=-0.5 * chi2[:, None], window=(traj * xs)[:, None], k0=k0,
+                      fit_ok=chi2 <= _chi2_limit(model, yfit, prior, gof))
