@@ -112,7 +112,7 @@ def test_reproduce_wide_writes_the_documented_summary_keys(tmp_path):
         for method in ("miv_bank", "global_init", "global_init_refit"):
             assert {"convergence_rate", "mrmse_r_m", "rmse_over_pcrlb", "nees_mean",
                     "seconds_per_passage"} <= set(summary[family][method])
-    parts = ("consistency", "consistency_without_refit", "consistency_low_process_noise")
+    parts = ("consistency", "consistency_without_refit", "consistency_default_process_noise")
     for c in (summary[part][name] for part in parts for name in ("S0", "S1-P2", "S2")):
         lo, hi = c["band"]
         assert 0 < lo < 2 < hi and c["consistent"] == (c["nees_mean"] is not None and lo <= c["nees_mean"] <= hi)
