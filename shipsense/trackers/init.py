@@ -127,7 +127,7 @@ class GlobalInit:
     fit_ok : ndarray of bool, shape (R,), optional
         Whether the passage's best fit passes the chi-square goodness-of-fit
         test (:func:`global_init`'s ``gof``); a failed passage is still seeded
-        from its best fit, with the covariance scaled by its reduced chi-square.
+        from its best fit.
     """
 
     start: np.ndarray
@@ -371,8 +371,10 @@ def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, c
         level (a local minimum, or a source the model does not describe).
         At 0.1 % a single-magnetometer fit 21 m off passed (EXPERIMENTS.md).
         It drives the staged ``refine`` and gives ``GlobalInit.fit_ok``.
-        Every fit's covariance is also scaled by its reduced chi-square
-        where that exceeds one (the Birge ratio).
+        (Scaling a failed fit's covariance by its reduced chi-square, the
+        Birge ratio, was tried and dropped: on 500 two-magnetometer passages
+        the first bank from the larger covariances went from 3.8x to 5.2x
+        the constant-velocity bound, EXPERIMENTS.md.)
     snr_start : float
         The window starts at the first sample with some channel above this SNR (adaptive start).
     inflate : float
@@ -483,10 +485,7 @@ def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, c
                                              prior=prior)
         limit = _chi2_limit(model, yfit, prior, gof)
     theta, chi2_fit = theta.reshape(R, M, -1), chi2_fit.reshape(R, M)
-    # the fit's covariance, scaled by its reduced chi-square where that exceeds 1 (the Birge ratio: a
-    # fit that does not explain the data to the noise level claims no more than it explains)
-    birge = np.maximum(1.0, chi2_fit / _dof(model, yfit, prior)[:, None])
-    cov = np.linalg.pinv(info, hermitian=True).reshape(R, M, model.n, model.n) * (inflate * birge)[..., None, None]
+    cov = np.linalg.pinv(info, hermitian=True).reshape(R, M, model.n, model.n) * inflate
     # propagate to the first sample after the fitted stretch
     Ak = powers(model.A, Wf + 1)
     Aw = Ak[np.minimum(end - k0, Wf)]                                                   # (R, n, n)
@@ -561,8 +560,7 @@ def refit_after_peak(model, measurements, gi: GlobalInit, estimates, through_pea
     followed it (a fit of that stretch from the window's solution falls into
     local minima more often, EXPERIMENTS.md).  Returns a :class:`GlobalInit`
     starting at ``e`` with the fit and its covariance (``inflate`` times the
-    inverse Gauss–Newton information, times the reduced chi-square where that
-    exceeds one) and ``fit_ok`` from the chi-square test at level ``gof``
+    inverse Gauss–Newton information) and ``fit_ok`` from the chi-square test at level ``gof``
     (as in :func:`global_init`); ``prior`` as for :func:`fit_passages`.
     """
     from shipsense.trackers.batchfit import fit_passages, powers
@@ -581,8 +579,7 @@ def refit_after_peak(model, measurements, gi: GlobalInit, estimates, through_pea
     ks = k0[:, None] + np.arange(Wf)[None, :]
     yfit = np.where((ks < end[:, None])[..., None], y[np.arange(R)[:, None], np.minimum(ks, K - 1)], np.nan)
     theta, chi2, info = fit_passages(model, yfit, theta, Wf, return_information=True, prior=prior)
-    birge = np.maximum(1.0, chi2 / _dof(model, yfit, prior))
-    cov = np.linalg.pinv(info, hermitian=True) * (inflate * birge)[:, None, None]
+    cov = np.linalg.pinv(info, hermitian=True) * inflate
     Ak = powers(model.A, Wf + 1)
     Ae = Ak[end - k0]                                                                  # (R, n, n)
     seeds = np.einsum("rij,rj->ri", Ae, theta)
