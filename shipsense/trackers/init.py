@@ -559,32 +559,12 @@ def refit_after_peak(model, measurements, gi: GlobalInit, estimates, through_pea
     fit across the closest approach, warm-started from a track that has
     followed it (a fit of that stretch from the window's solution falls into
     local minima more often, EXPERIMENTS.md).  Returns a :class:`GlobalInit`
-    starting at ``e`` with the fit and its covariance (``inflate`` times the
-    inverse Gauss–Newton information) and ``fit_ok`` from the chi-square test at level ``gof``
-    (as in :func:`global_init`); ``prior`` as for :func:`fit_passages`.
+    starting at ``e`` (:func:`~shipsense.trackers.refit.refit_at`: the fit,
+    ``inflate`` times its inverse Gauss–Newton information, and ``fit_ok``
+    from the chi-square test at level ``gof``); ``prior`` as for
+    :func:`fit_passages`.
     """
-    from shipsense.trackers.batchfit import fit_passages, powers
+    from shipsense.trackers.refit import peak_refit_sample, refit_at
 
-    y_si = np.asarray(measurements, dtype=float)
-    R, K, _ = y_si.shape
-    y = y_si / model.y_scale
-    k0 = np.asarray(gi.k0, dtype=int)
-    end = np.minimum(fit_end(model, y_si, k0, np.asarray(gi.start) - k0, through_peak), K - 1)
-    end = np.where(end > np.asarray(gi.start), end, K - 1)    # never before the first bank has started
-    Wf = int((end - k0).max())
-    xs = model.x_scale
-    last = np.asarray(estimates)[np.arange(R), end - 1] / xs                         # (R, n) at e - 1
-    back = powers(np.linalg.inv(model.A), Wf)[end - 1 - k0]                          # A^-(e-1-k0)
-    theta = np.einsum("rij,rj->ri", back, last)
-    ks = k0[:, None] + np.arange(Wf)[None, :]
-    yfit = np.where((ks < end[:, None])[..., None], y[np.arange(R)[:, None], np.minimum(ks, K - 1)], np.nan)
-    theta, chi2, info = fit_passages(model, yfit, theta, Wf, return_information=True, prior=prior)
-    cov = np.linalg.pinv(info, hermitian=True) * inflate
-    Ak = powers(model.A, Wf + 1)
-    Ae = Ak[end - k0]                                                                  # (R, n, n)
-    seeds = np.einsum("rij,rj->ri", Ae, theta)
-    P0 = Ae @ cov @ np.swapaxes(Ae, -1, -2)
-    traj = np.einsum("kij,rj->rki", Ak[:Wf], theta)
-    return GlobalInit(start=end, seeds=(seeds * xs)[:, None], P0=(P0 * np.outer(xs, xs))[:, None],
-                      loglik=-0.5 * chi2[:, None], window=(traj * xs)[:, None], k0=k0,
-                      fit_ok=chi2 <= _chi2_limit(model, yfit, prior, gof))
+    end = peak_refit_sample(model, measurements, gi.k0, gi.start, through_peak)
+    return refit_at(model, measurements, gi, estimates, end, prior=prior, inflate=inflate, gof=gof)

@@ -1,0 +1,95 @@
+"""Batch refits and the tracker that restarts its bank from them."""
+
+import numpy as np
+import pytest
+
+from shipsense import load_scenario, simulate
+from shipsense.trackers.filters import get_filter
+from shipsense.trackers.init import global_init, track_with_global_init
+from shipsense.trackers.models import model_from_scenario
+from shipsense.trackers.refit import divergence_alarm, refit_at, track_with_restarts
+
+
+def test_divergence_alarm_fires_after_the_first_window_above_the_limit():
+    K, w = 40, 5
+    nis = np.ones((4, K))
+    nis[0, 20:25] = 4.0               # the window 19..23 is the first to average above 3 (3.4): restart at 24
+    nis[1, 20:25] = 2.9               # below the limit of 3
+    nis[2, 5:10] = 10.0               # before the bank's start (12): not its innovations
+    nis[3, K - 1] = 20.0              # only the window ending on the last sample: nothing left to restart
+    start = np.array([0, 0, 12, 0])
+    np.testing.assert_array_equal(divergence_alarm(nis, start, w, 3.0), [24, K, K, K])
+    # missing samples: a window counts when at least half of it (2 of 5) is measured
+    gappy = np.full((2, K), np.nan)
+    gappy[:, 30] = 9.0
+    gappy[0, 32] = 9.0
+    np.testing.assert_array_equal(divergence_alarm(gappy, [0, 0], w, 3.0), [33, K])
+
+
+def _s2(runs=4, seed=5):
+    sc = load_scenario("S2")
+    model = model_from_scenario(sc, sensors=["M1", "M2"]).without_process_noise()
+    sim = simulate(sc, runs=runs, seed=seed, random=True)
+    y, truth = sim.measurements[..., :6], model.state_from_truth(sim.truth)
+    gi = global_init(model, y, ranges=np.geomspace(20, 150, 8), speeds=np.linspace(3, 7, 3))
+    return model, y, truth, gi
+
+
+def test_without_triggers_it_is_the_bank_and_with_them_it_is_causal():
+    model, y, truth, gi = _s2()
+    ukf = get_filter("ukf")
+    est0, bank = track_with_global_init(ukf, model, y, gi)
+    est, cov, restarts = track_with_restarts(ukf, model, y, gi, through_peak=None, nis_limit=np.inf)
+    np.testing.assert_array_equal(est, est0)
+    assert not restarts.any()
+    est, cov, restarts = track_with_restarts(ukf, model, y, gi)
+    assert restarts.min() >= 1                          # the refit after the closest approach
+    err = np.hypot(*(est[:, -1, :2] - truth[:, -1, :2]).T)
+    assert np.all(err < 0.5), err
+    # causal: changing the samples after k leaves every estimate up to k (from the bank's start on) alone
+    K = y.shape[1]
+    k = int(gi.start.max()) + (K - int(gi.start.max())) // 2
+    y2 = y.copy()
+    y2[:, k + 1:] += 3e-8
+    est2, cov2, _ = track_with_restarts(ukf, model, y2, gi)
+    mine = (np.arange(K)[None, :] >= gi.start[:, None]) & (np.arange(K)[None, :] <= k)
+    np.testing.assert_array_equal(est2[mine], est[mine])
+    np.testing.assert_array_equal(cov2[mine], cov[mine])
+    assert not np.array_equal(est2[:, k + 1:], est[:, k + 1:])
+
+
+def test_a_diverged_bank_is_restarted_from_a_refit():
+    """Seeds moved 30 m off with a covariance of centimetres: the bank without restarts stays off; the
+    divergence alarm restarts it from a multistart refit that finds the passage."""
+    from dataclasses import replace
+
+    model, y, truth, gi = _s2()
+    bad = gi.seeds.copy()
+    bad[..., 0] += 30.0
+    P0 = np.broadcast_to(np.diag([1e-4, 1e-4, 1e-4, 1e-4, 1e-12, 1e-12, 1e-12]), gi.P0.shape).copy()
+    wrong = replace(gi, seeds=bad, P0=P0)
+    ukf = get_filter("ukf")
+    K = y.shape[1]
+    est0, _, _ = track_with_restarts(ukf, model, y, wrong, through_peak=None, nis_limit=np.inf)
+    est, _, restarts = track_with_restarts(ukf, model, y, wrong, through_peak=None)
+    k = np.arange(K)
+    late = k >= K - 10
+    err0 = np.hypot(*(est0[:, late, :2] - truth[:, late, :2]).transpose(2, 0, 1))
+    err = np.hypot(*(est[:, late, :2] - truth[:, late, :2]).transpose(2, 0, 1))
+    assert np.all(err0.max(axis=1) > 5.0), err0.max(axis=1)
+    assert np.all(restarts >= 1) and np.all(err.max(axis=1) < 1.0), (restarts, err.max(axis=1))
+
+
+def test_multistart_refit_leaves_a_wrong_basin():
+    model, y, truth, gi = _s2()
+    R, K = y.shape[:2]
+    at = np.full(R, K - 5)
+    wrong = truth.copy()
+    wrong[..., 0] = -wrong[..., 0]                      # a track mirrored across the array's y axis
+    one = refit_at(model, y, gi, wrong, at)
+    many = refit_at(model, y, gi, wrong, at, multistart=np.ones(R, dtype=bool))
+    assert np.all(many.loglik <= 0) and np.all(many.loglik >= one.loglik)
+    err = np.hypot(*(many.seeds[:, 0, :2] - truth[np.arange(R), at, :2]).T)
+    assert np.all(err < 0.5) and many.fit_ok.all(), err
+    with pytest.raises(ValueError, match="refit samples"):
+        refit_at(model, y, gi, wrong, np.full(R, K))
