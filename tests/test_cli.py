@@ -109,10 +109,10 @@ def test_reproduce_wide_writes_the_documented_summary_keys(tmp_path):
     assert main(["reproduce", "wide", "--runs", "4", "--out", str(tmp_path)]) == 0
     summary = json.loads((tmp_path / "summary.json").read_text())
     for family in ("one_magnetometer", "two_magnetometers", "envelope_p2"):
-        for method in ("miv_bank", "global_init", "global_init_refit"):
+        for method in ("miv_bank", "global_init", "global_init_refit", "global_init_restarts"):
             assert {"convergence_rate", "mrmse_r_m", "rmse_over_pcrlb", "nees_mean",
                     "seconds_per_passage"} <= set(summary[family][method])
-    parts = ("consistency", "consistency_without_refit", "consistency_default_process_noise")
+    parts = ("consistency", "consistency_dwna", "consistency_default_process_noise")
     for c in (summary[part][name] for part in parts for name in ("S0", "S1-P2", "S2")):
         lo, hi = c["band"]
         assert 0 < lo < 2 < hi and c["consistent"] == (c["nees_mean"] is not None and lo <= c["nees_mean"] <= hi)

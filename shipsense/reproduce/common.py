@@ -171,6 +171,28 @@ def track_global(unit, model, y, sc, *, refit_peak=None, return_init=False, **op
     return (est, cov, t_init, gi) if return_init else (est, cov, t_init)
 
 
+def track_restarting(unit, model, y, sc, *, return_init=False, **options):
+    """The project's tracker: a constant-velocity model without process noise, the global initialiser, and
+    the bank restarted from batch refits after the closest approach and on divergence alarms
+    (:func:`~shipsense.trackers.refit.track_with_restarts`).
+
+    Returns estimates (R, K, n) SI, position covariances (R, K, 2, 2) (NaN before the bank starts), the
+    initialiser's seconds, the restarts per passage (R,) (and, with ``return_init``, the
+    :class:`~shipsense.trackers.init.GlobalInit`).  ``options`` go to the initialiser.
+    """
+    from shipsense.trackers.init import depth_prior, global_init
+    from shipsense.trackers.refit import track_with_restarts
+
+    still = model.without_process_noise()
+    ranges = np.geomspace(20.0, 1.2 * sc.prior.range[1], 8)
+    speeds = np.linspace(*sc.prior.speed, 3)
+    t1 = time.perf_counter()
+    gi = global_init(still, y, ranges=ranges, speeds=speeds, **options)
+    t_init = time.perf_counter() - t1
+    est, cov, restarts = track_with_restarts(unit, still, y, gi, prior=depth_prior(still, options.get("z_std")))
+    return (est, cov, t_init, restarts, gi) if return_init else (est, cov, t_init, restarts)
+
+
 def refit_stage(unit, model, y, gi, est, cov, refit_peak, z_std=None):
     """After the closest approach: each passage re-fitted once its signal has fallen to ``refit_peak`` of
     its peak (:func:`~shipsense.trackers.init.refit_after_peak`, with the depth prior ``z_std``), then a

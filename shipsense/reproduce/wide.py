@@ -32,12 +32,18 @@ magnetometer: measured, EXPERIMENTS.md).
 ``global_init_refit``: ``global_init`` continued by a refit after the closest
 approach and a bank without process noise (:data:`REFIT_PEAK`).
 
-``consistency``: NEES of the project's tracker configuration (``ukf``, DWNA
-0.1 m/s², global initialiser, refit after the closest approach) on S0,
-S1-P2 and S2, against the 95 % chi-square band (:func:`consistency`);
-``consistency_without_refit``: the same without the refit;
-``consistency_default_process_noise``: with the refit and the library's
-default white acceleration (1 m/s²).
+``global_init_restarts``: the project's tracker -- the family's unit on the
+constant-velocity model without process noise, from the global initialiser,
+its bank restarted from batch refits after the closest approach and on
+divergence alarms (:func:`~shipsense.trackers.refit.track_with_restarts`);
+also ``restarts_per_passage``.
+
+``consistency``: NEES of the project's tracker (``ukf`` unit) on S0, S1-P2
+and S2, against the 95 % chi-square band (:func:`consistency`);
+``consistency_dwna``: the ``ukf`` unit with DWNA 0.1 m/s² and one refit
+after the closest approach (:data:`TRACKER_SIGMA_A`);
+``consistency_default_process_noise``: the same with the library's default
+white acceleration (1 m/s²).
 """
 
 from __future__ import annotations
@@ -47,7 +53,7 @@ import time
 import numpy as np
 
 from shipsense.config import BankConfig, load_scenario
-from shipsense.reproduce.common import Output, Stages, refit_stage, track_global
+from shipsense.reproduce.common import Output, Stages, refit_stage, track_global, track_restarting
 from shipsense.simulator import simulate
 from shipsense.trackers.bank import run_bank
 from shipsense.trackers.init import seed_hypotheses
@@ -71,9 +77,9 @@ whose best fit fails the chi-square test get 20, then 60 grid minima refined), a
 refined (its close passages' global minima are narrower than the grid).  Envelope families also get the
 bank's depth prior (``z_std``, :func:`init_options`)."""
 TRACKER_SIGMA_A = 0.1
-"""White acceleration (m/s²) of the consistency study's tracker (:func:`consistency`): with the global
-initialiser and the refit, 0.1 put S0 and S1-P2 in their NEES bands, the library's default 1 m/s² neither
-(EXPERIMENTS.md)."""
+"""White acceleration (m/s²) of :func:`consistency`'s ``dwna`` configuration (global initialiser, one refit
+after the closest approach): 0.1 put S0 and S1-P2 in their NEES bands on the first seed, the library's
+default 1 m/s² neither (EXPERIMENTS.md)."""
 
 
 def init_options(name, sc):
@@ -194,29 +200,41 @@ CONSISTENCY_SCENARIOS = {"S0": (None, "one_magnetometer"), "S1-P2": (None, "enve
 """Scenario: (sensors, the wide-study family whose initialiser options it uses)."""
 
 
-def consistency(runs=100, seed=0, sigma_a=TRACKER_SIGMA_A, refit=True):
-    """NEES of the project's tracker configuration (issue 7) on S0, S1-P2 and S2 (the magnetometers).
+def consistency(runs=100, seed=0, tracker="restarts", sigma_a=TRACKER_SIGMA_A):
+    """Position NEES of a tracker configuration (issue 7) on S0, S1-P2 and S2 (the magnetometers).
 
-    Configuration: the ``ukf`` unit with the default process noise
-    (``ProcessNoiseConfig()``: DWNA and a moment walk) whose white
-    acceleration is ``sigma_a`` (:data:`TRACKER_SIGMA_A`; None keeps the
-    library default, 1 m/s²), seeded by the global initialiser (with the options of the wide-study family
-    of the same sensors, :data:`CONSISTENCY_SCENARIOS`), then
-    (``refit``) re-fitted after the closest approach and continued without
-    process noise (:func:`~shipsense.reproduce.common.refit_stage`), on
-    random passages from each scenario's prior.  Position NEES is averaged
-    over the converged runs and the second half of the passage; ``band`` is
-    the two-sided 95 % chi-square band of a run average over that many runs
-    (2 degrees of freedom); ``consistent`` says whether the time-averaged NEES
-    lies inside it.  ``nees_median_run`` is the median over converged runs of
-    each run's own time average: the typical run, where the mean is often set
-    by a few overconfident runs.
+    ``tracker``:
+
+    * ``"restarts"`` (the project's tracker): the ``ukf`` unit on the
+      constant-velocity model without process noise, seeded by the global
+      initialiser and restarted from batch refits after the closest approach
+      and on divergence alarms
+      (:func:`~shipsense.reproduce.common.track_restarting`);
+    * ``"dwna"``: the ``ukf`` unit with the default process noise
+      (``ProcessNoiseConfig()``: DWNA and a moment walk) whose white
+      acceleration is ``sigma_a`` (None keeps the library default, 1 m/s²),
+      seeded by the global initialiser, re-fitted once after the closest
+      approach and continued without process noise
+      (:func:`~shipsense.reproduce.common.refit_stage`).
+
+    The initialiser uses the options of the wide-study family of the same
+    sensors (:data:`CONSISTENCY_SCENARIOS`), on random passages from each
+    scenario's prior.  Position NEES is averaged over the converged runs and
+    the second half of the passage; ``band`` is the two-sided 95 % chi-square
+    band of a run average over that many runs (2 degrees of freedom);
+    ``consistent`` says whether the time-averaged NEES lies inside it.
+    ``nees_median_run`` is the median over converged runs of each run's own
+    time average: the typical run, where the mean is often set by a few
+    overconfident runs.
     """
     from scipy import stats
 
     from shipsense.config import ProcessNoiseConfig
+    from shipsense.reproduce.common import track_restarting
     from shipsense.trackers.filters import get_filter
 
+    if tracker not in ("restarts", "dwna"):
+        raise ValueError(f"tracker must be 'restarts' or 'dwna', got {tracker!r}")
     pn = ProcessNoiseConfig() if sigma_a is None else ProcessNoiseConfig(sigma_a=(sigma_a, sigma_a))
     out = {}
     for name, (sensors, family) in CONSISTENCY_SCENARIOS.items():
@@ -228,14 +246,18 @@ def consistency(runs=100, seed=0, sigma_a=TRACKER_SIGMA_A, refit=True):
         truth = model.state_from_truth(sim.truth)
         K = y.shape[1]
         opts = init_options(family, sc)
-        est, pos_cov, _ = track_global(get_filter("ukf"), model, y, sc, refit_peak=REFIT_PEAK if refit else None,
-                                       **opts)
+        if tracker == "restarts":
+            est, pos_cov, _, _ = track_restarting(get_filter("ukf"), model, y, sc, **opts)
+            noise = "none (constant velocity)"
+        else:
+            est, pos_cov, _ = track_global(get_filter("ukf"), model, y, sc, refit_peak=REFIT_PEAK, **opts)
+            noise = f"dwna {pn.sigma_a[0]:g} m/s^2"
         m = _metrics(est, pos_cov, truth, None, 0.0, np.full(runs, K - 1))
         n_conv = int(round(m["convergence_rate"] * runs))
         band = [float(stats.chi2.ppf(q, 2 * max(n_conv, 1)) / max(n_conv, 1)) for q in (0.025, 0.975)]
         ne = m["nees_mean"]
-        out[name] = {"filter": "ukf", "process_noise": f"dwna {sigma_a or pn.sigma_a[0]:g} m/s^2",
-                     "refit": refit, "runs": runs, "convergence_rate": m["convergence_rate"], "nees_mean": ne,
+        out[name] = {"filter": "ukf", "tracker": tracker, "process_noise": noise, "runs": runs,
+                     "convergence_rate": m["convergence_rate"], "nees_mean": ne,
                      "nees_median_run": m["nees_median_run"], "band": band,
                      "consistent": bool(ne is not None and band[0] <= ne <= band[1])}
     return out
@@ -265,14 +287,21 @@ def run_family(name, passages, seed):
     t_refit = time.perf_counter() - t0
     out["global_init_refit"] = _metrics(est, pos_cov, truth, bounds, (t_global + t_refit) / passages, ends)
     out["global_init_refit"]["refit_seconds_per_passage"] = t_refit / passages
+    # the project's tracker: no process noise, the bank restarted from batch refits
+    t0 = time.perf_counter()
+    est, pos_cov, t_init, restarts = track_restarting(unit, model, y, sc, **opts)
+    t_restart = time.perf_counter() - t0
+    out["global_init_restarts"] = _metrics(est, pos_cov, truth, bounds, t_restart / passages, ends)
+    out["global_init_restarts"]["init_seconds_per_passage"] = t_init / passages
+    out["global_init_restarts"]["restarts_per_passage"] = float(np.mean(restarts))
     return out
 
 
 def run(runs=500, out="results/wide", seed=0, progress=True):
     """Run the wide-prior benchmark; returns the summary (also written to ``out/summary.json``)."""
     o = Output(out)
-    parts = {"consistency": {}, "consistency_without_refit": {"refit": False},
-             "consistency_default_process_noise": {"sigma_a": None}}
+    parts = {"consistency": {}, "consistency_dwna": {"tracker": "dwna"},
+             "consistency_default_process_noise": {"tracker": "dwna", "sigma_a": None}}
     st = Stages([*FAMILIES, *parts], "wide", progress)
     summary = {}
     rows = []
@@ -284,15 +313,15 @@ def run(runs=500, out="results/wide", seed=0, progress=True):
                          m["rmse_over_pcrlb_pooled"], m["rmse_over_crlb_deterministic"], m["nees_mean"],
                          m["seconds_per_passage"]])
         st.done()
-    for part, kw in parts.items():   # the tracker, without its refit, and with the library's process noise
+    for part, kw in parts.items():   # the project's tracker; DWNA 0.1 m/s² with one refit; the library's DWNA
         st.step(part)
         summary[part] = consistency(min(runs, 100), seed, **kw)
         st.done()
     elapsed = st.close()
-    o.csv("consistency.csv", ["scenario", "process_noise", "refit", "convergence_rate", "nees_mean", "nees_median_run",
-                              "band_lo", "band_hi", "consistent"],
-          [[k, v["process_noise"], v["refit"], v["convergence_rate"], v["nees_mean"], v["nees_median_run"], *v["band"],
-            v["consistent"]]
+    o.csv("consistency.csv", ["scenario", "tracker", "process_noise", "convergence_rate", "nees_mean",
+                              "nees_median_run", "band_lo", "band_hi", "consistent"],
+          [[k, v["tracker"], v["process_noise"], v["convergence_rate"], v["nees_mean"], v["nees_median_run"],
+            *v["band"], v["consistent"]]
            for part in parts for k, v in summary[part].items()])
     o.csv("wide.csv", ["family", "method", "convergence_rate", "mrmse_r_m", "rmse_over_pcrlb",
                        "rmse_over_pcrlb_pooled", "rmse_over_crlb_deterministic", "nees_mean", "seconds_per_passage"],
