@@ -93,3 +93,16 @@ def test_multistart_refit_leaves_a_wrong_basin():
     assert np.all(err < 0.5) and many.fit_ok.all(), err
     with pytest.raises(ValueError, match="refit samples"):
         refit_at(model, y, gi, wrong, np.full(R, K))
+
+
+def test_a_bank_from_a_fit_that_failed_the_test_claims_no_covariance_until_a_refit_passes():
+    from dataclasses import replace
+
+    model, y, truth, gi = _s2()
+    assert gi.fit_ok.all()
+    failed = replace(gi, fit_ok=np.array([False, True, True, True]))
+    est, cov, restarts = track_with_restarts(get_filter("ukf"), model, y, failed, through_peak=None)
+    s, w = int(gi.start[0]), 10
+    assert np.isnan(cov[0, s:s + w]).all() and np.isfinite(cov[0, s + w:]).all()   # retried after one window
+    assert restarts.tolist() == [1, 0, 0, 0]
+    np.testing.assert_array_equal(np.isfinite(cov[1:, :, 0, 0]), np.arange(y.shape[1])[None] >= gi.start[1:, None])
