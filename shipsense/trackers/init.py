@@ -320,17 +320,16 @@ def _chi2_limit(model, yfit, prior, gof):
 def _distinct(chi2, positions, M, distinct_m):
     """Indices of the ``M`` lowest ``chi2`` whose ``positions`` (N, 2) are more than ``distinct_m`` apart.
 
-    A short greedy pass per passage over the finite ``chi2``; when fewer than ``M`` are distinct the
-    best one fills the rest.
+    Greedy over the finite ``chi2`` (each pick the best candidate not within ``distinct_m`` of an earlier
+    pick); when fewer than ``M`` are distinct the best one fills the rest.
     """
+    alive = np.isfinite(chi2)          # not fitted (staged refinement) or failed: never picked
     chosen = []
-    for c in np.argsort(chi2):
-        if not np.isfinite(chi2[c]):   # not fitted (staged refinement) or failed
-            break
-        if all(np.hypot(*(positions[c] - positions[o])) > distinct_m for o in chosen):
-            chosen.append(c)
-            if len(chosen) == M:
-                break
+    while len(chosen) < M and alive.any():
+        c = int(np.argmin(np.where(alive, chi2, np.inf)))
+        chosen.append(c)
+        d = positions - positions[c]
+        alive &= np.einsum("ij,ij->i", d, d) > distinct_m * distinct_m
     return chosen + [chosen[0]] * (M - len(chosen))
 
 
@@ -443,12 +442,15 @@ def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, c
     mid_grid = grid @ mid.T                                                              # (C, 2)
     stages = _refine_stages(refine, keep)
     M = stages[-1]
-    starts = np.zeros((R, M, model.n))
-    for r in range(R):
-        chosen = _distinct(chi2[r], mid_grid, M, distinct_m)
-        th = grid[chosen].copy()
-        th[:, slots] = params[r, chosen]
-        starts[r] = th
+
+    def grid_starts(rows, count):   # the ``count`` best distinct grid minima of passages ``rows``, their moments
+        out = np.zeros((len(rows), count, model.n))
+        for i, r in enumerate(rows):
+            chosen = _distinct(chi2[r], mid_grid, count, distinct_m)
+            out[i] = grid[chosen]
+            out[i][:, slots] = params[r, chosen]
+        return out
+
     prior = depth_prior(model, z_std, source_z)
     # refine grid minima by batch Levenberg-Marquardt fits over the whole window, stage by stage: a
     # passage whose best fit so far fails the chi-square test gets the next stage's minima
@@ -459,7 +461,8 @@ def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, c
     info = np.zeros((R, M, model.n, model.n))
     todo, lo = np.arange(R), 0
     for hi in stages:
-        t, c, j = fit_passages(model, np.repeat(yfit[todo], hi - lo, axis=0), starts[todo, lo:hi].reshape(-1, model.n),
+        starts = grid_starts(todo, hi)[:, lo:]
+        t, c, j = fit_passages(model, np.repeat(yfit[todo], hi - lo, axis=0), starts.reshape(-1, model.n),
                                window, return_information=True, prior=prior)
         theta[todo, lo:hi] = t.reshape(todo.size, hi - lo, -1)
         chi2_fit[todo, lo:hi] = np.where(np.isfinite(c), c, np.inf).reshape(todo.size, hi - lo)
