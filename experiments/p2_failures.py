@@ -5,7 +5,7 @@ Run:  python experiments/p2_failures.py [--runs 200] [--seed 0]     (about 3 min
 
 Every passage's bank starts from its own window (``track_with_global_init`` aligns them).  The
 variants: no depth prior and five refined grid minima (the first version's initialiser); the bank's
-depth prior (``z_std``); and ten refined minima on top (``refine=10``, the wide study's setting).
+depth prior (``z_std``); and the wide study's staged refinement on top (``refine=(10, 30, 60)``).
 For every failure it prints the best fit's chi-square and depth and the best seed's error: a failed
 fit (chi-square far above the number of samples) or a good fit the bank then loses.
 """
@@ -29,7 +29,7 @@ def main(argv=None):
     full = wide.init_options(name, sc)
     variants = {"first version (no depth prior, 5 refined)": {"snr_start": full["snr_start"]},
                 "depth prior": {"snr_start": full["snr_start"], "z_std": full["z_std"]},
-                "depth prior + 10 refined (study)": full}
+                "depth prior + staged refinement (study)": full}
     grid = dict(ranges=np.geomspace(20.0, 1.2 * sc.prior.range[1], 8), speeds=np.linspace(*sc.prior.speed, 3))
     iz = model.labels.index("z")
     for label, opts in variants.items():

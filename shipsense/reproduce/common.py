@@ -146,6 +146,12 @@ def rmse_plot(out, name, title, times, curves, ylabel="RMSE_k [m]"):
     return out.figure(fig, name)
 
 
+def prior_grid(sc):
+    """The initialiser's grid of start ranges (8, from 20 m to 1.2x the prior's farthest) and speeds (3, over
+    the prior's span) for scenario ``sc``."""
+    return {"ranges": np.geomspace(20.0, 1.2 * sc.prior.range[1], 8), "speeds": np.linspace(*sc.prior.speed, 3)}
+
+
 def track_global(unit, model, y, sc, *, refit_peak=None, return_init=False, **options):
     """Global initialiser then the bank, every passage from its own window (one batch).
 
@@ -159,10 +165,8 @@ def track_global(unit, model, y, sc, *, refit_peak=None, return_init=False, **op
     """
     from shipsense.trackers.init import global_init, track_with_global_init, unalign
 
-    ranges = np.geomspace(20.0, 1.2 * sc.prior.range[1], 8)
-    speeds = np.linspace(*sc.prior.speed, 3)
     t1 = time.perf_counter()
-    gi = global_init(model, y, ranges=ranges, speeds=speeds, **options)
+    gi = global_init(model, y, **prior_grid(sc), **options)
     t_init = time.perf_counter() - t1
     est, bank = track_with_global_init(unit, model, y, gi)
     cov = unalign(bank.selected_pos_cov, gi.start, y.shape[1])
@@ -184,10 +188,8 @@ def track_restarting(unit, model, y, sc, *, return_init=False, **options):
     from shipsense.trackers.refit import track_with_restarts
 
     still = model.without_process_noise()
-    ranges = np.geomspace(20.0, 1.2 * sc.prior.range[1], 8)
-    speeds = np.linspace(*sc.prior.speed, 3)
     t1 = time.perf_counter()
-    gi = global_init(still, y, ranges=ranges, speeds=speeds, **options)
+    gi = global_init(still, y, **prior_grid(sc), **options)
     t_init = time.perf_counter() - t1
     est, cov, restarts = track_with_restarts(unit, still, y, gi, prior=depth_prior(still, options.get("z_std")))
     return (est, cov, t_init, restarts, gi) if return_init else (est, cov, t_init, restarts)
