@@ -200,18 +200,16 @@ def refit_stage(unit, model, y, gi, est, cov, refit_peak, z_std=None):
     its peak (:func:`~shipsense.trackers.init.refit_after_peak`, with the depth prior ``z_std``), then a
     bank without process noise from the fit.  Returns the estimates and position covariances with the
     samples from the refit on replaced."""
-    from shipsense.trackers.init import depth_prior, refit_after_peak, track_with_global_init, unalign
+    from shipsense.trackers.init import depth_prior, refit_after_peak
+    from shipsense.trackers.refit import continue_from
 
-    K = y.shape[1]
     again = refit_after_peak(model, y, gi, est, refit_peak, prior=depth_prior(model, z_std))
-    est2, bank2 = track_with_global_init(unit, model.without_process_noise(), y, again)
-    after = np.arange(K)[None, :] >= again.start[:, None]
-    return (np.where(after[..., None], est2, est),
-            np.where(after[..., None, None], unalign(bank2.selected_pos_cov, again.start, K), cov))
+    est, cov, _ = continue_from(unit, model.without_process_noise(), y, again, est, cov)
+    return est, cov
 
 
 def global_init_summary(unit, model, y, truth, sc, snr_start=5.0):
-    """The project's tracker on a scenario's runs: global initialiser, then ``unit`` as a bank of its minima."""
+    """The global initialiser on a scenario's runs, then ``unit`` as a bank of its minima (no refits)."""
     from shipsense.trackers.metrics import position_error
 
     est, _, _ = track_global(unit, model, y, sc, snr_start=snr_start)

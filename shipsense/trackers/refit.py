@@ -191,16 +191,26 @@ def track_with_restarts(unit, model, measurements, gi, *, prior=None, through_pe
         sub = _passages(gi, sel)
         again = refit_at(model, y[sel], sub, est[sel], at[sel], prior=prior, inflate=inflate, gof=gof,
                          multistart=on_alarm)
-        e2, b2 = track_with_global_init(unit, model, y[sel], again)
+        est[sel], c2, b2 = continue_from(unit, model, y[sel], again, est[sel], cov[sel])
         after = k >= at[sel][:, None]
         trusted[sel] = again.fit_ok
-        c2 = np.where(again.fit_ok[:, None, None, None], unalign(b2.selected_pos_cov, at[sel], K), np.nan)
-        est[sel] = np.where(after[..., None], e2, est[sel])
-        cov[sel] = np.where(after[..., None, None], c2, cov[sel])
+        cov[sel] = np.where(after[..., None, None] & ~again.fit_ok[:, None, None, None], np.nan, c2)
         nis[sel] = np.where(after, unalign(selected_nis(b2), at[sel], K), nis[sel])
         start[sel] = at[sel]
         restarts[sel] += 1
         alarms[sel] += on_alarm
+
+
+def continue_from(unit, model, measurements, gi, estimates, pos_cov):
+    """Run a bank from ``gi`` (e.g. a refit) and splice it into ``estimates`` (R, K, n) and ``pos_cov``
+    (R, K, 2, 2) from each passage's ``gi.start`` on; returns the spliced copies and the ``BankRun``."""
+    from shipsense.trackers.init import track_with_global_init, unalign
+
+    K = np.shape(measurements)[1]
+    e2, bank = track_with_global_init(unit, model, measurements, gi)
+    after = np.arange(K)[None, :] >= np.asarray(gi.start)[:, None]
+    return (np.where(after[..., None], e2, estimates),
+            np.where(after[..., None, None], unalign(bank.selected_pos_cov, gi.start, K), pos_cov), bank)
 
 
 def _passages(gi, sel):
