@@ -216,6 +216,25 @@ class SensorArray:
         g = self._index["group_gather"]
         return flat if g is None else flat[..., g]
 
+    def _scalar_jacobian_rows(self, idx, R, B, dBq, dBm, val, dq, dm):
+        """Readings and derivatives of magnetometers ``idx`` when some are scalar (magnitude, tmi), written
+        into :meth:`measure_jacobian`'s blocks ``val``, ``dq``, ``dm``."""
+        code = self._index["mag_code"]
+        vec = np.einsum("sji,...sj->...si", R, B)
+        # row vector of the scalar reading: b-hat for magnitude, b_E for tmi
+        norm = np.sqrt(np.sum(B * B, axis=-1, keepdims=True))
+        w = B / np.where(norm > 0, norm, 1.0)
+        if np.any(code == 2):
+            w = np.where((code == 2)[:, None], self.earth_direction, w)
+        scalar = np.sum(w * B, axis=-1)
+        is_vec = (code == 0)[:, None]
+        val[..., idx, :] = np.where(is_vec, vec, np.stack([scalar, 0 * scalar, 0 * scalar], axis=-1))
+        for target, dB in ((dq, dBq), (dm, dBm)):
+            rows = np.einsum("sji,...sjk->...sik", R, dB)
+            srow = np.einsum("...sj,...sjk->...sk", w, dB)
+            first = np.concatenate([srow[..., None, :], np.zeros_like(rows[..., 1:, :])], axis=-2)
+            target[..., idx, :, :] = np.where(is_vec[..., None], rows, first)
+
     def measure_jacobian(self, sources, moments=None, dipoles=None):
         """Measurements and their derivatives with respect to the source's position and moments.
 
@@ -243,21 +262,15 @@ class SensorArray:
             B, dBq, dBm = dipole_field_jacobian(self.positions[idx], sources[..., None, :],
                                                 np.asarray(moments, float)[..., None, :])
             R = self.orientations[idx]
-            code = self._index["mag_code"]
-            vec = np.einsum("sji,...sj->...si", R, B)
-            # row vector of the scalar reading: b-hat for magnitude, b_E for tmi
-            norm = np.sqrt(np.sum(B * B, axis=-1, keepdims=True))
-            w = B / np.where(norm > 0, norm, 1.0)
-            if np.any(code == 2):
-                w = np.where((code == 2)[:, None], self.earth_direction, w)
-            scalar = np.sum(w * B, axis=-1)
-            is_vec = (code == 0)[:, None]
-            val[..., idx, :] = np.where(is_vec, vec, np.stack([scalar, 0 * scalar, 0 * scalar], axis=-1))
-            for target, dB in ((dq, dBq), (dm, dBm)):
-                rows = np.einsum("sji,...sjk->...sik", R, dB)
-                srow = np.einsum("...sj,...sjk->...sk", w, dB)
-                first = np.concatenate([srow[..., None, :], np.zeros_like(rows[..., 1:, :])], axis=-2)
-                target[..., idx, :, :] = np.where(is_vec[..., None], rows, first)
+            if self._index["mag_vector_only"]:   # three-axis readings only: no scalar rows to form
+                if self._index["identity"]:
+                    val[..., idx, :], dq[..., idx, :, :], dm[..., idx, :, :] = B, dBq, dBm
+                else:
+                    val[..., idx, :] = np.einsum("sji,...sj->...si", R, B)
+                    for target, dB in ((dq, dBq), (dm, dBm)):
+                        target[..., idx, :, :] = np.einsum("sji,...sjk->...sik", R, dB)
+            else:
+                self._scalar_jacobian_rows(idx, R, B, dBq, dBm, val, dq, dm)
         idx = groups["electrode"]
         if idx.size:
             if dipoles is None:

@@ -182,20 +182,30 @@ def dipole_field_jacobian(sensors, sources, moments):
     dB_dm : ndarray, shape (..., 3, 3)
         ``dB_i / dm_j = c (3 r r^T - r^2 I) / r^5``, T/(A·m²).
     """
-    r = np.asarray(sensors, dtype=float) - np.asarray(sources, dtype=float)
-    m = np.asarray(moments, dtype=float)
-    r, m = np.broadcast_arrays(r, m)
-    r2 = np.sum(r * r, axis=-1)
-    inv5 = r2**-2.5
-    mr = np.sum(m * r, axis=-1)
-    eye = np.eye(3)
-    rrT = r[..., :, None] * r[..., None, :]
-    dB_dm = MU0_OVER_4PI * (3.0 * rrT - r2[..., None, None] * eye) * inv5[..., None, None]
-    B = np.einsum("...ij,...j->...i", dB_dm, m)
-    num = 3.0 * mr[..., None] * r - r2[..., None] * m
-    dB_dr = MU0_OVER_4PI * (
-        (3.0 * r[..., :, None] * m[..., None, :] + 3.0 * mr[..., None, None] * eye
-         - 2.0 * m[..., :, None] * r[..., None, :]) * inv5[..., None, None]
-        - 5.0 * num[..., :, None] * r[..., None, :] * (inv5 / r2)[..., None, None]
-    )
-    return B, -dB_dr, dB_dm
+    s, q, m = (np.asarray(a, dtype=float) for a in (sensors, sources, moments))
+    shape = np.broadcast_shapes(s.shape, q.shape, m.shape)[:-1]
+    # component-wise (unit-stride over the batch), and dB/dr is symmetric:
+    # c [3 (r m^T + m r^T) + 3 (m.r) I - 15 (m.r) r r^T / r^2] / r^5
+    r = [np.subtract(s[..., i], q[..., i]) for i in range(3)]
+    mc = [m[..., i] for i in range(3)]
+    r2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2]
+    mr = mc[0] * r[0] + mc[1] * r[1] + mc[2] * r[2]
+    a = MU0_OVER_4PI / (r2 * r2 * np.sqrt(r2))
+    a3, ar2 = 3.0 * a, a * r2
+    a3mr = a3 * mr
+    c15 = 5.0 * a3mr / r2
+    B = np.empty(shape + (3,))
+    dB_dq = np.empty(shape + (3, 3))
+    dB_dm = np.empty(shape + (3, 3))
+    for i in range(3):
+        B[..., i] = a3mr * r[i] - ar2 * mc[i]
+        for j in range(i, 3):
+            rr = r[i] * r[j]
+            vm = a3 * rr
+            vr = a3 * (r[i] * mc[j] + mc[i] * r[j]) - c15 * rr
+            if i == j:
+                vm -= ar2
+                vr += a3mr
+            dB_dm[..., i, j] = dB_dm[..., j, i] = vm
+            dB_dq[..., i, j] = dB_dq[..., j, i] = -vr
+    return B, dB_dq, dB_dm
