@@ -333,10 +333,29 @@ def _distinct(chi2, positions, M, distinct_m):
     return chosen + [chosen[0]] * (M - len(chosen))
 
 
+def distinct_rows(chi2, positions, M, distinct_m):
+    """:func:`_distinct` for every row at once: indices (R, M) of each row's ``M`` lowest finite ``chi2``
+    (R, C) whose ``positions`` (R, C, 2) are more than ``distinct_m`` apart, and whether each is a pick
+    (R, M) (False: fewer were distinct, the index repeats the row's best)."""
+    chi2 = np.where(np.isfinite(chi2), chi2, np.inf)
+    R = chi2.shape[0]
+    rows = np.arange(R)
+    alive = np.isfinite(chi2)
+    idx = np.zeros((R, M), dtype=int)
+    found = np.zeros((R, M), dtype=bool)
+    for j in range(M):   # M greedy picks, each over all rows
+        c = np.argmin(np.where(alive, chi2, np.inf), axis=1)
+        found[:, j] = alive[rows, c]
+        idx[:, j] = np.where(found[:, j], c, idx[:, 0])
+        d = positions - positions[rows, c][:, None]
+        alive &= ~found[:, j:j + 1] | (np.einsum("rci,rci->rc", d, d) > distinct_m * distinct_m)
+    return idx, found
+
+
 def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, course_step_deg=30.0,
                 window_s=15.0, grid_samples=16, keep=5, distinct_m=15.0, snr_start=5.0, inflate=2.0,
                 source_z=None, common_start=False, max_bytes=512e6, through_peak=None, z_std=None, refine=None,
-                gof=0.01):
+                gof=0.01, explore_samples=None):
     """Global initialisation of passages from a grid search with the moment eliminated in closed form.
 
     Parameters
@@ -374,6 +393,14 @@ def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, c
         Birge ratio, was tried and dropped: on 500 two-magnetometer passages
         the first bank from the larger covariances went from 3.8x to 5.2x
         the constant-velocity bound, EXPERIMENTS.md.)
+    explore_samples : int, optional
+        The refinement's fits of the grid minima use about this many samples
+        of the window, evenly spaced (and the staged test those samples); the
+        ``keep`` fits kept are then polished on every sample.  Exploring many
+        minima then costs that much less: on S0 (150-sample windows), 60
+        minima explored on 15 samples missed the global minimum of none of
+        100 passages, where 5, 20 and 60 in stages on every sample missed 16
+        (EXPERIMENTS.md).  None: every sample.
     snr_start : float
         The window starts at the first sample with some channel above this SNR (adaptive start).
     inflate : float
@@ -455,27 +482,36 @@ def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, c
     # refine grid minima by batch Levenberg-Marquardt fits over the whole window, stage by stage: a
     # passage whose best fit so far fails the chi-square test gets the next stage's minima
     yfit = y[np.arange(R)[:, None], k0[:, None] + np.arange(window)[None, :]]           # (R, W, m)
-    limit = _chi2_limit(model, yfit, prior, gof)
+    if explore_samples is not None and explore_samples < 2:
+        raise ValueError(f"explore_samples must be at least 2, got {explore_samples!r}")
+    explore_stride = 1 if explore_samples is None else max(1, window // int(explore_samples))
+    ysub = yfit[:, ::explore_stride]
+    limit = _chi2_limit(model, ysub, prior, gof)
     theta = np.zeros((R, M, model.n))
     chi2_fit = np.full((R, M), np.inf)
     info = np.zeros((R, M, model.n, model.n))
     todo, lo = np.arange(R), 0
     for hi in stages:
         starts = grid_starts(todo, hi)[:, lo:]
-        t, c, j = fit_passages(model, np.repeat(yfit[todo], hi - lo, axis=0), starts.reshape(-1, model.n),
-                               window, return_information=True, prior=prior)
+        t, c, j = fit_passages(model, np.repeat(ysub[todo], hi - lo, axis=0), starts.reshape(-1, model.n),
+                               window, stride=explore_stride, return_information=True, prior=prior)
         theta[todo, lo:hi] = t.reshape(todo.size, hi - lo, -1)
         chi2_fit[todo, lo:hi] = np.where(np.isfinite(c), c, np.inf).reshape(todo.size, hi - lo)
         info[todo, lo:hi] = j.reshape(todo.size, hi - lo, model.n, model.n)
         todo, lo = np.flatnonzero(chi2_fit.min(axis=1) > limit), hi
         if todo.size == 0:
             break
-    if M > keep:   # the best ``keep`` distinct refined fits seed the bank
-        sel = np.array([_distinct(chi2_fit[r], theta[r] @ mid.T, keep, distinct_m) for r in range(R)])
-        pick = (np.arange(R)[:, None], sel)
-        theta, chi2_fit, info = (a[pick] for a in (theta, chi2_fit, info))
-        M = keep
+    # the best ``keep`` distinct refined fits seed the bank (fits that converged to the same minimum count
+    # once: a repeat of the best fills a passage's bank at log-likelihood -inf, no weight)
+    sel, found = distinct_rows(chi2_fit, theta @ mid.T, keep, distinct_m)
+    pick = (np.arange(R)[:, None], sel)
+    theta, chi2_fit, info = (a[pick] for a in (theta, chi2_fit, info))
+    M = keep
     theta, chi2_fit, info = (a.reshape((R * M,) + a.shape[2:]) for a in (theta, chi2_fit, info))
+    if explore_stride > 1:   # polish the kept fits on every sample of the window
+        theta, chi2_fit, info = fit_passages(model, np.repeat(yfit, M, axis=0), theta, window,
+                                             return_information=True, prior=prior)
+        limit = _chi2_limit(model, yfit, prior, gof)
     end = fit_end(model, y_si, k0, window, through_peak)
     if common_start:
         end = np.full(R, end.max())
@@ -496,8 +532,9 @@ def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, c
     P0 = Aw[:, None] @ cov @ np.swapaxes(Aw, -1, -2)[:, None] + (end - k0)[:, None, None, None] * model.Q
     traj = np.einsum("kij,rmj->rmki", Ak[:Wf], theta)
     xs = model.x_scale
+    loglik = np.where(found | (np.arange(M) == 0), -0.5 * np.minimum(chi2_fit, 1e300), -np.inf)
     return GlobalInit(start=end, seeds=seeds * xs, P0=P0 * np.outer(xs, xs),
-                      loglik=-0.5 * chi2_fit, window=traj * xs, k0=k0, fit_ok=chi2_fit.min(axis=1) <= limit)
+                      loglik=loglik, window=traj * xs, k0=k0, fit_ok=chi2_fit.min(axis=1) <= limit)
 
 
 def track_with_global_init(unit, model, measurements, gi: GlobalInit):

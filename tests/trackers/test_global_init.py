@@ -232,3 +232,44 @@ def test_chi_square_test_fails_fits_to_noise_larger_than_modelled():
     np.testing.assert_array_equal(W, gi3.start - gi3.k0)
     reduced = -2 * gi3.loglik.max(axis=1) / (W * 6 - model.n)
     np.testing.assert_allclose(reduced, 9.0, rtol=0.25)
+
+
+def test_exploring_on_a_subset_of_the_window_finds_a_global_minimum_the_stages_miss():
+    """S0 passage 91: its best fit from the stages (5, 20, 60) on every sample passes the chi-square test
+    but lies about 100 above the window's minimum (the fit started at the truth); 20 then 60 minima
+    explored on 15 of the window's 150 samples, then polished on all of them, find it."""
+    from shipsense.trackers.batchfit import fit_passages
+
+    sc, model, y, truth = _s0_passages(92)
+    model = model.without_process_noise()
+    y, truth = y[91:92], truth[91:92]
+    kw = dict(ranges=np.geomspace(20.0, 1.2 * sc.prior.range[1], 8), speeds=np.linspace(*sc.prior.speed, 3),
+              snr_start=400.0)
+    staged = global_init(model, y, refine=(5, 20, 60), **kw)
+    explored = global_init(model, y, refine=(20, 60), explore_samples=15, **kw)
+    k0, W = int(staged.k0[0]), int(staged.start[0] - staged.k0[0])
+    assert (explored.k0[0], explored.start[0]) == (k0, k0 + W) and W == 150
+    _, floor = fit_passages(model, y[:, k0:k0 + W] / model.y_scale, truth[:, k0] / model.x_scale, W)
+    chi2 = [float(-2 * g.loglik.max()) for g in (staged, explored)]
+    assert staged.fit_ok[0] and chi2[0] > floor[0] + 50.0, (chi2, floor)
+    assert chi2[1] < floor[0] + 1.0, (chi2, floor)
+    with pytest.raises(ValueError, match="explore_samples"):
+        global_init(model, y, explore_samples=1, **kw)
+
+
+def test_distinct_rows_is_the_greedy_selection_of_every_row():
+    from shipsense.trackers.init import _distinct, distinct_rows
+
+    rng = np.random.default_rng(3)
+    R, C, M = 30, 12, 4
+    chi2 = rng.uniform(0, 10, (R, C))
+    chi2[rng.uniform(size=(R, C)) < 0.2] = np.inf                     # failed fits are never picked
+    chi2[0] = np.inf
+    chi2[0, 5] = 1.0                                                    # one finite fit: the rest repeat it
+    pos = rng.uniform(0, 40, (R, C, 2))
+    idx, found = distinct_rows(chi2, pos, M, 15.0)
+    for r in range(R):
+        if np.isfinite(chi2[r]).any():
+            assert idx[r].tolist() == _distinct(chi2[r], pos[r], M, 15.0)
+    assert idx[0].tolist() == [5] * M and found[0].tolist() == [True, False, False, False]
+    assert np.all(found.sum(axis=1) == np.array([len(set(i)) for i in idx.tolist()]))
