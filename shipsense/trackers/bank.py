@@ -102,6 +102,18 @@ class BankRun:
         spread = d[..., :, None] * d[..., None, :]
         return np.sum(w * (np.nan_to_num(self.pos_cov) + spread), axis=1)
 
+    @property
+    def selected_pos_mse(self) -> np.ndarray:
+        """Position mean-square-error matrix of the selected estimate under the bank's mixture (R, K, 2, 2):
+        ``sum_j mu_j (P_j + e_j e_j^T)`` with ``e_j`` the position of hypothesis ``j`` minus the selected
+        one's.  Equal to :attr:`selected_pos_cov` when one hypothesis holds all the weight; when
+        distant hypotheses explain the data almost as well, it says so."""
+        w = self.weights[..., None, None]
+        live = w > 0
+        e = self.means[..., :2] - self.selected_means[:, None, :, :2]
+        spread = e[..., :, None] * e[..., None, :]
+        return np.sum(np.where(live, w * (self.pos_cov + spread), 0.0), axis=1)
+
     def diverged(self, window: int = 10, confidence: float = 0.999) -> np.ndarray:
         """Divergence flag (R, H, K): lost covariance, or mean NIS over the last ``window`` steps
         above its ``confidence`` chi-square bound."""

@@ -90,3 +90,23 @@ def test_collinear_array_reports_mirror_ambiguity_and_triangle_does_not(name, am
         truth = sim.truth[..., ELEC]
         err = np.hypot(*(bank.selected_means[:, -1, :2] - truth[:, -1, :2]).T)
         assert np.all(err < 5.0), err
+
+
+def test_selected_mean_square_error_adds_the_weighted_spread_of_the_other_hypotheses():
+    from shipsense.trackers.bank import BankRun
+
+    means = np.zeros((1, 3, 1, 4))
+    means[0, 1, 0, :2] = [3.0, 4.0]
+    means[0, 2, 0, :2] = [100.0, 0.0]
+    pos_cov = np.broadcast_to(np.eye(2), (1, 3, 1, 2, 2)).copy()
+    ll = np.log([[0.75, 0.25, 1.0]])                                     # hypothesis 2 starts at -inf below
+    init = np.array([[0.0, 0.0, -np.inf]])
+    run = BankRun(means[:, :, 0], means, pos_cov, ll[..., None], np.zeros((1, 3, 1)), np.ones((1, 3, 1), int),
+                  np.ones((1, 3, 1), bool), np.ones((1, 3, 1), bool), ("x", "y", "vx", "vy"), init)
+    assert run.selected[0, 0] == 0
+    spread = 0.25 * np.outer([3.0, 4.0], [3.0, 4.0])
+    np.testing.assert_allclose(run.selected_pos_mse[0, 0], np.eye(2) + spread, rtol=1e-12)
+    # one hypothesis with all the weight: its own covariance
+    one = BankRun(means[:, :1, 0], means[:, :1], pos_cov[:, :1], ll[:, :1, None], np.zeros((1, 1, 1)),
+                  np.ones((1, 1, 1), int), np.ones((1, 1, 1), bool), np.ones((1, 1, 1), bool), ("x", "y", "vx", "vy"))
+    np.testing.assert_array_equal(one.selected_pos_mse, one.selected_pos_cov)
