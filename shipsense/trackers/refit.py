@@ -28,8 +28,9 @@ import numpy as np
 from shipsense.trackers.batchfit import fit_passages, powers
 
 
-def refit_at(model, measurements, gi, estimates, at, *, prior=None, inflate=1.0, gof=0.01, multistart=None):
-    """One hypothesis per passage, re-fitted to its samples ``gi.k0`` .. ``at - 1``, for a bank from ``at``.
+def refit_at(model, measurements, gi, estimates, at, *, prior=None, inflate=1.0, gof=0.01, multistart=None,
+             hypotheses=None, keep=1, distinct_m=15.0):
+    """Passages re-fitted to their samples ``gi.k0`` .. ``at - 1``: the hypotheses of a bank from ``at``.
 
     Parameters
     ----------
@@ -52,15 +53,24 @@ def refit_at(model, measurements, gi, estimates, at, *, prior=None, inflate=1.0,
         (:func:`~shipsense.trackers.init.global_init`).
     multistart : ndarray of bool, shape (R,), optional
         Passages whose fit also starts from each of the initialiser's window
-        fits; the lowest chi-square wins (for a track that has diverged, its
-        own estimate may sit in the wrong basin).
+        fits (for a track that has diverged, its own estimate may sit in the
+        wrong basin).
+    hypotheses : ndarray, shape (R, H, n), optional
+        Further starts at ``at - 1`` (SI; NaN rows are skipped), e.g. a bank's
+        hypotheses that still carry weight.
+    keep : int
+        Hypotheses returned per passage: the best fits more than
+        ``distinct_m`` apart at ``at - 1``, with log-likelihood ``-chi2 / 2``
+        (a passage with fewer distinct fits repeats its best, at
+        log-likelihood ``-inf``: no weight).
 
     Returns
     -------
     GlobalInit
-        One hypothesis per passage, starting at ``at``.
+        ``keep`` hypotheses per passage, starting at ``at``; ``fit_ok`` is the
+        best fit's chi-square test.
     """
-    from shipsense.trackers.init import GlobalInit, _chi2_limit
+    from shipsense.trackers.init import GlobalInit, _chi2_limit, distinct_rows
 
     y = np.asarray(measurements, dtype=float) / model.y_scale
     R, K, _ = y.shape
@@ -71,34 +81,38 @@ def refit_at(model, measurements, gi, estimates, at, *, prior=None, inflate=1.0,
     Wf = int((at - k0).max())
     xs = model.x_scale
     rows = np.arange(R)
-    last = np.asarray(estimates)[rows, at - 1] / xs                                 # (R, n) at at - 1
     back = powers(np.linalg.inv(model.A), Wf)[at - 1 - k0]                          # A^-(at-1-k0)
-    theta = np.einsum("rij,rj->ri", back, last)
+    starts = [np.asarray(estimates)[rows, at - 1][:, None]]                          # (R, 1, n) at at - 1
+    if hypotheses is not None:   # (the selected hypothesis is the estimate: fitted once)
+        h = np.asarray(hypotheses, dtype=float)
+        starts.append(np.where(np.all(h == starts[0], axis=-1, keepdims=True), np.nan, h))
+    theta = np.einsum("rij,rhj->rhi", back, np.concatenate(starts, axis=1) / xs)      # at k0
+    if multistart is not None:   # the initialiser's window fits (at k0) for the passages that ask
+        win = np.where(np.asarray(multistart, dtype=bool)[:, None, None], gi.window[:, :, 0] / xs, np.nan)
+        theta = np.concatenate([theta, win], axis=1)
+    C = theta.shape[1]
+    use = np.isfinite(theta).all(axis=-1)
+    pr, pc = np.nonzero(use)
     ks = k0[:, None] + np.arange(Wf)[None, :]
     yfit = np.where((ks < at[:, None])[..., None], y[rows[:, None], np.minimum(ks, K - 1)], np.nan)
-    theta, chi2, info = fit_passages(model, yfit, theta, Wf, return_information=True, prior=prior)
-    chi2 = np.where(np.isfinite(chi2), chi2, np.inf)
-    many = np.flatnonzero(multistart) if multistart is not None else np.zeros(0, dtype=int)
-    if many.size:   # the initialiser's window fits as further starts
-        M = gi.window.shape[1]
-        t2, c2, i2 = fit_passages(model, np.repeat(yfit[many], M, axis=0),
-                                  (gi.window[many, :, 0] / xs).reshape(many.size * M, -1), Wf,
-                                  return_information=True, prior=prior)
-        c2 = np.where(np.isfinite(c2), c2, np.inf).reshape(many.size, M)
-        b = np.argmin(c2, axis=1)
-        better = c2[np.arange(many.size), b] < chi2[many]
-        pick = many[better]
-        flat = np.arange(many.size)[better] * M + b[better]
-        theta[pick], chi2[pick], info[pick] = t2[flat], c2.reshape(-1)[flat], i2[flat]
-    cov = np.linalg.pinv(info, hermitian=True) * inflate
+    t, c, j = fit_passages(model, yfit[pr], theta[pr, pc], Wf, return_information=True, prior=prior)
+    fits = np.zeros((R, C, model.n))
+    chi2 = np.full((R, C), np.inf)
+    info = np.zeros((R, C, model.n, model.n))
+    fits[pr, pc], chi2[pr, pc], info[pr, pc] = t, np.where(np.isfinite(c), c, np.inf), j
     Ak = powers(model.A, Wf + 1)
     Ae = Ak[at - k0]                                                                   # (R, n, n)
-    seeds = np.einsum("rij,rj->ri", Ae, theta)
-    P0 = Ae @ cov @ np.swapaxes(Ae, -1, -2)
-    traj = np.einsum("kij,rj->rki", Ak[:Wf], theta)
-    return GlobalInit(start=at, seeds=(seeds * xs)[:, None], P0=(P0 * np.outer(xs, xs))[:, None],
-                      loglik=-0.5 * chi2[:, None], window=(traj * xs)[:, None], k0=k0,
-                      fit_ok=chi2 <= _chi2_limit(model, yfit, prior, gof))
+    last = np.einsum("rij,rcj->rci", Ak[at - 1 - k0], fits)[..., :2] * xs[:2]          # positions at at - 1
+    pick, found = distinct_rows(chi2, last, keep, distinct_m)
+    fits, chi2, info = (a[rows[:, None], pick] for a in (fits, chi2, info))
+    cov = np.linalg.pinv(info, hermitian=True) * inflate
+    seeds = np.einsum("rij,rmj->rmi", Ae, fits)
+    P0 = Ae[:, None] @ cov @ np.swapaxes(Ae, -1, -2)[:, None]
+    traj = np.einsum("kij,rmj->rmki", Ak[:Wf], fits)
+    return GlobalInit(start=at, seeds=seeds * xs, P0=P0 * np.outer(xs, xs),
+                      loglik=np.where(found | (np.arange(keep) == 0), -0.5 * np.minimum(chi2, 1e300), -np.inf),
+                      window=traj * xs, k0=k0,
+                      fit_ok=chi2[:, 0] <= _chi2_limit(model, yfit, prior, gof))
 
 
 def peak_refit_sample(model, measurements, k0, start, through_peak=0.5):
@@ -138,15 +152,38 @@ def divergence_alarm(nis, start, window, limit):
 
 
 def track_with_restarts(unit, model, measurements, gi, *, prior=None, through_peak=0.5, nis_window=10,
-                        nis_limit=3.0, max_restarts=4, inflate=1.0, gof=0.01):
+                        nis_limit=3.0, max_restarts=4, inflate=1.0, gof=0.01, refit_every=20, keep=3,
+                        ambiguity_nats=10.0, mixture=True, collapse=0.25):
     """Track passages from the global initialiser, restarting the bank from batch refits (see module).
 
     ``model`` is used for every bank; for the constant-velocity passages the
     project's tracker passes ``model.without_process_noise()`` (and builds
     ``gi`` with it).  A passage restarts at most ``max_restarts`` times on
     divergence alarms, plus once after its closest approach (``through_peak``;
-    None: never); an alarm refit also starts from the initialiser's window
+    None: never), plus -- with ``refit_every`` -- every that many samples
+    until then; an alarm refit also starts from the initialiser's window
     fits (:func:`refit_at`'s ``multistart``).
+
+    Every refit also starts from the bank's hypotheses within
+    ``ambiguity_nats`` of the selected one's log-likelihood, and the new bank
+    holds the ``keep`` best distinct fits weighted by their likelihoods, so
+    that a second passage that explains the data almost as well survives
+    the refit.  With ``mixture`` the reported covariance is the selected
+    estimate's mean-square-error matrix under the bank's mixture
+    (:attr:`~shipsense.trackers.bank.BankRun.selected_pos_mse`), else the
+    selected hypothesis's own.
+
+    With ``collapse`` (a fraction), a bank whose selected position covariance
+    (trace) falls below ``collapse`` times its refit's within ``nis_window``
+    samples is re-fitted at once.  One sample cannot carry that much
+    information; what shrinks it is the filter combining the fit's
+    information with a Jacobian taken metres away, where a curved
+    (banana-shaped) likelihood turns the other way.  The batch fit
+    re-linearises every sample at one point (on a single-magnetometer passage
+    with the fit's position standard deviation at 6.1 m, the UKF reported
+    0.75 m after one more sample and the EKF 0.90 m after two, where the fit
+    of the same samples gave 5.95 and 5.76 m: EXPERIMENTS.md).  At every
+    refit, the last fitted sample's estimate and covariance are the fit's.
 
     A bank started from a fit that fails the chi-square test (``gi.fit_ok``,
     or a refit's) makes no claim on its accuracy: its position covariance
@@ -171,46 +208,120 @@ def track_with_restarts(unit, model, measurements, gi, *, prior=None, through_pe
     R, K, _ = y.shape
     est, bank = track_with_global_init(unit, model, y, gi)
     start = np.asarray(gi.start, dtype=int).copy()
-    cov = unalign(bank.selected_pos_cov, start, K)
+    cov = unalign(bank.selected_pos_mse if mixture else bank.selected_pos_cov, start, K)
     nis = unalign(selected_nis(bank), start, K)
+    H = max(bank.means.shape[1], keep)
+    hyps = np.full((R, K, H, model.n), np.nan)            # every bank's hypotheses that carry weight, per sample
+    if keep > 1:
+        _store(hyps, bank, start, K, ambiguity_nats)
     peak = np.full(R, K) if through_peak is None else peak_refit_sample(model, y, gi.k0, start, through_peak)
     restarts = np.zeros(R, dtype=int)
     alarms = np.zeros(R, dtype=int)
     k = np.arange(K)[None, :]
     trusted = np.ones(R, dtype=bool) if gi.fit_ok is None else np.asarray(gi.fit_ok, dtype=bool).copy()
     cov[~trusted] = np.nan
+    spread = unalign(_trace2(bank.selected_pos_cov), start, K)                     # for the collapse alarm
+    ref = _trace2(gi.P0[np.arange(R), np.argmax(gi.loglik, axis=1)])                # the fit's, at the start
+    inv_A = np.linalg.inv(model.A)
     while True:
         alarm = divergence_alarm(nis, start, nis_window, nis_limit)
         alarm = np.where(trusted, alarm, np.minimum(alarm, start + nis_window))    # retry a failed fit
         alarm = np.where(alarms < max_restarts, alarm, K)
-        at = np.minimum(alarm, np.where(peak > start, peak, K))   # the refit after the peak is due once
+        due = np.where(peak > start, peak, K)                     # the refit after the peak is due once
+        if refit_every is not None:                               # and until then, every refit_every samples
+            due = np.minimum(due, np.where(peak > start, start + refit_every, K))
+        at = np.minimum(alarm, due)
+        if collapse is not None:
+            at = np.minimum(at, collapse_alarm(spread, start, ref, collapse, nis_window))
         sel = np.flatnonzero(at < K)
         if sel.size == 0:
             return est, cov, restarts
         on_alarm = alarm[sel] <= at[sel]
         sub = _passages(gi, sel)
+        others = hyps[sel, at[sel] - 1] if keep > 1 else None
         again = refit_at(model, y[sel], sub, est[sel], at[sel], prior=prior, inflate=inflate, gof=gof,
-                         multistart=on_alarm)
-        est[sel], c2, b2 = continue_from(unit, model, y[sel], again, est[sel], cov[sel])
-        after = k >= at[sel][:, None]
+                         multistart=on_alarm, hypotheses=others, keep=keep)
+        est[sel], c2, b2 = continue_from(unit, model, y[sel], again, est[sel], cov[sel], mixture=mixture)
+        last, c_last = _fit_at_last(model, again, inv_A, mixture)                  # the fit at at - 1
+        est[sel, at[sel] - 1], c2[np.arange(sel.size), at[sel] - 1] = last, c_last
+        after = k >= at[sel][:, None] - 1
         trusted[sel] = again.fit_ok
         cov[sel] = np.where(after[..., None, None] & ~again.fit_ok[:, None, None, None], np.nan, c2)
+        spread[sel] = np.where(k > at[sel][:, None] - 1, unalign(_trace2(b2.selected_pos_cov), at[sel], K),
+                               spread[sel])
+        ref[sel] = _trace2(again.P0[:, 0])
         nis[sel] = np.where(after, unalign(selected_nis(b2), at[sel], K), nis[sel])
+        if keep > 1:
+            sub_h = hyps[sel]
+            _store(sub_h, b2, at[sel], K, ambiguity_nats)
+            hyps[sel] = sub_h
         start[sel] = at[sel]
         restarts[sel] += 1
         alarms[sel] += on_alarm
 
 
-def continue_from(unit, model, measurements, gi, estimates, pos_cov):
+def collapse_alarm(spread, start, ref, fraction, window):
+    """First sample (R,) after ``start`` plus one at which a bank started at ``start`` from a fit whose position
+    covariance has trace ``ref`` (R,) reports a trace ``spread`` (R, K) below ``fraction`` of it, within
+    ``window`` samples of the start; ``K`` when there is none."""
+    R, K = spread.shape
+    k = np.arange(K)[None, :]
+    start = np.asarray(start)[:, None]
+    low = (k >= start) & (k < start + window) & (spread < fraction * np.asarray(ref)[:, None]) & (k < K - 1)
+    return np.where(low.any(axis=1), np.argmax(low, axis=1) + 1, K)
+
+
+def _trace2(cov):
+    """Trace of position covariances (..., 2, 2) or the position block of state covariances (..., n, n)."""
+    return cov[..., 0, 0] + cov[..., 1, 1]
+
+
+def _fit_at_last(model, gi, inv_A, mixture):
+    """A refit's estimate (R, n) and position covariance (R, 2, 2) (SI) at its last fitted sample ``gi.start - 1``:
+    the best hypothesis, and its covariance or (``mixture``) its mean-square-error matrix under the
+    hypotheses' likelihood weights."""
+    xs = model.x_scale
+    x = np.einsum("ij,rhj->rhi", inv_A, gi.seeds / xs) * xs                             # (R, H, n)
+    P = inv_A @ (gi.P0 / np.outer(xs, xs)) @ inv_A.T * np.outer(xs, xs)
+    best = np.argmax(gi.loglik, axis=1)
+    rows = np.arange(len(best))
+    if not mixture:
+        return x[rows, best], P[rows, best, :2, :2]
+    w = np.exp(gi.loglik - gi.loglik[rows, best][:, None])
+    w /= w.sum(axis=1, keepdims=True)
+    e = x[..., :2] - x[rows, best][:, None, :2]
+    mse = np.where((w > 0)[..., None, None], w[..., None, None] * (P[..., :2, :2] + e[..., :, None] * e[..., None, :]),
+                   0.0).sum(axis=1)
+    return x[rows, best], mse
+
+
+def _store(hyps, bank, start, K, nats):
+    """Write a bank's hypotheses within ``nats`` of its best (NaN otherwise) into ``hyps`` (R, K, H, n) from
+    each passage's ``start`` on."""
+    from shipsense.trackers.init import unalign
+
+    H = bank.means.shape[1]
+    live = bank.normalised_loglik > -nats                                          # (R, H, J)
+    means = np.where(live[..., None], bank.means, np.nan)
+    vals = unalign(np.moveaxis(means, 2, 1), start, K)                             # (R, K, H, n)
+    after = np.arange(K)[None, :] >= np.asarray(start)[:, None]
+    hyps[..., :H, :] = np.where(after[..., None, None], vals, hyps[..., :H, :])
+    hyps[..., H:, :] = np.where(after[..., None, None], np.nan, hyps[..., H:, :])
+
+
+def continue_from(unit, model, measurements, gi, estimates, pos_cov, mixture=False):
     """Run a bank from ``gi`` (e.g. a refit) and splice it into ``estimates`` (R, K, n) and ``pos_cov``
-    (R, K, 2, 2) from each passage's ``gi.start`` on; returns the spliced copies and the ``BankRun``."""
+    (R, K, 2, 2) from each passage's ``gi.start`` on (with ``mixture`` the selected estimate's
+    mean-square-error matrix under the bank's mixture, else the selected hypothesis's covariance);
+    returns the spliced copies and the ``BankRun``."""
     from shipsense.trackers.init import track_with_global_init, unalign
 
     K = np.shape(measurements)[1]
     e2, bank = track_with_global_init(unit, model, measurements, gi)
     after = np.arange(K)[None, :] >= np.asarray(gi.start)[:, None]
+    c2 = bank.selected_pos_mse if mixture else bank.selected_pos_cov
     return (np.where(after[..., None], e2, estimates),
-            np.where(after[..., None, None], unalign(bank.selected_pos_cov, gi.start, K), pos_cov), bank)
+            np.where(after[..., None, None], unalign(c2, gi.start, K), pos_cov), bank)
 
 
 def _passages(gi, sel):
