@@ -177,8 +177,9 @@ def track_global(unit, model, y, sc, *, refit_peak=None, return_init=False, **op
 
 def track_restarting(unit, model, y, sc, *, return_init=False, **options):
     """The project's tracker: a constant-velocity model without process noise, the global initialiser, and
-    the bank restarted from batch refits after the closest approach and on divergence alarms
-    (:func:`~shipsense.trackers.refit.track_with_restarts`).
+    the bank restarted from batch refits (:func:`~shipsense.trackers.refit.track_with_restarts` with its
+    defaults: every 20 samples until the closest approach and once after it, on divergence alarms and on
+    covariance collapses; up to three distinct fits, the mixture's mean-square error reported).
 
     Returns estimates (R, K, n) SI, position covariances (R, K, 2, 2) (NaN before the bank starts), the
     initialiser's seconds, the restarts per passage (R,) (and, with ``return_init``, the

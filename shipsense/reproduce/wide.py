@@ -34,9 +34,12 @@ approach and a bank without process noise (:data:`REFIT_PEAK`).
 
 ``global_init_restarts``: the project's tracker -- the family's unit on the
 constant-velocity model without process noise, from the global initialiser,
-its bank restarted from batch refits after the closest approach and on
-divergence alarms (:func:`~shipsense.trackers.refit.track_with_restarts`);
-also ``restarts_per_passage``.
+its bank restarted from batch refits every 20 samples until the closest
+approach and once after it, on divergence alarms and on covariance
+collapses, each refit keeping up to three distinct fits and the reported
+covariance the selected estimate's mean-square error under their mixture
+(:func:`~shipsense.trackers.refit.track_with_restarts`); also
+``restarts_per_passage``.
 
 ``consistency``: NEES of the project's tracker (``ukf`` unit) on S0, S1-P2
 and S2, against the 95 % chi-square band (:func:`consistency`);
@@ -215,9 +218,10 @@ def consistency(runs=100, seed=0, tracker="restarts", sigma_a=TRACKER_SIGMA_A):
 
     * ``"restarts"`` (the project's tracker): the ``ukf`` unit on the
       constant-velocity model without process noise, seeded by the global
-      initialiser and restarted from batch refits after the closest approach
-      and on divergence alarms
-      (:func:`~shipsense.reproduce.common.track_restarting`);
+      initialiser and restarted from batch refits (scheduled until the
+      closest approach, after it, on divergence alarms and on covariance
+      collapses), reporting the mixture mean-square error of its distinct
+      fits (:func:`~shipsense.reproduce.common.track_restarting`);
     * ``"dwna"``: the ``ukf`` unit with the default process noise
       (``ProcessNoiseConfig()``: DWNA and a moment walk) whose white
       acceleration is ``sigma_a`` (None keeps the library default, 1 m/s²),

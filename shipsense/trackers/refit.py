@@ -15,7 +15,16 @@ therefore runs the bank and restarts it from a refit when
 * the selected hypothesis's innovations say it has diverged: its normalised
   innovation squared per measurement component, averaged over
   ``nis_window`` samples, exceeds ``nis_limit`` (trackers.md §3's
-  divergence flag, acted on).
+  divergence flag, acted on),
+* every ``refit_every`` samples until the refit after the closest approach,
+* its covariance collapses: within ``nis_window`` samples of a refit it
+  falls below ``collapse`` of the fit's, more than the samples can carry.
+
+A refit keeps up to ``keep`` distinct fits (also started from the bank's
+hypotheses that still carry weight) as the next bank's hypotheses, weighted
+by their likelihoods, and the tracker reports the selected estimate's
+mean-square error under that mixture: when a passage 20 m away explains the
+data almost as well, the covariance says so.
 
 Every refit uses only the samples before the restart (causal), and all
 passages that restart together are one batch.
@@ -179,11 +188,12 @@ def track_with_restarts(unit, model, measurements, gi, *, prior=None, through_pe
     information; what shrinks it is the filter combining the fit's
     information with a Jacobian taken metres away, where a curved
     (banana-shaped) likelihood turns the other way.  The batch fit
-    re-linearises every sample at one point (on a single-magnetometer passage
-    with the fit's position standard deviation at 6.1 m, the UKF reported
-    0.75 m after one more sample and the EKF 0.90 m after two, where the fit
-    of the same samples gave 5.95 and 5.76 m: EXPERIMENTS.md).  At every
-    refit, the last fitted sample's estimate and covariance are the fit's.
+    re-linearises every sample at one point (on S0 passage 85, from a fit
+    with a position standard deviation of 6.1 m, the UKF reported 0.75 m
+    after one more sample and the EKF 0.90 m after two, where the fits of
+    the same samples gave 5.97 and 5.79 m: ``experiments/filter_collapse.py``).
+    At every refit, the last fitted sample's estimate and covariance are the
+    fit's.
 
     A bank started from a fit that fails the chi-square test (``gi.fit_ok``,
     or a refit's) makes no claim on its accuracy: its position covariance
