@@ -8,7 +8,8 @@ Run:  python experiments/refit_after_peak.py [--family two_magnetometers] [--run
 ``--tracker refit`` (default): the study's ``global_init_refit`` -- the first bank with the family's low
 process noise, one refit after the closest approach, then a bank without process noise.  ``--tracker
 restarts``: the project's tracker (``global_init_restarts``: no process noise anywhere, the bank restarted
-from batch refits after the closest approach and on divergence alarms).
+from batch refits -- scheduled, after the closest approach, on divergence alarms and on covariance
+collapses -- reporting the mixture mean-square error of its distinct fits).
 
 Converged passages, second halves (from the closest approach), as in ``shipsense reproduce wide``; the
 bound is each passage's CRLB without process noise (``rmse_over_crlb_deterministic``).  Besides the

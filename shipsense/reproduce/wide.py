@@ -88,7 +88,8 @@ get the bank's depth prior (``z_std``, :func:`init_options`)."""
 TRACKER_SIGMA_A = 0.1
 """White acceleration (m/s²) of :func:`consistency`'s ``dwna`` configuration (global initialiser, one refit
 after the closest approach): 0.1 put S0 and S1-P2 in their NEES bands on the first seed, the library's
-default 1 m/s² neither (EXPERIMENTS.md)."""
+default 1 m/s² neither; since the single magnetometer's explored search S0 is under its band (1.20) with it
+(EXPERIMENTS.md)."""
 
 
 def init_options(name, sc):
