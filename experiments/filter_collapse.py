@@ -29,7 +29,7 @@ from shipsense.trackers.bank import run_bank
 from shipsense.trackers.filters import get_filter
 from shipsense.trackers.init import global_init, track_with_global_init
 from shipsense.trackers.models import model_from_scenario
-from shipsense.trackers.refit import refit_at
+from shipsense.trackers.refit import _fit_at_last, refit_at
 
 
 def main(argv=None):
@@ -53,13 +53,10 @@ def main(argv=None):
     print(f"S0 passage {args.passage}, window {int(gi.k0[0])}..{int(gi.start[0]) - 1}, refit at {args.at}")
     print(f"{'':>10}" + "".join(f"{k:>14}" for k in ks))
     rows = {"batch fit": []}
-    for k in ks:   # the fit of samples up to k, at k (refit at k + 1, moved back one step)
-        f = refit_at(model, y, gi, est, np.array([k + 1]))
-        inv_A = np.linalg.inv(model.A)
-        x = inv_A @ (f.seeds[0, 0] / model.x_scale) * model.x_scale
-        P = inv_A @ (f.P0[0, 0] / np.outer(model.x_scale, model.x_scale)) @ inv_A.T * np.outer(model.x_scale,
-                                                                                                 model.x_scale)
-        rows["batch fit"].append((sd(P), np.hypot(*(x[:2] - truth[0, k, :2]))))
+    inv_A = np.linalg.inv(model.A)
+    for k in ks:   # the fit of samples up to k, at k (the refit for a bank from k + 1, at its last sample)
+        x, P = _fit_at_last(model, refit_at(model, y, gi, est, np.array([k + 1])), inv_A, mixture=False)
+        rows["batch fit"].append((sd(P[0]), np.hypot(*(x[0, :2] - truth[0, k, :2]))))
     fit = refit_at(model, y, gi, est, np.array([args.at]))
     for name in ("ekf", "ukf", "ckf", "cdkf"):
         b = run_bank(get_filter(name), model, y[:, ks], fit.seeds, fit.P0)

@@ -108,11 +108,7 @@ class BankRun:
         ``sum_j mu_j (P_j + e_j e_j^T)`` with ``e_j`` the position of hypothesis ``j`` minus the selected
         one's.  Equal to :attr:`selected_pos_cov` when one hypothesis holds all the weight; when
         distant hypotheses explain the data almost as well, it says so."""
-        w = self.weights[..., None, None]
-        live = w > 0
-        e = self.means[..., :2] - self.selected_means[:, None, :, :2]
-        spread = e[..., :, None] * e[..., None, :]
-        return np.sum(np.where(live, w * (self.pos_cov + spread), 0.0), axis=1)
+        return mixture_mse(self.weights, self.means[..., :2], self.pos_cov, self.selected_means[:, None, :, :2])
 
     def diverged(self, window: int = 10, confidence: float = 0.999) -> np.ndarray:
         """Divergence flag (R, H, K): lost covariance, or mean NIS over the last ``window`` steps
@@ -146,6 +142,15 @@ class BankRun:
                         pairs.append((int(i), int(j), float(abs(norm[r, i] - norm[r, j])), d))
             out.append(pairs)
         return out
+
+
+def mixture_mse(weights, means, covs, about):
+    """Mean-square-error matrix about ``about`` of a Gaussian mixture, summed over its axis 1:
+    ``sum_j w_j (P_j + e_j e_j^T)``, ``e_j = means_j - about`` (components of zero weight ignored, even
+    with NaN means)."""
+    w = np.asarray(weights)[..., None, None]
+    e = means - about
+    return np.sum(np.where(w > 0, w * (covs + e[..., :, None] * e[..., None, :]), 0.0), axis=1)
 
 
 def _project(belief, model):

@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from shipsense.trackers.bank import mixture_mse
 from shipsense.trackers.batchfit import fit_passages, powers
 
 
@@ -299,10 +300,7 @@ def _fit_at_last(model, gi, inv_A, mixture):
         return x[rows, best], P[rows, best, :2, :2]
     w = np.exp(gi.loglik - gi.loglik[rows, best][:, None])
     w /= w.sum(axis=1, keepdims=True)
-    e = x[..., :2] - x[rows, best][:, None, :2]
-    mse = np.where((w > 0)[..., None, None], w[..., None, None] * (P[..., :2, :2] + e[..., :, None] * e[..., None, :]),
-                   0.0).sum(axis=1)
-    return x[rows, best], mse
+    return x[rows, best], mixture_mse(w, x[..., :2], P[..., :2, :2], x[rows, best][:, None, :2])
 
 
 def _store(hyps, bank, start, K, nats):
