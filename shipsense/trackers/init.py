@@ -352,6 +352,14 @@ def distinct_rows(chi2, positions, M, distinct_m):
     return idx, found
 
 
+def distinct_loglik(chi2, found):
+    """Log-likelihoods ``-chi2 / 2`` (R, M) of fits picked by :func:`distinct_rows`, ``-inf`` for the repeats
+    that fill a row (no weight in a mixture); a row's first is always finite (its best, or a failed fit's
+    very low value) so that every bank has a hypothesis to select."""
+    first = np.arange(np.shape(chi2)[1]) == 0
+    return np.where(found | first, -0.5 * np.minimum(chi2, 1e300), -np.inf)
+
+
 def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, course_step_deg=30.0,
                 window_s=15.0, grid_samples=16, keep=5, distinct_m=15.0, snr_start=5.0, inflate=2.0,
                 source_z=None, common_start=False, max_bytes=512e6, through_peak=None, z_std=None, refine=None,
@@ -532,9 +540,8 @@ def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, c
     P0 = Aw[:, None] @ cov @ np.swapaxes(Aw, -1, -2)[:, None] + (end - k0)[:, None, None, None] * model.Q
     traj = np.einsum("kij,rmj->rmki", Ak[:Wf], theta)
     xs = model.x_scale
-    loglik = np.where(found | (np.arange(M) == 0), -0.5 * np.minimum(chi2_fit, 1e300), -np.inf)
-    return GlobalInit(start=end, seeds=seeds * xs, P0=P0 * np.outer(xs, xs),
-                      loglik=loglik, window=traj * xs, k0=k0, fit_ok=chi2_fit.min(axis=1) <= limit)
+    return GlobalInit(start=end, seeds=seeds * xs, P0=P0 * np.outer(xs, xs), loglik=distinct_loglik(chi2_fit, found),
+                      window=traj * xs, k0=k0, fit_ok=chi2_fit.min(axis=1) <= limit)
 
 
 def track_with_global_init(unit, model, measurements, gi: GlobalInit):

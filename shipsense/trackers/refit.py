@@ -80,7 +80,7 @@ def refit_at(model, measurements, gi, estimates, at, *, prior=None, inflate=1.0,
         ``keep`` hypotheses per passage, starting at ``at``; ``fit_ok`` is the
         best fit's chi-square test.
     """
-    from shipsense.trackers.init import GlobalInit, _chi2_limit, distinct_rows
+    from shipsense.trackers.init import GlobalInit, _chi2_limit, distinct_loglik, distinct_rows
 
     y = np.asarray(measurements, dtype=float) / model.y_scale
     R, K, _ = y.shape
@@ -120,8 +120,7 @@ def refit_at(model, measurements, gi, estimates, at, *, prior=None, inflate=1.0,
     P0 = Ae[:, None] @ cov @ np.swapaxes(Ae, -1, -2)[:, None]
     traj = np.einsum("kij,rmj->rmki", Ak[:Wf], fits)
     return GlobalInit(start=at, seeds=seeds * xs, P0=P0 * np.outer(xs, xs),
-                      loglik=np.where(found | (np.arange(keep) == 0), -0.5 * np.minimum(chi2, 1e300), -np.inf),
-                      window=traj * xs, k0=k0,
+                      loglik=distinct_loglik(chi2, found), window=traj * xs, k0=k0,
                       fit_ok=chi2[:, 0] <= _chi2_limit(model, yfit, prior, gof))
 
 
@@ -221,9 +220,9 @@ def track_with_restarts(unit, model, measurements, gi, *, prior=None, through_pe
     start = np.asarray(gi.start, dtype=int).copy()
     cov = unalign(bank.selected_pos_mse if mixture else bank.selected_pos_cov, start, K)
     nis = unalign(selected_nis(bank), start, K)
-    H = max(bank.means.shape[1], keep)
-    hyps = np.full((R, K, H, model.n), np.nan)            # every bank's hypotheses that carry weight, per sample
+    hyps = None                                           # every bank's hypotheses that carry weight, per sample
     if keep > 1:
+        hyps = np.full((R, K, max(bank.means.shape[1], keep), model.n), np.nan)
         _store(hyps, bank, start, K, ambiguity_nats)
     peak = np.full(R, K) if through_peak is None else peak_refit_sample(model, y, gi.k0, start, through_peak)
     restarts = np.zeros(R, dtype=int)
