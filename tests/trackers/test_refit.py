@@ -56,7 +56,12 @@ def test_without_triggers_it_is_the_bank_and_with_them_it_is_causal():
     mine = (np.arange(K)[None, :] >= gi.start[:, None]) & (np.arange(K)[None, :] <= k)
     # (to rounding: the passages refitted together form one batch, and later ones join it)
     np.testing.assert_allclose(est2[mine], est[mine], rtol=1e-6)
-    np.testing.assert_allclose(cov2[mine], cov[mine], rtol=1e-5)
+    # covariances against their own scale, |dP_ij| <= 1e-4 sqrt(P_ii P_jj): an off-diagonal of 1e-10 beside
+    # variances of ~7 is zero to rounding, BLAS rounding differs between machines, and a refit batch of another
+    # composition stops its Levenberg-Marquardt iterations elsewhere within their tolerance (seen: 2e-6)
+    sd = np.sqrt(np.einsum("...ii->...i", cov[mine]))
+    assert np.all(np.abs(cov2[mine] - cov[mine]) <= 1e-4 * sd[..., :, None] * sd[..., None, :])
+    assert not np.allclose(cov2[:, k + 1:], cov[:, k + 1:], rtol=1e-2)
     assert not np.allclose(est2[:, k + 1:], est[:, k + 1:], rtol=1e-3)
 
 
