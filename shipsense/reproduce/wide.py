@@ -60,7 +60,7 @@ from shipsense.reproduce.common import Output, Stages, refit_stage, track_global
 from shipsense.simulator import simulate
 from shipsense.trackers.bank import run_bank
 from shipsense.trackers.init import seed_hypotheses
-from shipsense.trackers.metrics import position_error
+from shipsense.trackers.metrics import converged_until, passage_ends
 from shipsense.trackers.models import model_from_scenario
 from shipsense.tracking import scenario_tracker
 
@@ -140,14 +140,6 @@ def position_bounds(model, truth, P0):
             "crlb_deterministic": trace(pcrlb(model, x, J0, per_run=True, Q=np.zeros_like(model.Q)))}
 
 
-def passage_ends(truth, centre, period):
-    """Last sample of each symmetric passage: as far past the closest approach as its start was before it."""
-    p0, v = truth[:, 0, :2] - centre, truth[:, 0, 2:4]
-    speed2 = np.sum(v * v, axis=-1)
-    t_cpa = -np.sum(p0 * v, axis=-1) / speed2
-    return np.minimum(np.round(2 * t_cpa / period).astype(int), truth.shape[1] - 1)
-
-
 def family_passages(name, passages, seed):
     """A family's scenario, model, filter unit, and ``passages`` random passages: y (SI), truth and ends."""
     sc, model = family_scenario(name)
@@ -160,14 +152,10 @@ def family_passages(name, passages, seed):
 
 
 def converged(est, truth, ends):
-    """The study's rule per passage: error below 10 m over the last 10 % of its own samples; also the
-    position errors (NaN after each passage's end) and the mask of its samples."""
-    k = np.arange(truth.shape[1])[None, :]
-    valid = k <= ends[:, None]
-    err = np.where(valid, position_error(est, truth), np.nan)
-    hold = np.maximum(1, (0.1 * (ends + 1)).astype(int))
-    tail = valid & (k > (ends - hold)[:, None])
-    return np.all(np.where(tail, err < 10.0, True), axis=1), err, valid
+    """The study's rule per passage (:func:`~shipsense.trackers.metrics.converged_until`): error below 10 m over
+    the last 10 % of its own samples; also the position errors (NaN after each passage's end) and the mask of
+    its samples."""
+    return converged_until(est, truth, ends)
 
 
 def _metrics(est, covs_pos, truth, bounds, seconds, ends):

@@ -52,6 +52,29 @@ def convergence_rate(means, truth, threshold=CONVERGENCE_THRESHOLD_M, hold=0.1):
     return float(np.mean(converged(means, truth, threshold, hold)))
 
 
+def passage_ends(truth, centre, period):
+    """Last sample (R,) of each passage (truth (R, K, >= 4)) as far past its closest approach to ``centre`` as
+    its start was before it (a symmetric passage; at most the last sample)."""
+    p0, v = truth[:, 0, :2] - np.asarray(centre), truth[:, 0, 2:4]
+    speed2 = np.sum(v * v, axis=-1)
+    t_cpa = -np.sum(p0 * v, axis=-1) / speed2
+    return np.minimum(np.round(2 * t_cpa / period).astype(int), truth.shape[1] - 1)
+
+
+def converged_until(means, truth, ends, threshold=CONVERGENCE_THRESHOLD_M, hold=0.1):
+    """:func:`converged` over each passage's own samples ``0 .. ends`` (R,).
+
+    Returns ``(converged (R,), errors (R, K) NaN after each end, valid (R, K))``: the error is below
+    ``threshold`` over the last ``hold`` of the passage's samples.
+    """
+    k = np.arange(truth.shape[1])[None, :]
+    valid = k <= np.asarray(ends)[:, None]
+    err = np.where(valid, position_error(means, truth), np.nan)
+    n_hold = np.maximum(1, (hold * (np.asarray(ends) + 1)).astype(int))
+    tail = valid & (k > (ends - n_hold)[:, None])
+    return np.all(np.where(tail, err < threshold, True), axis=1), err, valid
+
+
 def nees(means, covs, truth, components=(0, 1)):
     """Normalised estimation error squared over ``components`` (default position), shape (..., steps).
 
