@@ -426,6 +426,33 @@ def cmd_reproduce(args) -> int:
     return EXIT_OK
 
 
+def cmd_sweep(args) -> int:
+    from shipsense.sweep import EXAMPLE, SweepError, load_sweep, report, run_sweep
+
+    try:
+        if args.example:
+            print(EXAMPLE, end="")
+            return EXIT_OK
+        if args.report is not None:
+            for path in report(args.report):
+                print(f"wrote {path}")
+            return EXIT_OK
+        if args.sweep is None or args.out is None:
+            raise _BadInput("give SWEEP.toml and --out DIR (or --example, or --report DIR)")
+        if args.workers is not None and not 0 <= args.workers <= 1024:
+            raise _BadInput(f"--workers must be between 0 and 1024, got {args.workers}")
+        spec, base = load_sweep(args.sweep)
+        run = run_sweep(spec, base, args.out, workers=args.workers, scheduler=args.scheduler, restart=args.restart,
+                        csv=args.csv, progress=False if args.quiet else None,
+                        log=(lambda *a, **k: None) if args.quiet else print)
+    except SweepError as err:
+        raise _BadInput(str(err)) from None
+    print(f"ran {run.ran} of {run.tasks} tasks ({run.skipped} already finished) in {run.wall_seconds:.1f} s; "
+          f"wrote {Path(args.out) / 'results.parquet'}" + (" and results.csv" if args.csv else "")
+          + ", passages.parquet and one PNG per metric")
+    return EXIT_OK
+
+
 def build_parser() -> argparse.ArgumentParser:
     from shipsense import __version__
 
@@ -488,6 +515,22 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--out", default=None, help="output directory (default: results/train-TASK)")
     tr.add_argument("--seed", type=int, default=0)
     tr.set_defaults(func=cmd_train)
+
+    w = sub.add_parser("sweep", help="a layout study: layouts x site conditions x passages, on Dask, resumable",
+                       description="Run the cells of SWEEP.toml (layouts x site conditions) in chunks of passages "
+                       "on a local Dask cluster (or --scheduler), writing each finished chunk to DIR; rerunning "
+                       "skips finished chunks.  `shipsense sweep --example` prints an example sweep file.")
+    w.add_argument("sweep", nargs="?", metavar="SWEEP.toml", help="the sweep file")
+    w.add_argument("--out", metavar="DIR", help="results folder (resumed if it holds this sweep's results)")
+    w.add_argument("--workers", type=int, default=None,
+                   help="local Dask workers, one thread each (default: the cores; 0 runs serially in-process)")
+    w.add_argument("--scheduler", default=None, metavar="ADDRESS", help="an existing Dask scheduler, tcp://host:8786")
+    w.add_argument("--restart", action="store_true", help="discard another sweep's results found in DIR")
+    w.add_argument("--csv", action="store_true", help="also write results.csv")
+    w.add_argument("--quiet", action="store_true", help="no progress bar or log lines")
+    w.add_argument("--example", action="store_true", help="print an example sweep file (about 100 cells) and exit")
+    w.add_argument("--report", default=None, metavar="DIR", help="re-draw the plots of a finished sweep in DIR")
+    w.set_defaults(func=cmd_sweep)
 
     r = sub.add_parser("reproduce", help="reproduce the reference experiments of S0, S1, S2, or the wide-prior study")
     r.add_argument("name", metavar="S0|S1|S2|wide")

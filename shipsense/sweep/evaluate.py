@@ -1,0 +1,173 @@
+"""One sweep task, as a pure function: simulate a chunk of passages of a cell, track them, score each passage.
+
+Per passage (``passage`` is its index in the cell; the columns of a chunk's table):
+
+* ``converged``: the position error is below 10 m over the last 10 % of the
+  passage's own samples (:func:`~shipsense.trackers.metrics.converged_until`;
+  a passage ends as far past its closest approach as it started before it);
+* ``rmse_m``: root-mean-square position error over the second half of the
+  passage's samples;
+* ``rmse_over_crlb``: that RMSE over the root-mean of the position CRLB on the
+  same samples (the constant-velocity bound of the passage, with the bank's
+  initial covariance as prior information);
+* ``nees_mean``: mean position NEES over the same samples (2 is consistent);
+  ``nees_coverage``: the share of them where the truth lies inside the
+  reported 95 % ellipse (0.95 is honest; a sample without a covariance
+  counts as not covered);
+* ``seconds``: tracking wall time per passage (the one column that depends on
+  the machine).
+
+A cell's ambiguity task gives its ``verdict`` (observable / ambiguous /
+degenerate) and ``min_chi2`` from :func:`shipsense.design.observability.check_scenario`
+on ``ambiguity_passages`` passages of the prior.
+
+Tasks run in worker processes: everything here is a function of the task
+alone, and BLAS is held to one thread so that results are bit-identical
+wherever a task runs.
+"""
+
+from __future__ import annotations
+
+import time
+from contextlib import contextmanager
+
+import numpy as np
+
+from shipsense.sweep.cells import AMBIGUITY_CHUNK, Task
+
+CHI2_95_2DOF = 5.991464547107979
+"""The 95 % quantile of chi-square with 2 degrees of freedom (the position ellipse)."""
+
+PASSAGE_COLUMNS = ("cell", "chunk", "passage", "converged", "rmse_m", "rmse_over_crlb", "nees_mean", "nees_coverage",
+                   "seconds")
+AMBIGUITY_COLUMNS = ("cell", "verdict", "min_chi2", "seconds")
+
+
+@contextmanager
+def one_blas_thread():
+    """Hold BLAS/OpenMP to one thread (threadpoolctl), so that a result does not depend on the machine's cores."""
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:  # pragma: no cover - threadpoolctl comes with the sweep extra
+        yield
+        return
+    with threadpool_limits(limits=1):
+        yield
+
+
+def run_task(task: Task) -> dict:
+    """The task's result as a table ``{column: list}`` (see the module docstring for the columns)."""
+    with one_blas_thread():
+        if task.chunk == AMBIGUITY_CHUNK:
+            return _ambiguity(task)
+        return _chunk(task)
+
+
+def _scenario(task):
+    from shipsense.config import Scenario
+
+    return Scenario.model_validate(task.cell.scenario)
+
+
+def _ambiguity(task):
+    from shipsense.design.observability import check_scenario
+
+    t0 = time.perf_counter()
+    v = check_scenario(_scenario(task), passages=task.passages, seed=task.seed % 2**32)
+    return {"cell": [task.cell.key], "verdict": [v.verdict],
+            "min_chi2": [float(v.min_chi2) if np.isfinite(v.min_chi2) else np.nan],
+            "seconds": [time.perf_counter() - t0]}
+
+
+def _chunk(task):
+    from shipsense.simulator import simulate
+    from shipsense.trackers.metrics import converged_until, passage_ends
+    from shipsense.trackers.models import model_from_scenario
+
+    sc = _scenario(task)
+    model = model_from_scenario(sc)
+    sim = simulate(sc, runs=task.passages, seed=task.seed, random=True)
+    y, truth = sim.measurements, model.state_from_truth(sim.truth)
+    t0 = time.perf_counter()
+    est, pos_cov = track_passages(task.method, sc, model, y)
+    seconds = (time.perf_counter() - t0) / task.passages
+    ends = passage_ends(truth, model.array.positions[:, :2].mean(axis=0), sc.period)
+    conv, err, valid = converged_until(est, truth, ends)
+    second = valid & (np.arange(truth.shape[1])[None, :] >= (ends // 2)[:, None])
+    n = second.sum(axis=1)
+    rmse = np.sqrt(np.nansum(np.where(second, err, 0.0) ** 2, axis=1) / n)
+    ratio = np.full(task.passages, np.nan)
+    if "rmse_over_crlb" in task.metrics:
+        bound = crlb_position_trace(sc, model, truth)
+        ratio = rmse / np.sqrt(np.sum(np.where(second, bound, 0.0), axis=1) / n)
+    q = position_nees(est, pos_cov, truth)
+    covered = np.where(second, q <= CHI2_95_2DOF, False)   # NaN (no covariance) compares False: not covered
+    nees_mean = np.array([np.nanmean(q[r, second[r]]) if np.isfinite(q[r, second[r]]).any() else np.nan
+                          for r in range(task.passages)])
+    return {"cell": [task.cell.key] * task.passages, "chunk": [task.chunk] * task.passages,
+            "passage": list(range(task.first, task.first + task.passages)), "converged": conv.tolist(),
+            "rmse_m": rmse.tolist(), "rmse_over_crlb": ratio.tolist(), "nees_mean": nees_mean.tolist(),
+            "nees_coverage": (covered.sum(axis=1) / n).tolist(), "seconds": [seconds] * task.passages}
+
+
+def position_nees(est, pos_cov, truth):
+    """Position NEES (R, K) of estimates (R, K, >= 2) with 2x2 covariances; NaN where there is no valid one."""
+    from shipsense.trackers.metrics import nees
+
+    P = np.asarray(pos_cov, dtype=float)
+    det = P[..., 0, 0] * P[..., 1, 1] - P[..., 0, 1] * P[..., 1, 0]
+    ok = np.isfinite(P).all(axis=(-2, -1)) & (P[..., 0, 0] > 0) & (det > 0)
+    safe = np.where(ok[..., None, None], P, np.eye(2))
+    return np.where(ok, nees(np.asarray(est)[..., :2], safe, np.asarray(truth)[..., :2]), np.nan)
+
+
+def crlb_position_trace(sc, model, truth):
+    """Trace (R, K) of the position block of each passage's constant-velocity CRLB, m², with the prior
+    information of the tracker's bank (its initial standard deviations)."""
+    from shipsense.design.fisher import pcrlb
+    from shipsense.tracking import scenario_tracker
+
+    _, bank = scenario_tracker(sc)
+    std = {"x": bank.position_std, "y": bank.position_std, "vx": bank.velocity_std, "vy": bank.velocity_std,
+           "mx": bank.moment_std, "my": bank.moment_std, "mz": bank.moment_std, "z": bank.z_std, "p": bank.p_std}
+    J0 = np.diag((np.array([std[c] for c in model.labels]) / model.x_scale) ** -2.0)
+    b = pcrlb(model, model.to_internal(truth), J0, per_run=True, Q=np.zeros_like(model.Q))
+    return b[..., 0, 0] * model.x_scale[0] ** 2 + b[..., 1, 1] * model.x_scale[1] ** 2
+
+
+def _init_options(model, sc):
+    # The wide study's measured initialiser settings per sensor family (EXPERIMENTS.md), until the public
+    # tracker of issue 16 chooses its own.
+    types = set(model.array.types)
+    if "electrode" in types:
+        from shipsense.tracking import scenario_tracker
+
+        return {"snr_start": 50.0, "refine": (10, 30, 60), "z_std": scenario_tracker(sc)[1].z_std}
+    if len(model.array.ids) == 1:
+        return {"snr_start": 400.0, "refine": (20, 60), "explore_samples": 15}
+    return {"snr_start": 5.0, "refine": (5, 20)}
+
+
+def track_passages(method, sc, model, y):
+    """Estimates (R, K, n) and position covariances (R, K, 2, 2), SI, of passages ``y`` (R, K, m).
+
+    ``tracker``: the project's tracker (global initialiser, a bank without process noise restarted from batch
+    refits); ``bank``: the studies' multiple-initial-value bank seeded from the first sample.
+    """
+    from shipsense.trackers.init import depth_prior, global_init, seed_hypotheses
+    from shipsense.trackers.refit import track_with_restarts
+    from shipsense.tracking import scenario_tracker
+
+    unit, bank_cfg = scenario_tracker(sc)
+    if method == "bank":
+        from shipsense.trackers.bank import run_bank
+
+        seeds, P0 = seed_hypotheses(model, y[:, 0], bank_cfg)
+        bank = run_bank(unit, model, y, seeds, P0, prune_nats=bank_cfg.prune_nats)
+        return bank.selected_means, bank.selected_pos_cov
+    still = model.without_process_noise()
+    opts = _init_options(model, sc)
+    grid = {"ranges": np.geomspace(20.0, 1.2 * sc.prior.range[1], 8), "speeds": np.linspace(*sc.prior.speed, 3)}
+    gi = global_init(still, y, **grid, **opts)
+    est, cov, _ = track_with_restarts(unit, still, y, gi, prior=depth_prior(still, opts.get("z_std")))
+    return est, cov

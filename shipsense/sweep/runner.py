@@ -1,0 +1,243 @@
+"""Running a sweep: serially or on Dask, resumable, each finished task written atomically.
+
+Output folder ``DIR``::
+
+    sweep.json           the sweep's hash, its spec, seed, versions, counts and timing
+    chunks/*.parquet     one file per finished task (``<cell>-c<chunk>``, ``<cell>-ambiguity``)
+    results.parquet      one row per cell and metric (and results.csv with ``csv=True``)
+    passages.parquet     one row per passage
+    <metric>.png         the metric by layout and condition, with 95 % intervals
+
+Results are written by the process that runs the sweep, as tasks finish
+(a temporary file, then an atomic rename), so workers need no shared
+filesystem and a task that runs twice (a worker lost mid-task) rewrites the
+same file with the same rows.  Rerunning the same sweep into the same
+folder skips the finished tasks; a different sweep is refused unless
+``restart``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from shipsense.sweep.cells import Task, build_cells, make_tasks
+from shipsense.sweep.spec import SweepError, SweepSpec, canonical_hash
+from shipsense.sweep.store import atomic_write_bytes, write_table
+
+SCHEDULER_TIMEOUT_S = 5.0
+"""How long to wait for a ``--scheduler`` address to answer."""
+ONE_THREAD = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+OWN_FILES = ("sweep.json", "results.parquet", "results.csv", "passages.parquet", "chunks")
+
+
+@dataclass
+class SweepRun:
+    """What :func:`run_sweep` did: the folder, task counts and timing (seconds)."""
+
+    out: Path
+    tasks: int
+    skipped: int
+    ran: int
+    wall_seconds: float
+    task_seconds: float
+    workers: int
+
+
+def sweep_hash(spec: SweepSpec) -> str:
+    """The identity of a sweep: the hash of its validated spec (formatting and comments do not count)."""
+    return canonical_hash(spec.model_dump(mode="json"))
+
+
+def _versions():
+    from importlib.metadata import PackageNotFoundError, version
+
+    out = {"python": sys.version.split()[0]}
+    for pkg in ("shipsense", "numpy", "scipy", "dask", "distributed", "pandas", "pyarrow"):
+        try:
+            out[pkg] = version(pkg)
+        except PackageNotFoundError:
+            out[pkg] = None
+    return out
+
+
+def check_folder(out: Path, digest: str, restart: bool) -> bool:
+    """Whether ``out`` can take this sweep: new, or holding its results (resumed), or -- with ``restart`` --
+    another sweep's results (True: they must be removed first).  Anything else is refused.  Reads only."""
+    meta = out / "sweep.json"
+    if out.exists() and not out.is_dir():
+        raise SweepError(f"--out {out}: exists and is not a folder")
+    if meta.is_file():
+        try:
+            old = json.loads(meta.read_text())
+        except (OSError, ValueError) as err:
+            raise SweepError(f"{meta}: unreadable ({err}); remove the folder or choose another --out") from None
+        if old.get("sweep_hash") == digest:
+            return False
+        if restart:
+            return True
+        raise SweepError(f"--out {out}: holds the results of another sweep ({old.get('name')!r}, hash "
+                         f"{str(old.get('sweep_hash'))[:12]}): the sweep file changed or the folder is "
+                         "another sweep's; pass --restart to discard them, or choose another --out")
+    if out.is_dir() and any(out.iterdir()):
+        raise SweepError(f"--out {out}: the folder is not empty and holds no sweep.json (not a sweep's results)")
+    return False
+
+
+def _clear(out: Path) -> None:
+    for name in OWN_FILES:
+        p = out / name
+        shutil.rmtree(p) if p.is_dir() else p.unlink(missing_ok=True)
+    for png in out.glob("*.png"):
+        png.unlink()
+
+
+def _write_meta(out, spec, digest, **fields):
+    data = {"sweep_hash": digest, "name": spec.name, "seed": spec.seed, "versions": _versions(), **fields}
+    atomic_write_bytes(out / "sweep.json", (json.dumps(data, indent=2, default=str) + "\n").encode())
+
+
+def run_sweep(spec: SweepSpec, base_dir, out, *, workers: int | None = None, scheduler: str | None = None,
+              client=None, restart: bool = False, csv: bool = False, progress: bool | None = None,
+              log=print) -> SweepRun:
+    """Run (or resume) a sweep into ``out``; returns what was done.
+
+    Parameters
+    ----------
+    spec : SweepSpec
+    base_dir : path
+        Folder the sweep file's relative paths are taken from.
+    out : path
+        Output folder (see the module docstring).
+    workers : int, optional
+        ``0``: run serially in this process; ``N``: a local Dask cluster of N
+        single-threaded worker processes (default: the machine's cores).
+    scheduler : str, optional
+        Address of an existing Dask scheduler (``tcp://host:8786``) instead of a local cluster.
+    client : distributed.Client, optional
+        An existing client (overrides ``workers`` and ``scheduler``).
+    restart : bool
+        Discard another sweep's results found in ``out``.
+    csv : bool
+        Also write ``results.csv``.
+    progress : bool, optional
+        A progress bar (default: only on a terminal).
+    """
+    from shipsense.sweep.results import summarise
+
+    out = Path(out)
+    cells = build_cells(spec, Path(base_dir))
+    tasks = make_tasks(spec, cells)
+    digest = sweep_hash(spec)
+    stale = check_folder(out, digest, restart)
+    done = set() if stale else {p.stem for p in (out / "chunks").glob("*.parquet")}
+    todo = [t for t in tasks if t.name not in done]
+    skipped = len(tasks) - len(todo)
+    log(f"sweep {spec.name!r}: {len(cells)} cells, {len(tasks)} tasks"
+        + (f"; {skipped} already finished in {out}, {len(todo)} to run" if skipped else ""))
+    t0 = time.perf_counter()
+    own = client is None and todo and not (scheduler is None and workers == 0)
+    if own:   # before anything is written: a scheduler that does not answer leaves no folder behind
+        client = connect(workers, scheduler, log)
+    try:
+        if stale:
+            _clear(out)
+        (out / "chunks").mkdir(parents=True, exist_ok=True)
+        _write_meta(out, spec, digest, status="running", cells=len(cells), tasks=len(tasks))
+        task_seconds, n_workers = _execute(todo, out, client, progress)
+    finally:
+        if own:
+            _close(client)
+    wall = time.perf_counter() - t0
+    summarise(spec, cells, out, csv=csv)
+    _write_meta(out, spec, digest, status="complete", cells=len(cells), tasks=len(tasks), skipped=skipped,
+                ran=len(todo), wall_seconds=wall, task_seconds=task_seconds, workers=n_workers,
+                sweep=spec.model_dump(mode="json"))
+    return SweepRun(out, len(tasks), skipped, len(todo), wall, task_seconds, n_workers)
+
+
+def _progress_bar(total, enabled):
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc="sweep", unit="task", file=sys.stderr,
+                disable=(not enabled) if enabled is not None else not sys.stderr.isatty())
+
+
+def _store(out: Path, task: Task, table: dict) -> float:
+    write_table(out / "chunks" / f"{task.name}.parquet", table)
+    return float(sum(table["seconds"])) if task.chunk < 0 else float(table["seconds"][0]) * task.passages
+
+
+def _execute(todo, out, client, progress):
+    """Run the tasks ``todo`` (in this process without a client) and store each result as it arrives;
+    returns (task seconds, workers used)."""
+    from shipsense.sweep.evaluate import run_task
+
+    if not todo:
+        return 0.0, 0
+    bar = _progress_bar(len(todo), progress)
+    spent = 0.0
+    try:
+        if client is None:
+            for task in todo:
+                spent += _store(out, task, run_task(task))
+                bar.update(1)
+            return spent, 0
+        from distributed import as_completed
+
+        n_workers = len(client.scheduler_info().get("workers", {}))
+        futures = {client.submit(run_task, t, key=f"shipsense-sweep-{t.name}", pure=False, retries=2): t
+                   for t in todo}
+        for fut in as_completed(futures):
+            task = futures[fut]
+            try:
+                table = fut.result()
+            except Exception as err:   # a task's own failure: name it, keep what finished
+                for f in futures:
+                    f.cancel()
+                raise SweepError(f"task {task.name} (layout {task.cell.layout!r}, condition "
+                                 f"{task.cell.condition}) failed: {type(err).__name__}: {err}") from err
+            spent += _store(out, task, table)
+            bar.update(1)
+        return spent, n_workers
+    finally:
+        bar.close()
+
+
+def _close(client):
+    cluster = getattr(client, "cluster", None)
+    client.close()
+    if cluster is not None:
+        cluster.close()
+
+
+def connect(workers: int | None, scheduler: str | None, log=print):
+    """A Dask client: on ``scheduler`` (answering within :data:`SCHEDULER_TIMEOUT_S`), or on a new local
+    cluster of ``workers`` single-threaded processes (default: the cores), BLAS pinned to one thread each."""
+    import logging
+
+    try:
+        import dask
+        from distributed import Client, LocalCluster
+    except ImportError:
+        raise SweepError("running on Dask needs the sweep extra: pip install 'shipsense[sweep]' "
+                         "(or --workers 0 to run serially)") from None
+    if scheduler is not None:
+        try:
+            client = Client(scheduler, timeout=f"{SCHEDULER_TIMEOUT_S}s")
+        except (OSError, TimeoutError, ValueError) as err:
+            raise SweepError(f"--scheduler {scheduler}: no Dask scheduler answered within "
+                             f"{SCHEDULER_TIMEOUT_S:g} s ({type(err).__name__}: {err})") from None
+    else:
+        n = workers if workers is not None else (os.cpu_count() or 1)
+        with dask.config.set({"distributed.nanny.pre-spawn-environ": ONE_THREAD}):
+            cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, silence_logs=logging.ERROR,
+                                   dashboard_address=":0")
+        client = Client(cluster)
+    log(f"dask: {len(client.scheduler_info().get('workers', {}))} workers, dashboard {client.dashboard_link}")
+    return client
