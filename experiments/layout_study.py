@@ -1,30 +1,31 @@
-"""Layout study: random, line, greedy, convex and convex-with-cuts placements, judged by the same evaluation.
+"""Layout study as a sweep: random, line, greedy, convex and convex-with-cuts placements, judged alike.
 
-Run:  python experiments/layout_study.py [--passages 40] [--out results/layouts]
+Run:  python experiments/layout_study.py [--passages 40] [--method tracker|bank] [--workers 2]
+                                         [--out results/layouts]
 
 Two families: envelope electrodes (the S1-P2 template, 3 sensors from a 9 x 9
 grid of 60 m x 60 m on the seabed) and vector magnetometers (the S2 template,
 3 sensors from a 9 x 9 grid of 40 m x 40 m).  Every method designs from the
-same 8 prior passages (seed 0); every layout is evaluated by
-:func:`shipsense.design.evaluate.evaluate_layout` with the scenario's bank on
-the same held-out passages (seed 10000): convergence rate, mean TRMSE, RMSE
-over the second half against the PCRLB, and the ambiguity verdict.  Writes
-``layouts.csv``, ``layouts.json`` and ``layouts.png``.
+same 8 prior passages (seed 0); each design is written as a layout file and
+the layouts of a family are one sweep (``shipsense sweep``, seed 10000 for
+held-out passages): convergence, RMSE of the converged passages and its ratio
+to the CRLB, NEES coverage of the reported 95 % ellipse, the ambiguity
+verdict and the tracking time.  Writes, under ``--out``, ``layouts/*.toml``,
+one sweep folder per family and ``layouts.csv`` (the table printed).
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 import numpy as np
 
 from shipsense import load_scenario
+from shipsense.config import to_toml
 from shipsense.design import placement as pl
-from shipsense.design.evaluate import evaluate_layout
-from shipsense.plotting import plt
 from shipsense.simulator import sample_passages
+from shipsense.sweep import parse_sweep, run_sweep
 from shipsense.trackers.models import candidate_model
 
 FAMILIES = {
@@ -55,44 +56,52 @@ def layouts_for(name, half, prior_std, seed=0):
     return sc, cands, out, values
 
 
+def write_layouts(name, half, prior_std, folder):
+    """Design a family's layouts and write each as a scenario file; returns {method: (path, D value)}."""
+    sc, cands, layouts, values = layouts_for(name, half, prior_std)
+    template = sc.sensors[0]
+    out = {}
+    for method, chosen in layouts.items():
+        sensors = [template.model_copy(update={"id": f"L{i + 1}", "position": tuple(map(float, cands[c]))})
+                   for i, c in enumerate(chosen)]
+        path = folder / f"{name}-{method.replace(' + ', '-')}.toml"
+        path.write_text(to_toml(sc.model_copy(update={"sensors": sensors, "name": f"{name} {method}"})))
+        out[method] = (path, values[method])
+    return out
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--passages", type=int, default=40)
+    ap.add_argument("--method", default="tracker", choices=["tracker", "bank"])
+    ap.add_argument("--workers", type=int, default=None, help="local Dask workers (0: serial)")
     ap.add_argument("--out", default="results/layouts")
     args = ap.parse_args(argv)
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    rows, fig = [], plt.figure(figsize=(15, 6.5), layout="constrained")
-    axes = fig.subplots(2, 5)
-    print(f"{'family':<9} {'method':<14} {'D value':>8} {'verdict':>11} {'converged':>9} {'TRMSE [m]':>10} "
-          f"{'RMSE/bound':>11}")
-    for f, (family, (name, half, prior_std)) in enumerate(FAMILIES.items()):
-        sc, cands, layouts, values = layouts_for(name, half, prior_std)
-        template = sc.sensors[0]
-        for j, (method, chosen) in enumerate(layouts.items()):
-            sensors = [template.model_copy(update={"id": f"L{i + 1}", "position": tuple(map(float, cands[c]))})
-                       for i, c in enumerate(chosen)]
-            ev = evaluate_layout(sc.model_copy(update={"sensors": sensors}), passages=args.passages)
-            row = {"family": family, "method": method, "d_value": values[method], **ev.to_json(),
-                   "sensors": cands[chosen].tolist()}
-            rows.append(row)
-            print(f"{family:<9} {method:<14} {values[method]:>8.2f} {ev.verdict:>11} {ev.convergence_rate:>9.2f} "
-                  f"{ev.trmse_m:>10.2f} {ev.ratio_to_bound:>11.3g}", flush=True)
-            ax = axes[f, j]
-            ax.scatter(cands[:, 0], cands[:, 1], s=6, color="0.7")
-            ax.scatter(cands[chosen, 0], cands[chosen, 1], s=60, color="tab:red", edgecolor="k")
-            ax.set_title(f"{family}: {method}\n{ev.verdict}, conv {ev.convergence_rate:.2f}, "
-                         f"TRMSE {ev.trmse_m:.1f} m", fontsize=8)
-            ax.set_aspect("equal")
-            ax.tick_params(labelsize=7)
-    fig.savefig(out / "layouts.png", dpi=100)
-    keys = [k for k in rows[0] if k != "sensors"]
-    with open(out / "layouts.csv", "w") as fh:
-        fh.write(",".join(keys) + "\n")
-        for r in rows:
-            fh.write(",".join(f"{r[k]:.6g}" if isinstance(r[k], float) else str(r[k]) for k in keys) + "\n")
-    (out / "layouts.json").write_text(json.dumps(rows, indent=2) + "\n")
-    print(f"wrote {out / 'layouts.csv'}, {out / 'layouts.json'} and {out / 'layouts.png'}")
+    (out / "layouts").mkdir(parents=True, exist_ok=True)
+    lines = ["family,method,d_value,verdict,convergence_rate,rmse_m,rmse_over_crlb,nees_coverage,seconds_per_passage"]
+    print(f"{'family':<9} {'method':<14} {'D value':>8} {'verdict':>11} {'converged':>9} {'RMSE [m]':>9} "
+          f"{'RMSE/CRLB':>10} {'coverage':>9}")
+    for family, (name, half, prior_std) in FAMILIES.items():
+        files = write_layouts(name, half, prior_std, out / "layouts")
+        spec = parse_sweep({"name": f"layout-study-{family}", "scenario": name, "seed": 10_000,
+                            "passages": args.passages, "chunk": 10, "method": args.method,
+                            "layouts": [{"name": m, "file": str(p.resolve())} for m, (p, _) in files.items()]},
+                           f"layout study ({family})")
+        run_sweep(spec, out, out / f"sweep-{family}", workers=args.workers, restart=True)
+        import pandas as pd
+
+        res = pd.read_parquet(out / f"sweep-{family}" / "results.parquet")
+        for method, (_, d_value) in files.items():
+            r = res[res.layout == method].set_index("metric")
+            v = {m: float(r.loc[m, "value"]) for m in r.index}
+            verdict = r["verdict"].iloc[0]
+            print(f"{family:<9} {method:<14} {d_value:>8.2f} {verdict:>11} {v['convergence_rate']:>9.2f} "
+                  f"{v['rmse_m']:>9.3g} {v['rmse_over_crlb']:>10.3g} {v['nees_coverage']:>9.2f}", flush=True)
+            lines.append(f"{family},{method},{d_value:.6g},{verdict},{v['convergence_rate']:.6g},{v['rmse_m']:.6g},"
+                         f"{v['rmse_over_crlb']:.6g},{v['nees_coverage']:.6g},{v['seconds_per_passage']:.6g}")
+    (out / "layouts.csv").write_text("\n".join(lines) + "\n")
+    print(f"wrote {out / 'layouts.csv'} and the sweep folders under {out}")
 
 
 if __name__ == "__main__":

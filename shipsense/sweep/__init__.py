@@ -15,8 +15,8 @@ from shipsense.sweep.runner import SweepRun, run_sweep, sweep_hash
 from shipsense.sweep.spec import SweepError, SweepSpec, load_sweep, parse_sweep
 
 EXAMPLE = '''\
-# An example layout study (`shipsense sweep --example > sweep.toml`): 5 layouts of vector magnetometers
-# x 18 site conditions = 90 cells, 8 passages each; a few minutes on 2 cores.
+# An example layout study (`shipsense sweep --example > sweep.toml`): 6 layouts of vector magnetometers
+# x 18 site conditions = 108 cells, 8 passages each; a few minutes on 2 cores.
 name = "magnetometer-layouts"
 scenario = "S2"          # base scenario: medium, noise, prior, period, tracker
 template = "M1"          # the sensor the generated layouts copy
@@ -53,6 +53,12 @@ shape = [2, 2]
 spacing = 10.0
 
 [[layouts]]
+name = "grid-3x2"
+generator = "grid"
+shape = [3, 2]
+spacing = 8.0
+
+[[layouts]]
 name = "line-4"
 generator = "line"
 n = 4
@@ -68,7 +74,7 @@ noise_scale = [1.0, 3.0, 10.0]        # x the scenario's noise standard deviatio
 source_scale = [0.3, 1.0, 3.0]        # x the moment of the passages
 prior_range = [[50.0, 150.0], [100.0, 300.0]]   # start range of the passages, m
 '''
-"""An example sweep file (about 100 cells): what ``shipsense sweep --example`` prints."""
+"""An example sweep file (108 cells): what ``shipsense sweep --example`` prints."""
 
 __all__ = ["EXAMPLE", "SweepError", "SweepRun", "SweepSpec", "load_sweep", "parse_sweep", "report", "run_sweep",
            "sweep_hash"]

@@ -1,13 +1,16 @@
 """A sweep's cells (layout x site condition) and its tasks (chunks of passages), with their derived seeds.
 
 A cell is a validated scenario: the base scenario with the layout's sensors
-and the condition applied.  Its key is a hash of that scenario and of the
-way it is scored, so it names the cell whatever else the sweep holds.  A
+and the condition applied.  Its key is a hash of the layout's name, that
+scenario and the way it is scored, so it names the cell whatever else the
+sweep holds (two methods that design the same layout are two cells).  A
 task is ``passages`` consecutive passages of one cell (or the cell's
-ambiguity check); its seed is derived from the sweep seed and the cell key
-(:class:`numpy.random.SeedSequence` with ``spawn_key = (cell, chunk)``), so
-a task's result is a pure function of the task, however the work is
-scheduled.
+ambiguity check); its seed is derived from the sweep seed and the cell's
+condition (:class:`numpy.random.SeedSequence` with ``spawn_key =
+(condition, chunk)``), so a task's result is a pure function of the task,
+however the work is scheduled.  Every layout under one condition sees the
+same draws (common random numbers): the differences between layouts are
+the layouts', not passage-to-passage noise.
 """
 
 from __future__ import annotations
@@ -33,6 +36,7 @@ class Cell:
     layout: str
     condition: dict
     scenario: dict   # a validated scenario, JSON-able (``Scenario.model_dump(mode="json")``)
+    draws: str       # key of the cell's random draws: its condition's (common to every layout under it)
 
 
 @dataclass(frozen=True)
@@ -174,20 +178,19 @@ def build_cells(spec: SweepSpec, base_dir: Path) -> list[Cell]:
             except ScenarioError as err:
                 raise SweepError(str(err)) from None
             scenario = sc.model_dump(mode="json")
-            key = canonical_hash({"scenario": scenario, "method": spec.method, "metrics": sorted(spec.metrics),
-                                  "ambiguity_passages": spec.ambiguity_passages})[:16]
-            cells.append(Cell(len(cells), key, layout.name, dict(cond), scenario))
-    keys = [c.key for c in cells]
-    if len(set(keys)) != len(keys):
-        dup = next(c for c in cells if keys.count(c.key) > 1)
-        raise SweepError(f"layouts/conditions: two cells are the same scenario (layout {dup.layout!r}, "
-                         f"condition {dup.condition}): remove the repeat")
+            key = canonical_hash({"layout": layout.name, "scenario": scenario, "method": spec.method,
+                                  "metrics": sorted(spec.metrics), "ambiguity_passages": spec.ambiguity_passages})[:16]
+            draws = canonical_hash({"condition": cond})[:16]
+            cells.append(Cell(len(cells), key, layout.name, dict(cond), scenario, draws))
+    if len({c.key for c in cells}) != len(cells):   # names are unique, so only a repeated condition does this
+        raise SweepError("conditions: a combination of conditions is repeated (combine = 'list' with equal rows?)")
     return cells
 
 
-def derive_seed(sweep_seed: int, cell_key: str, chunk: int) -> int:
-    """A task's seed: ``SeedSequence(sweep_seed, spawn_key=(cell, chunk))`` as one 63-bit integer."""
-    ss = np.random.SeedSequence(sweep_seed, spawn_key=(int(cell_key[:8], 16), chunk % 2**32))
+def derive_seed(sweep_seed: int, draws_key: str, chunk: int) -> int:
+    """A task's seed: ``SeedSequence(sweep_seed, spawn_key=(draws, chunk))`` as one 63-bit integer (``draws``:
+    the key of the cell's condition, :attr:`Cell.draws`)."""
+    ss = np.random.SeedSequence(sweep_seed, spawn_key=(int(draws_key[:8], 16), chunk % 2**32))
     hi, lo = ss.generate_state(2, dtype=np.uint32)
     return (int(hi) << 31) ^ int(lo)
 
@@ -203,8 +206,8 @@ def make_tasks(spec: SweepSpec, cells: list[Cell]) -> list[Task]:
     for cell in cells:
         for c, first in enumerate(range(0, spec.passages, spec.chunk)):
             n = min(spec.chunk, spec.passages - first)
-            tasks.append(Task(cell, c, first, n, derive_seed(spec.seed, cell.key, c), spec.method, metrics))
+            tasks.append(Task(cell, c, first, n, derive_seed(spec.seed, cell.draws, c), spec.method, metrics))
         if "ambiguity" in spec.metrics:
             tasks.append(Task(cell, AMBIGUITY_CHUNK, 0, spec.ambiguity_passages,
-                              derive_seed(spec.seed, cell.key, AMBIGUITY_CHUNK), spec.method, metrics))
+                              derive_seed(spec.seed, cell.draws, AMBIGUITY_CHUNK), spec.method, metrics))
     return tasks

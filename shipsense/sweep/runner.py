@@ -41,6 +41,7 @@ class SweepRun:
     """What :func:`run_sweep` did: the folder, task counts and timing (seconds)."""
 
     out: Path
+    cells: int
     tasks: int
     skipped: int
     ran: int
@@ -158,7 +159,7 @@ def run_sweep(spec: SweepSpec, base_dir, out, *, workers: int | None = None, sch
     _write_meta(out, spec, digest, status="complete", cells=len(cells), tasks=len(tasks), skipped=skipped,
                 ran=len(todo), wall_seconds=wall, task_seconds=task_seconds, workers=n_workers,
                 sweep=spec.model_dump(mode="json"))
-    return SweepRun(out, len(tasks), skipped, len(todo), wall, task_seconds, n_workers)
+    return SweepRun(out, len(cells), len(tasks), skipped, len(todo), wall, task_seconds, n_workers)
 
 
 def _progress_bar(total, enabled):

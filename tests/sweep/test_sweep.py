@@ -77,13 +77,16 @@ def test_cells_and_seeds_are_stable_and_distinct(tmp_path):
     assert cells[1].scenario["sensors"][0]["noise_var"] == pytest.approx(9 * 2.5e-19)
     assert [s["id"] for s in cells[2].scenario["sensors"]] == ["triangle-1", "triangle-2", "triangle-3"]
     tasks = make_tasks(spec, cells)
-    assert len(tasks) == 8 and len({t.seed for t in tasks}) == 8
+    # common random numbers: the layouts under one condition share their draws, the conditions do not
+    seeds = {(t.cell.layout, t.cell.condition["noise_scale"], t.chunk): t.seed for t in tasks}
+    assert seeds["pair", 1.0, 0] == seeds["triangle", 1.0, 0] != seeds["pair", 3.0, 0] != seeds["pair", 1.0, 1]
+    assert len(set(seeds.values())) == 4
     # a cell's key and seeds do not depend on the other cells of the sweep
     spec1 = parse_sweep({**tomllib.loads((tmp_path / "sweep.toml").read_text()), "layouts": [
         {"name": "triangle", "generator": "triangle"}]})
     again = build_cells(spec1, base)
     assert again[0].key == cells[2].key
-    assert derive_seed(3, cells[2].key, 1) == tasks[5].seed
+    assert derive_seed(3, cells[2].draws, 1) == tasks[5].seed
 
 
 @pytest.mark.parametrize("change, message", [
