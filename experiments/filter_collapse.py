@@ -27,9 +27,10 @@ from shipsense.reproduce.wide import init_options
 from shipsense.simulator import simulate
 from shipsense.trackers.bank import run_bank
 from shipsense.trackers.filters import get_filter
-from shipsense.trackers.init import global_init, track_with_global_init
+from shipsense.trackers.initialiser import global_init
 from shipsense.trackers.models import model_from_scenario
-from shipsense.trackers.refit import _fit_at_last, refit_at
+from shipsense.trackers.restarts import _fit_at_last, refit_at
+from shipsense.trackers.studies import track_with_global_init
 
 
 def main(argv=None):

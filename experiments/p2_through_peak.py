@@ -14,7 +14,7 @@ import time
 from shipsense.reproduce import wide
 from shipsense.reproduce.common import track_global
 from shipsense.trackers.bank import run_bank
-from shipsense.trackers.init import seed_hypotheses
+from shipsense.trackers.seeding import seed_hypotheses
 
 
 def main(argv=None):

@@ -25,9 +25,11 @@ import numpy as np
 
 from shipsense.reproduce import wide
 from shipsense.reproduce.common import refit_stage, track_global, track_restarting
-from shipsense.trackers.init import depth_prior, refit_after_peak, seed_hypotheses
+from shipsense.trackers.initialiser import depth_prior
 from shipsense.trackers.metrics import nees
-from shipsense.trackers.refit import peak_refit_sample
+from shipsense.trackers.restarts import peak_refit_sample
+from shipsense.trackers.seeding import seed_hypotheses
+from shipsense.trackers.studies import refit_after_peak
 
 
 def main(argv=None):

@@ -26,7 +26,7 @@ import numpy as np
 from shipsense.config import load_scenario
 from shipsense.simulator import simulate
 from shipsense.trackers.batchfit import fit_passages
-from shipsense.trackers.init import global_init
+from shipsense.trackers.initialiser import global_init
 from shipsense.trackers.metrics import nees
 from shipsense.trackers.models import model_from_scenario
 

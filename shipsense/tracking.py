@@ -9,8 +9,8 @@ import numpy as np
 from shipsense.config import BankConfig, Scenario
 from shipsense.trackers.bank import BankRun, run_bank
 from shipsense.trackers.filters import get_filter
-from shipsense.trackers.init import field_strength, seed_hypotheses
 from shipsense.trackers.models import FieldModel, model_from_scenario
+from shipsense.trackers.seeding import field_strength, seed_hypotheses
 
 DEFAULT_BANK = BankConfig(levels=[1e5, 1e6, 1e7], bearings_deg=[45.0, 135.0, 225.0, 315.0],
                           initial_velocity=(5.0, 5.0), initial_course="towards_array")

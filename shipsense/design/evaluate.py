@@ -16,9 +16,9 @@ import numpy as np
 from shipsense.design.fisher import pcrlb
 from shipsense.design.observability import check_array
 from shipsense.trackers.bank import run_bank
-from shipsense.trackers.init import seed_hypotheses
 from shipsense.trackers.metrics import convergence_rate, position_error, trmse
 from shipsense.trackers.models import model_from_scenario
+from shipsense.trackers.seeding import seed_hypotheses
 
 HELD_OUT_SEED = 10_000
 

@@ -57,9 +57,9 @@ from shipsense.design.observability import check_array
 from shipsense.design.placement import grid_candidates
 from shipsense.simulator import keel_dipole, sample_passages, simulate
 from shipsense.trackers.bank import run_bank
-from shipsense.trackers.init import seed_hypotheses
 from shipsense.trackers.metrics import convergence_rate, trmse
 from shipsense.trackers.models import candidate_model, subset_model
+from shipsense.trackers.seeding import seed_hypotheses
 from shipsense.tracking import scenario_tracker
 
 

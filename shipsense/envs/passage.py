@@ -63,8 +63,8 @@ from gymnasium.vector.utils import batch_space
 from shipsense.config import load_scenario
 from shipsense.simulator import simulate
 from shipsense.trackers.bank import BankState
-from shipsense.trackers.init import seed_hypotheses
 from shipsense.trackers.models import model_from_scenario
+from shipsense.trackers.seeding import seed_hypotheses
 from shipsense.tracking import scenario_tracker
 
 SEED_HIGH = 2**31 - 1

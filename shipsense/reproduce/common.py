@@ -158,12 +158,13 @@ def track_global(unit, model, y, sc, *, refit_peak=None, return_init=False, **op
     Returns estimates (R, K, n) SI, position covariances (R, K, 2, 2) (NaN
     inside the fitted stretch, before the bank starts: NEES assesses the
     bank) and the seconds spent in the initialiser itself (and, with
-    ``return_init``, the :class:`~shipsense.trackers.init.GlobalInit`).
+    ``return_init``, the :class:`~shipsense.trackers.initialiser.GlobalInit`).
     ``options`` (e.g. ``snr_start``, ``z_std``, ``refine``, ``through_peak``)
-    go to :func:`~shipsense.trackers.init.global_init`.  With ``refit_peak``
+    go to :func:`~shipsense.trackers.initialiser.global_init`.  With ``refit_peak``
     the tracker continues with :func:`refit_stage`.
     """
-    from shipsense.trackers.init import global_init, track_with_global_init, unalign
+    from shipsense.trackers.initialiser import global_init, unalign
+    from shipsense.trackers.studies import track_with_global_init
 
     t1 = time.perf_counter()
     gi = global_init(model, y, **prior_grid(sc), **options)
@@ -177,16 +178,16 @@ def track_global(unit, model, y, sc, *, refit_peak=None, return_init=False, **op
 
 def track_restarting(unit, model, y, sc, *, return_init=False, **options):
     """The project's tracker: a constant-velocity model without process noise, the global initialiser, and
-    the bank restarted from batch refits (:func:`~shipsense.trackers.refit.track_with_restarts` with its
+    the bank restarted from batch refits (:func:`~shipsense.trackers.studies.track_with_restarts` with its
     defaults: every 20 samples until the closest approach and once after it, on divergence alarms and on
     covariance collapses; up to three distinct fits, the mixture's mean-square error reported).
 
     Returns estimates (R, K, n) SI, position covariances (R, K, 2, 2) (NaN before the bank starts), the
     initialiser's seconds, the restarts per passage (R,) (and, with ``return_init``, the
-    :class:`~shipsense.trackers.init.GlobalInit`).  ``options`` go to the initialiser.
+    :class:`~shipsense.trackers.initialiser.GlobalInit`).  ``options`` go to the initialiser.
     """
-    from shipsense.trackers.init import depth_prior, global_init
-    from shipsense.trackers.refit import track_with_restarts
+    from shipsense.trackers.initialiser import depth_prior, global_init
+    from shipsense.trackers.studies import track_with_restarts
 
     still = model.without_process_noise()
     t1 = time.perf_counter()
@@ -198,11 +199,11 @@ def track_restarting(unit, model, y, sc, *, return_init=False, **options):
 
 def refit_stage(unit, model, y, gi, est, cov, refit_peak, z_std=None):
     """After the closest approach: each passage re-fitted once its signal has fallen to ``refit_peak`` of
-    its peak (:func:`~shipsense.trackers.init.refit_after_peak`, with the depth prior ``z_std``), then a
+    its peak (:func:`~shipsense.trackers.studies.refit_after_peak`, with the depth prior ``z_std``), then a
     bank without process noise from the fit.  Returns the estimates and position covariances with the
     samples from the refit on replaced."""
-    from shipsense.trackers.init import depth_prior, refit_after_peak
-    from shipsense.trackers.refit import continue_from
+    from shipsense.trackers.initialiser import depth_prior
+    from shipsense.trackers.studies import continue_from, refit_after_peak
 
     again = refit_after_peak(model, y, gi, est, refit_peak, prior=depth_prior(model, z_std))
     est, cov, _ = continue_from(unit, model.without_process_noise(), y, again, est, cov)

@@ -12,9 +12,9 @@ from shipsense.reproduce.common import Output, Stages, bank_summary, bar_charts,
 from shipsense.simulator import simulate
 from shipsense.trackers.bank import run_bank
 from shipsense.trackers.filters import get_filter
-from shipsense.trackers.init import seed_hypotheses
 from shipsense.trackers.metrics import rmse_k
 from shipsense.trackers.models import model_from_scenario
+from shipsense.trackers.seeding import seed_hypotheses
 
 SYMMETRY_SENSORS = ((0.0, 5.0), (0.0, 0.0), (5.0, 0.0))
 SYMMETRY_BEARINGS = (np.pi / 4, 3 * np.pi / 4, 5 * np.pi / 4, 7 * np.pi / 4)

@@ -38,7 +38,7 @@ its bank restarted from batch refits every 20 samples until the closest
 approach and once after it, on divergence alarms and on covariance
 collapses, each refit keeping up to three distinct fits and the reported
 covariance the selected estimate's mean-square error under their mixture
-(:func:`~shipsense.trackers.refit.track_with_restarts`); also
+(:func:`~shipsense.trackers.studies.track_with_restarts`); also
 ``restarts_per_passage``.
 
 ``consistency``: NEES of the project's tracker (``ukf`` unit) on S0, S1-P2
@@ -59,9 +59,9 @@ from shipsense.config import BankConfig, load_scenario
 from shipsense.reproduce.common import Output, Stages, refit_stage, track_global, track_restarting
 from shipsense.simulator import simulate
 from shipsense.trackers.bank import run_bank
-from shipsense.trackers.init import seed_hypotheses
 from shipsense.trackers.metrics import converged_until, passage_ends
 from shipsense.trackers.models import model_from_scenario
+from shipsense.trackers.seeding import seed_hypotheses
 from shipsense.tracking import scenario_tracker
 
 PERIOD, STEPS = 0.5, 330

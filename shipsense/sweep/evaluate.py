@@ -154,8 +154,9 @@ def track_passages(method, sc, model, y):
     ``tracker``: the project's tracker (global initialiser, a bank without process noise restarted from batch
     refits); ``bank``: the studies' multiple-initial-value bank seeded from the first sample.
     """
-    from shipsense.trackers.init import depth_prior, global_init, seed_hypotheses
-    from shipsense.trackers.refit import track_with_restarts
+    from shipsense.trackers.initialiser import depth_prior, global_init
+    from shipsense.trackers.seeding import seed_hypotheses
+    from shipsense.trackers.studies import track_with_restarts
     from shipsense.tracking import scenario_tracker
 
     unit, bank_cfg = scenario_tracker(sc)

@@ -24,6 +24,7 @@ import numpy as np
 from scipy import stats
 
 from shipsense.trackers.filters import Belief, FilterUnit, get_filter
+from shipsense.trackers.selection import mixture_mse
 
 
 @dataclass(frozen=True)
@@ -142,15 +143,6 @@ class BankRun:
                         pairs.append((int(i), int(j), float(abs(norm[r, i] - norm[r, j])), d))
             out.append(pairs)
         return out
-
-
-def mixture_mse(weights, means, covs, about):
-    """Mean-square-error matrix about ``about`` of a Gaussian mixture, summed over its axis 1:
-    ``sum_j w_j (P_j + e_j e_j^T)``, ``e_j = means_j - about`` (components of zero weight ignored, even
-    with NaN means)."""
-    w = np.asarray(weights)[..., None, None]
-    e = means - about
-    return np.sum(np.where(w > 0, w * (covs + e[..., :, None] * e[..., None, :]), 0.0), axis=1)
 
 
 def _project(belief, model):
@@ -309,7 +301,7 @@ def run_bank(unit, model, measurements, seeds, P0, *, prune_nats=None, progress=
     measurements : ndarray, shape (R, K, m)
         SI units, NaN = missing.
     seeds : ndarray, shape (R, H, n)
-        Initial means (SI), e.g. from :func:`shipsense.trackers.init.seed_hypotheses`.
+        Initial means (SI), e.g. from :func:`shipsense.trackers.seeding.seed_hypotheses`.
     P0 : ndarray, shape (n, n) or (R, H, n, n)
         Initial covariances (SI).
     prune_nats : float, optional

@@ -1,6 +1,6 @@
 """Batch least-squares fits of whole passages (constant velocity), batched over candidates.
 
-Used by the global initialiser (:mod:`shipsense.trackers.init`) and by the
+Used by the global initialiser (:mod:`shipsense.trackers.initialiser`) and by the
 ambiguity search of the design tools.  A passage is its initial state
 ``theta`` (internal units); its samples are ``h(A^k theta)``.
 """

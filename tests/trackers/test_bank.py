@@ -6,8 +6,8 @@ import pytest
 from shipsense import load_scenario, simulate
 from shipsense.trackers.bank import run_bank
 from shipsense.trackers.driver import run_filter
-from shipsense.trackers.init import seed_hypotheses
 from shipsense.trackers.models import model_from_scenario
+from shipsense.trackers.seeding import seed_hypotheses
 
 MAG = [0, 1, 2, 3, 5, 6, 7]
 ELEC = [0, 1, 2, 3, 4, 8]

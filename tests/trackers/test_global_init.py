@@ -5,8 +5,9 @@ import pytest
 
 from shipsense import load_scenario, simulate
 from shipsense.trackers.filters import get_filter
-from shipsense.trackers.init import candidate_grid, global_init, linear_basis, track_with_global_init
+from shipsense.trackers.initialiser import candidate_grid, global_init, linear_basis
 from shipsense.trackers.models import model_from_scenario
+from shipsense.trackers.studies import track_with_global_init
 
 
 def test_basis_reproduces_the_measurement_model_for_any_moment():
@@ -66,7 +67,7 @@ def test_tracking_from_the_global_initialiser_converges_on_s2():
 
 
 def test_fit_through_the_peak_spans_the_closest_approach_and_seeds_after_it():
-    from shipsense.trackers.init import detection_start, fit_end, window_samples
+    from shipsense.trackers.initialiser import detection_start, fit_end, window_samples
 
     sc = load_scenario("S1-P2")
     model = model_from_scenario(sc)
@@ -120,7 +121,7 @@ def test_depth_prior_makes_the_fit_a_map_fit_with_the_prior_in_its_information()
 def test_bank_from_per_passage_starts_equals_each_passage_run_alone():
     from dataclasses import replace
 
-    from shipsense.trackers.init import unalign
+    from shipsense.trackers.initialiser import unalign
 
     sc = load_scenario("S2")
     model = model_from_scenario(sc, sensors=["M1", "M2"])
@@ -161,7 +162,8 @@ def test_refining_more_grid_minima_finds_a_narrow_global_minimum():
 
 
 def test_refit_after_the_peak_is_causal_and_lands_on_the_passage():
-    from shipsense.trackers.init import fit_end, refit_after_peak
+    from shipsense.trackers.initialiser import fit_end
+    from shipsense.trackers.studies import refit_after_peak
 
     sc = load_scenario("S2")
     model = model_from_scenario(sc, sensors=["M1", "M2"])
@@ -258,7 +260,7 @@ def test_exploring_on_a_subset_of_the_window_finds_a_global_minimum_the_stages_m
 
 
 def test_distinct_rows_is_the_greedy_selection_of_every_row():
-    from shipsense.trackers.init import _distinct, distinct_rows
+    from shipsense.trackers.initialiser import _distinct, distinct_rows
 
     rng = np.random.default_rng(3)
     R, C, M = 30, 12, 4

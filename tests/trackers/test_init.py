@@ -7,8 +7,8 @@ from shipsense import load_scenario
 from shipsense.config import BankConfig
 from shipsense.physics.electric import hed_field
 from shipsense.physics.magnetic import dipole_field
-from shipsense.trackers.init import seed_hypotheses, seed_ranges
 from shipsense.trackers.models import model_from_scenario
+from shipsense.trackers.seeding import seed_hypotheses, seed_ranges
 
 
 def test_magnetic_range_is_exact_on_the_dipole_axis_and_corrected_horizontally():

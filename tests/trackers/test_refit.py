@@ -5,9 +5,10 @@ import pytest
 
 from shipsense import load_scenario, simulate
 from shipsense.trackers.filters import get_filter
-from shipsense.trackers.init import global_init, track_with_global_init
+from shipsense.trackers.initialiser import global_init
 from shipsense.trackers.models import model_from_scenario
-from shipsense.trackers.refit import collapse_alarm, divergence_alarm, refit_at, track_with_restarts
+from shipsense.trackers.restarts import collapse_alarm, divergence_alarm, refit_at
+from shipsense.trackers.studies import track_with_global_init, track_with_restarts
 
 
 def test_divergence_alarm_fires_after_the_first_window_above_the_limit():

@@ -1,17 +1,14 @@
-r"""Seeding the hypotheses of the multiple-initial-value bank from the first measurement.
+"""The global initialiser: where is the passage, with no prior on its position (beyond the source studies).
 
-From the first measured field magnitude (the sensor with the largest one:
-a documented choice that picks the sensor nearest the ship) and K assumed
-source strengths, the range formulas of physics.md give K ranges,
-
-* magnetic: :math:`|r| = \sqrt[3]{(\mu_0/4\pi)\, 2 |m| / |B|}` (on-axis;
-  off-axis the range is over-estimated by at most a factor cbrt(2));
-* electric: :math:`|r| = \sqrt[3]{c\, p / (2\pi\sigma_1 |E|)}` with the image
-  correction ``c`` (about 2 near the surface);
-
-and the horizontal-range correction :math:`\rho = \sqrt{r^2 - \Delta z^2}`
-(zero when ``r < |dz|``).  On each range, ``l`` bearings give ``K l``
-positions around that sensor (trackers.md §2).
+The fields are linear in the moment (and in ``p``), so for every candidate
+trajectory of a grid (start range and bearing from the array centroid,
+course, speed) the best moment is a closed-form least-squares solve
+(:func:`linear_basis`); the best distinct grid minima are refined by batched
+Levenberg-Marquardt fits (:func:`~shipsense.trackers.batchfit.fit_passages`)
+over a window that starts at the detection (:func:`detection_start`), and
+checked by a chi-square goodness-of-fit test (:func:`chi2_limit`).
+:func:`global_init` returns the fits as the hypotheses of a bank
+(:class:`GlobalInit`).
 """
 
 from __future__ import annotations
@@ -20,92 +17,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from shipsense.physics.magnetic import MU0_OVER_4PI
+from shipsense.trackers.batchfit import fit_passages, powers
 
 
-def field_strength(model, y):
-    """Per-sensor field magnitude (..., S) of a first measurement (SI, NaN = missing); NaN for bearings."""
-    array = model.array
-    y = np.asarray(y, dtype=float)
-    sensor = array.channel_sensor
-    S = len(array.ids)
-    out = np.full(y.shape[:-1] + (S,), np.nan)
-    for s in range(S):  # a handful of sensors, once per passage
-        if array.types[s] == "accelerometer":
-            continue
-        v = y[..., sensor == s]
-        out[..., s] = np.sqrt(np.nansum(v * v, axis=-1))
-        out[..., s] = np.where(np.isnan(v).all(axis=-1), np.nan, out[..., s])
-    return out
-
-
-def seed_ranges(model, y, levels, range_correction=2.0):
-    """Sensor index (...), and slant and horizontal ranges (..., K) implied by the first measurement.
-
-    The source type is magnetic when the array has magnetometers, else electric.
-    """
-    array = model.array
-    levels = np.asarray(levels, dtype=float)
-    strength = field_strength(model, y)
-    magnetic = "magnetometer" in array.types
-    use = np.array([t == ("magnetometer" if magnetic else "electrode") for t in array.types])
-    strength = np.where(use, strength, np.nan)
-    if np.isnan(strength).all(axis=-1).any():
-        raise ValueError("the first measurement has no field sample to seed from (all missing)")
-    best = np.nanargmax(strength, axis=-1)
-    f = np.take_along_axis(strength, best[..., None], axis=-1)
-    if magnetic:
-        r = np.cbrt(MU0_OVER_4PI * 2.0 * levels / f)
-    else:
-        r = np.cbrt(range_correction * levels / (2.0 * np.pi * array.medium.sigma_water * f))
-    source_z = model.source_z
-    dz = np.abs(array.positions[best, 2] - source_z)[..., None]
-    rho = np.sqrt(np.clip(r * r - dz * dz, 0.0, None))
-    return best, r, rho
-
-
-def seed_hypotheses(model, y, bank, source_z=None):
-    """Initial means (..., K l, n) and covariance (n, n) of the bank, in SI.
-
-    Parameters
-    ----------
-    model : FieldModel
-    y : ndarray, shape (..., m)
-        First measurement (SI).
-    bank : BankConfig
-    source_z : float, optional
-        Initial source height for electric models (default: the model's ``source_z``).
-    """
-    best, _, rho = seed_ranges(model, y, bank.levels, bank.range_correction)
-    phi = np.deg2rad(np.asarray(bank.bearings_deg, dtype=float))
-    K, L = len(bank.levels), phi.size
-    centre = model.array.positions[best, :2]                             # (..., 2)
-    pos = centre[..., None, None, :] + rho[..., :, None, None] * np.stack([np.cos(phi), np.sin(phi)], -1)
-    pos = pos.reshape(pos.shape[:-3] + (K * L, 2))
-    n = model.n
-    x0 = np.zeros(pos.shape[:-1] + (n,))
-    x0[..., 0:2] = pos
-    if bank.initial_course == "towards_array":
-        heading = model.array.positions[:, :2].mean(axis=0) - pos
-        norm = np.linalg.norm(heading, axis=-1, keepdims=True)
-        speed = float(np.hypot(*bank.initial_velocity))
-        x0[..., 2:4] = speed * heading / np.where(norm > 0, norm, 1.0)
-    else:
-        x0[..., 2:4] = bank.initial_velocity
-    std = [bank.position_std] * 2 + [bank.velocity_std] * 2
-    labels = model.labels
-    if "mx" in labels:
-        std += [bank.moment_std] * 3                                       # moment starts at zero
-    if "z" in labels:
-        iz = labels.index("z")
-        x0[..., iz] = model.source_z if source_z is None else source_z
-        # electric levels seed p; in a fused (magnetic + electric) model the levels are magnetic
-        x0[..., iz + 1] = bank.p_initial if "mx" in labels else np.repeat(np.asarray(bank.levels, dtype=float), L)
-        std += [bank.z_std, bank.p_std]
-    return x0, np.diag(np.square(std))
-
-
-# -- the global initialiser (beyond the source studies) ------------------------------------------
 @dataclass(frozen=True)
 class GlobalInit:
     """Hypotheses from :func:`global_init` for R passages (SI units).
@@ -164,6 +78,8 @@ def candidate_grid(model, ranges, bearings_deg, courses_deg, speeds, source_z=No
 
 
 _BASIS_CACHE: dict = {}
+
+
 _BASIS_CACHE_SIZE = 4
 
 
@@ -191,7 +107,6 @@ def linear_basis(model, theta, steps, stride=1):
 
 
 def _linear_basis(model, theta, steps, stride):
-    from shipsense.trackers.batchfit import powers
 
     slots = _parameter_slots(model)
     Ak = powers(model.A, steps)[::stride]
@@ -211,7 +126,7 @@ def window_samples(model, K, window_s=15.0):
     return int(np.clip(round(window_s / model.period), 4, K - 1))
 
 
-def _snr(model, y):
+def strongest_snr(model, y):
     """The strongest field channel's SNR per sample (R, K) of measurements in internal units (R, K, m)."""
     return np.where(~model.axial, np.abs(np.nan_to_num(y)) / np.sqrt(model.R), 0.0).max(axis=-1)
 
@@ -224,7 +139,7 @@ def detection_start(model, measurements, snr_start=5.0, window=0):
     """
     y = np.asarray(measurements, dtype=float) / model.y_scale
     K = y.shape[1]
-    snr = _snr(model, y)
+    snr = strongest_snr(model, y)
     above = snr > snr_start
     k0 = np.where(above.any(axis=1), np.argmax(above, axis=1), 0)
     return np.minimum(k0, K - window - 1).clip(0)
@@ -241,7 +156,7 @@ def fit_end(model, measurements, k0, window, through_peak=None):
     end = np.minimum(k0 + window, K - 1)
     if through_peak is None:
         return end
-    snr = _snr(model, y)
+    snr = strongest_snr(model, y)
     k = np.arange(K)[None, :]
     since = np.where(k >= k0[:, None], snr, 0.0)
     peak = np.maximum.accumulate(since, axis=1)
@@ -308,7 +223,7 @@ def _dof(model, yfit, prior):
     return np.maximum(np.isfinite(yfit).sum(axis=(1, 2)) + rows - model.n, 1)
 
 
-def _chi2_limit(model, yfit, prior, gof):
+def chi2_limit(model, yfit, prior, gof):
     """Chi-square (R,) above which a fit to ``yfit`` fails the goodness-of-fit test at level ``gof``."""
     from scipy import stats
 
@@ -435,7 +350,6 @@ def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, c
     -------
     GlobalInit
     """
-    from shipsense.trackers.batchfit import fit_passages, powers
 
     y_si = np.asarray(measurements, dtype=float)
     R, K, m = y_si.shape
@@ -494,7 +408,7 @@ def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, c
         raise ValueError(f"explore_samples must be at least 2, got {explore_samples!r}")
     explore_stride = 1 if explore_samples is None else max(1, window // int(explore_samples))
     ysub = yfit[:, ::explore_stride]
-    limit = _chi2_limit(model, ysub, prior, gof)
+    limit = chi2_limit(model, ysub, prior, gof)
     theta = np.zeros((R, M, model.n))
     chi2_fit = np.full((R, M), np.inf)
     info = np.zeros((R, M, model.n, model.n))
@@ -519,7 +433,7 @@ def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, c
     if explore_stride > 1:   # polish the kept fits on every sample of the window
         theta, chi2_fit, info = fit_passages(model, np.repeat(yfit, M, axis=0), theta, window,
                                              return_information=True, prior=prior)
-        limit = _chi2_limit(model, yfit, prior, gof)
+        limit = chi2_limit(model, yfit, prior, gof)
     end = fit_end(model, y_si, k0, window, through_peak)
     if common_start:
         end = np.full(R, end.max())
@@ -530,7 +444,7 @@ def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, c
         yfit = np.where((ks < end[:, None])[..., None], yfit, np.nan)                   # each passage to its end
         theta, chi2_fit, info = fit_passages(model, np.repeat(yfit, M, axis=0), theta, Wf, return_information=True,
                                              prior=prior)
-        limit = _chi2_limit(model, yfit, prior, gof)
+        limit = chi2_limit(model, yfit, prior, gof)
     theta, chi2_fit = theta.reshape(R, M, -1), chi2_fit.reshape(R, M)
     cov = np.linalg.pinv(info, hermitian=True).reshape(R, M, model.n, model.n) * inflate
     # propagate to the first sample after the fitted stretch
@@ -544,43 +458,6 @@ def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, c
                       window=traj * xs, k0=k0, fit_ok=chi2_fit.min(axis=1) <= limit)
 
 
-def track_with_global_init(unit, model, measurements, gi: GlobalInit):
-    """Run the bank from the global initialiser's hypotheses; returns ``(estimates (R, K, n) SI, BankRun)``.
-
-    Every passage's bank starts at its own ``gi.start``: the measurements are
-    aligned on it (bank step j processes sample ``start + j`` of each
-    passage; passages that end earlier are padded with missing samples), so
-    all passages are one batch whatever their starts.  The returned
-    ``BankRun`` is on that aligned axis (step j of passage r is its sample
-    ``gi.start[r] + j``).  Before the bank starts, the estimate is the best
-    batch fit's trajectory (constant velocity, propagated backwards before
-    the detection).
-    """
-    from shipsense.trackers.bank import run_bank
-
-    y = np.asarray(measurements, dtype=float)
-    R, K, _ = y.shape
-    start = np.asarray(gi.start, dtype=int)
-    if np.any(start >= K):
-        raise ValueError(f"a passage ({K} samples) ends inside its fitted window (bank start {int(start.max())})")
-    J = K - int(start.min())                                                  # aligned bank steps
-    j = np.arange(J)[None, :]
-    src = start[:, None] + j                                                  # (R, J): sample of step j
-    inside = src < K
-    aligned = np.where(inside[..., None], y[np.arange(R)[:, None], np.minimum(src, K - 1)], np.nan)
-    bank = run_bank(unit, model, aligned, gi.seeds, gi.P0, initial_loglik=gi.loglik)
-    est = unalign(bank.selected_means, start, K)
-    best = np.argmax(gi.loglik, axis=1)
-    theta0 = gi.window[np.arange(R), best, 0] / model.x_scale                 # internal, at k0
-    ks = np.arange(K)[None, :] - gi.k0[:, None]                               # steps relative to k0
-    # constant velocity forwards and backwards: x_k = x_0 + k T v for the kinematic block
-    traj = np.repeat(theta0[:, None, :], K, axis=1)
-    traj[..., 0:2] += ks[..., None] * model.period * theta0[:, None, 2:4]
-    before = np.arange(K)[None, :] < start[:, None]
-    est[before] = (traj * model.x_scale)[before]
-    return est, bank
-
-
 def unalign(values, start, K, fill=np.nan):
     """Values on a bank's aligned axis (R, J, ...) (:func:`track_with_global_init`) back on the samples (R, K, ...)."""
     values = np.asarray(values)
@@ -591,27 +468,3 @@ def unalign(values, start, K, fill=np.nan):
     rows = np.broadcast_to(np.arange(R)[:, None], src.shape)
     out[rows[inside], src[inside]] = values[inside]
     return out
-
-
-def refit_after_peak(model, measurements, gi: GlobalInit, estimates, through_peak=0.5, prior=None, inflate=1.0,
-                     gof=0.01):
-    """One hypothesis per passage for a second bank after the closest approach (causal).
-
-    At each passage's sample ``e`` where the strongest channel has fallen
-    below ``through_peak`` of its peak since the window start (:func:`fit_end`;
-    passages that never get there are refitted at their last sample), the
-    first bank's estimate at ``e - 1`` is moved back to the window start
-    ``gi.k0`` along its constant-velocity track and re-fitted by
-    Levenberg–Marquardt to every sample from ``gi.k0`` to ``e - 1``: a batch
-    fit across the closest approach, warm-started from a track that has
-    followed it (a fit of that stretch from the window's solution falls into
-    local minima more often, EXPERIMENTS.md).  Returns a :class:`GlobalInit`
-    starting at ``e`` (:func:`~shipsense.trackers.refit.refit_at`: the fit,
-    ``inflate`` times its inverse Gauss–Newton information, and ``fit_ok``
-    from the chi-square test at level ``gof``); ``prior`` as for
-    :func:`fit_passages`.
-    """
-    from shipsense.trackers.refit import peak_refit_sample, refit_at
-
-    end = peak_refit_sample(model, measurements, gi.k0, gi.start, through_peak)
-    return refit_at(model, measurements, gi, estimates, end, prior=prior, inflate=inflate, gof=gof)
