@@ -7,6 +7,9 @@ ambiguity search of the design tools.  A passage is its initial state
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from functools import cached_property
+
 import numpy as np
 
 
@@ -19,16 +22,74 @@ def powers(A, K):
     return out
 
 
+def transitions(model, taus):
+    """Constant-velocity transitions ``A(tau)`` (..., n, n) over ``taus`` (...) seconds (negative: backwards).
+
+    ``A(tau) = I + (tau / T)(A - I)``: the model's one-period transition moves positions by ``T v`` and
+    leaves the rest, so a time ``tau`` moves them by ``tau v``.
+    """
+    taus = np.asarray(taus, dtype=float)
+    n = model.A.shape[0]
+    return np.eye(n) + (taus[..., None, None] / model.period) * (model.A - np.eye(n))
+
+
+@dataclass(frozen=True)
+class Huber:
+    """Robust (Huber) fits, and what their cost should be under the noise's outlier model.
+
+    The noise of a whitened residual is taken as ``(1 - eps) N(0, 1) + eps N(0, scale^2)`` (physics.md §5;
+    ``eps = 0``: Gaussian).  Fits minimise :func:`huber_cost` with threshold ``gamma``; the goodness-of-fit
+    test compares that cost with its distribution under the noise model: mean ``dof mu`` and variance
+    ``dof sigma^2`` per residual (:attr:`moments`, by Gauss-Hermite quadrature), a normal approximation.
+    """
+
+    gamma: float = 1.345
+    eps: float = 0.0
+    scale: float = 10.0
+
+    @cached_property
+    def moments(self):
+        """Mean and variance of ``2 rho(e)`` for one residual ``e`` of the noise model."""
+        x, w = np.polynomial.hermite_e.hermegauss(80)
+        w = w / w.sum()
+        mean = var = 0.0
+        for share, sd in ((1.0 - self.eps, 1.0), (self.eps, self.scale)):
+            c = huber_cost((sd * x)[:, None], self.gamma)
+            mean += share * np.sum(w * c)
+            var += share * np.sum(w * c * c)
+        return mean, var - mean * mean
+
+    def limit(self, dof, gof):
+        """Cost (like ``dof``) above which a fit with ``dof`` degrees of freedom fails at level ``gof``."""
+        from scipy import stats
+
+        mu, var = self.moments
+        return np.asarray(dof) * mu + stats.norm.isf(gof) * np.sqrt(np.asarray(dof) * var)
+
+
+def huber_cost(r, gamma):
+    """Huber's ``2 rho(r)`` summed over the last axis: ``r^2`` where ``|r| <= gamma``, ``2 gamma |r| - gamma^2``
+    beyond (equal to the chi-square of Gaussian residuals that are not outliers)."""
+    a = np.abs(r)
+    return np.sum(np.where(a <= gamma, r * r, 2.0 * gamma * a - gamma * gamma), axis=-1)
+
+
 def fit_passages(model, y, theta_init, steps, stride=1, iterations=40, return_information=False, tol=1e-9,
-                 prior=None):
+                 prior=None, taus=None, huber=None):
     """Batched Levenberg–Marquardt fit of passages to measurements (internal units).
 
-    ``y`` (B or 1, K', m) are the measurements at steps ``0, stride, 2 stride, ...``;
-    ``theta_init`` (B, n); NaN samples are ignored.  ``prior``, optional, is a
+    ``y`` (B or 1, K', m) are the measurements at steps ``0, stride, 2 stride, ...``
+    -- or, with ``taus`` (B or 1, K'), at those times (s) after the fitted
+    state's (irregular sampling); ``theta_init`` (B, n); NaN samples are
+    ignored.  ``prior``, optional, is a
     Gaussian prior ``(mean (n,) or (B, n), information (n,))`` on the initial
     state with a diagonal information (zero where a component has none): the
     fit is then the MAP estimate, and its chi-square and information include
-    the prior's term.  Returns the fitted
+    the prior's term.  With ``huber`` (a threshold gamma on the whitened
+    residuals, e.g. 1.345) the fit is a Huber M-estimate (iteratively
+    reweighted: residuals beyond gamma count linearly), robust to outliers;
+    its "chi-square" is then :func:`huber_cost` and its information the
+    reweighted ``J^T W J``.  Returns the fitted
     initial states (B, n), kept within the model's ``state_bounds`` (projected
     steps), and their chi-square over the fitted samples (and,
     with ``return_information``, the Gauss–Newton information ``J^T J`` (B, n, n)
@@ -37,7 +98,12 @@ def fit_passages(model, y, theta_init, steps, stride=1, iterations=40, return_in
     (an accepted step gaining less than the relative ``tol``, or a rejected
     step at a damping of 1e6 or more).
     """
-    Ak = powers(model.A, steps)[::stride]
+    if isinstance(huber, Huber):
+        huber = huber.gamma
+    if taus is None:
+        Ak = powers(model.A, steps)[::stride][None]                     # (1, K', n, n)
+    else:
+        Ak = transitions(model, taus)                                    # (B or 1, K', n, n)
     w = 1.0 / np.sqrt(model.R)
     lo, hi = getattr(model, "state_bounds", None) or (None, None)
     theta = np.array(theta_init, dtype=float)
@@ -47,31 +113,38 @@ def fit_passages(model, y, theta_init, steps, stride=1, iterations=40, return_in
 
     present = np.isfinite(y)
     y = np.where(present, y, 0.0)
-    shared = y.shape[0] == 1          # one measurement set for every fit
 
     def rows(a, idx):
-        return a if shared else a[idx]
+        return a if a.shape[0] == 1 else a[idx]
 
     if prior is not None:
         mu = np.broadcast_to(np.asarray(prior[0], dtype=float), (B, n))
         root = np.sqrt(np.asarray(prior[1], dtype=float))                 # (n,): the prior's rows
 
     def residual(th, idx):
-        X = np.einsum("kij,bj->bki", Ak, th)
+        X = np.einsum("bkij,bj->bki", rows(Ak, idx), th)
         r = (model.residual(model.h(X), rows(y, idx)) * w * rows(present, idx)).reshape(len(th), -1)
         if prior is not None:
             r = np.concatenate([r, root * (th - mu[idx])], axis=-1)
         return r, X
 
-    def jacobian(X, idx):
-        J = (model.H(X) @ Ak * (w * rows(present, idx))[..., None]).reshape(len(X), -1, n)
+    def cost_of(r):
+        return np.sum(r * r, axis=-1) if huber is None else huber_cost(r, huber)
+
+    def jacobian(X, idx, r):
+        J = (model.H(X) @ rows(Ak, idx) * (w * rows(present, idx))[..., None]).reshape(len(X), -1, n)
         if prior is not None:
             J = np.concatenate([J, np.broadcast_to(np.diag(root), (len(X), n, n))], axis=1)
+        if huber is not None:   # IRLS: rows scaled by the square root of the Huber weight min(1, gamma / |r|)
+            J = J * np.sqrt(np.minimum(1.0, huber / np.maximum(np.abs(r), 1e-300)))[..., None]
         return J
+
+    def weighted(r):
+        return r if huber is None else r * np.sqrt(np.minimum(1.0, huber / np.maximum(np.abs(r), 1e-300)))
 
     everyone = np.arange(B)
     r, X = residual(theta, everyone)
-    cost = np.sum(r * r, axis=-1)
+    cost = cost_of(r)
     lam = np.full(B, 1e-2)
     stall = np.zeros(B, dtype=int)
     for _ in range(iterations):
@@ -80,9 +153,9 @@ def fit_passages(model, y, theta_init, steps, stride=1, iterations=40, return_in
         a = np.flatnonzero(stall < 3)
         if a.size == 0:
             break
-        Jac = jacobian(X[a], a)
+        Jac = jacobian(X[a], a, r[a])
         JtJ = np.swapaxes(Jac, -1, -2) @ Jac
-        g = np.einsum("bmn,bm->bn", Jac, r[a])
+        g = np.einsum("bmn,bm->bn", Jac, weighted(r[a]))
         D = np.diagonal(JtJ, axis1=-2, axis2=-1)
         A = JtJ + lam[a, None, None] * (np.eye(n) * (D + 1e-12)[:, None, :])
         step = -np.linalg.solve(A, g[..., None])[..., 0]
@@ -90,7 +163,7 @@ def fit_passages(model, y, theta_init, steps, stride=1, iterations=40, return_in
         if lo is not None:   # projected steps: the fit stays physical (e.g. the source in the water)
             trial = np.clip(trial, lo, hi)
         r_t, X_t = residual(trial, a)
-        cost_t = np.sum(r_t * r_t, axis=-1)
+        cost_t = cost_of(r_t)
         better = np.isfinite(cost_t) & (cost_t < cost[a])
         gain = np.where(better, (cost[a] - cost_t) / np.maximum(cost[a], 1e-300), 0.0)
         ok = a[better]
@@ -103,6 +176,6 @@ def fit_passages(model, y, theta_init, steps, stride=1, iterations=40, return_in
         stalled = np.where(better, gain < tol, lam[a] >= 1e6)
         stall[a] = np.where(stalled, stall[a] + 1, 0)
     if return_information:
-        Jac = jacobian(X, everyone)
+        Jac = jacobian(X, everyone, r)
         return theta, cost, np.swapaxes(Jac, -1, -2) @ Jac
     return theta, cost

@@ -223,13 +223,18 @@ def _dof(model, yfit, prior):
     return np.maximum(np.isfinite(yfit).sum(axis=(1, 2)) + rows - model.n, 1)
 
 
-def chi2_limit(model, yfit, prior, gof):
-    """Chi-square (R,) above which a fit to ``yfit`` fails the goodness-of-fit test at level ``gof``."""
+def chi2_limit(model, yfit, prior, gof, huber=None):
+    """Chi-square (R,) above which a fit to ``yfit`` fails the goodness-of-fit test at level ``gof``.
+
+    With ``huber`` (robust fits) the statistic is the Huber cost, and its limit the normal approximation of
+    its distribution under the noise's outlier model (:meth:`~shipsense.trackers.batchfit.Huber.limit`).
+    """
     from scipy import stats
 
     if gof is None:
         return np.full(yfit.shape[0], np.inf)
-    return stats.chi2.isf(gof, _dof(model, yfit, prior))
+    dof = _dof(model, yfit, prior)
+    return stats.chi2.isf(gof, dof) if huber is None else huber.limit(dof, gof)
 
 
 def _distinct(chi2, positions, M, distinct_m):
@@ -275,10 +280,144 @@ def distinct_loglik(chi2, found):
     return np.where(found | first, -0.5 * np.minimum(chi2, 1e300), -np.inf)
 
 
+@dataclass(frozen=True)
+class WindowFits:
+    """The distinct fits of passages' windows, at each window's first sample (internal units).
+
+    Attributes
+    ----------
+    theta : ndarray, shape (R, M, n)
+        Fitted initial states, best first.
+    chi2 : ndarray, shape (R, M)
+        Their chi-square (Huber cost for robust fits).
+    info : ndarray, shape (R, M, n, n)
+        Gauss-Newton information at the fits.
+    found : ndarray of bool, shape (R, M)
+        False where a passage had fewer distinct fits (the entry repeats its best).
+    limit : ndarray, shape (R,)
+        The goodness-of-fit test's limit on the chi-square.
+    """
+
+    theta: np.ndarray
+    chi2: np.ndarray
+    info: np.ndarray
+    found: np.ndarray
+    limit: np.ndarray
+
+    @property
+    def fit_ok(self):
+        """Whether each passage's best fit passes the goodness-of-fit test (R,)."""
+        return self.chi2[:, 0] <= self.limit
+
+    @property
+    def loglik(self):
+        """The fits' log-likelihoods ``-chi2 / 2`` (R, M), ``-inf`` for repeats (:func:`distinct_loglik`)."""
+        return distinct_loglik(self.chi2, self.found)
+
+
+def grid_search(model, yw, grid, window, stride, max_bytes=512e6):
+    """Moment-eliminated chi-square (R, C) and best parameters (R, C, P) of every grid candidate.
+
+    ``yw`` (R, W', m) are the window's samples at steps ``0, stride, ...`` (internal units, NaN = missing);
+    the grid's candidate trajectories are evaluated on the same steps (:func:`linear_basis`).
+    """
+    R, Wn, m = yw.shape
+    std = np.sqrt(model.R)
+    offset, basis = linear_basis(model, grid, window, stride)                             # (C, W', m[, P])
+    G = basis / std[:, None]                                                              # (C, W', m, P)
+    C, P = G.shape[0], G.shape[-1]
+    clamp = "p" in model.labels                                   # the envelope needs p >= 0
+    if np.any(offset) or not np.isfinite(yw).all():
+        return _grid_fit_masked(model, yw, offset, G, std, max_bytes, clamp)
+    # no offset (no bearing channels) and nothing missing: the whitened data d are the same for every
+    # candidate, so b = G^T d is one matmul and chi2 = |d|^2 - 2 par.b + par^T A par (no fit formed)
+    Gf = G.reshape(C, Wn * m, P)                                                          # (C, W'm, P)
+    A_all = np.swapaxes(Gf, -1, -2) @ Gf + 1e-9 * np.eye(P)                               # shared by passages
+    d = (yw / std).reshape(R, Wn * m)
+    b = np.matmul(np.swapaxes(Gf, -1, -2), d.T)                                           # (C, P, R)
+    par = np.linalg.inv(A_all) @ b
+    if clamp:
+        par[:, -1] = np.maximum(par[:, -1], 0.0)
+    chi2 = (np.sum(d * d, axis=-1)[None] - 2.0 * np.sum(par * b, axis=1)
+            + np.sum(par * (A_all @ par), axis=1)).T                                      # (R, C)
+    return chi2, np.moveaxis(par, -1, 0)                                                  # (R, C, P)
+
+
+def refine_minima(model, yfit, grid, chi2_grid, params, *, stages, keep, distinct_m, prior, gof, explore_samples,
+                  taus=None, huber=None):
+    """The ``keep`` best distinct Levenberg-Marquardt fits of each passage's window ``yfit`` (R, W, m),
+    started from its best distinct grid minima, refined in ``stages`` (a passage whose best fit so far fails
+    the chi-square test gets the next stage's minima); :class:`WindowFits`."""
+    R, W, _ = yfit.shape
+    slots = _parameter_slots(model)
+    mid = powers(model.A, W)[W // 2][:2]
+    mid_grid = grid @ mid.T                                                              # (C, 2)
+    M = stages[-1]
+
+    def grid_starts(rows, count):   # the ``count`` best distinct grid minima of passages ``rows``, their moments
+        out = np.zeros((len(rows), count, model.n))
+        for i, r in enumerate(rows):
+            chosen = _distinct(chi2_grid[r], mid_grid, count, distinct_m)
+            out[i] = grid[chosen]
+            out[i][:, slots] = params[r, chosen]
+        return out
+
+    if explore_samples is not None and explore_samples < 2:
+        raise ValueError(f"explore_samples must be at least 2, got {explore_samples!r}")
+    explore = 1 if explore_samples is None else max(1, W // int(explore_samples))
+    ysub = yfit[:, ::explore]
+    tsub = None if taus is None else taus[:, ::explore]
+    limit = chi2_limit(model, ysub, prior, gof, huber)
+    theta = np.zeros((R, M, model.n))
+    chi2 = np.full((R, M), np.inf)
+    info = np.zeros((R, M, model.n, model.n))
+    todo, lo = np.arange(R), 0
+    for hi in stages:
+        starts = grid_starts(todo, hi)[:, lo:]
+        t, c, j = fit_passages(model, np.repeat(ysub[todo], hi - lo, axis=0), starts.reshape(-1, model.n), W,
+                               stride=explore, return_information=True, prior=prior, huber=huber,
+                               taus=None if tsub is None else np.repeat(tsub[todo], hi - lo, axis=0))
+        theta[todo, lo:hi] = t.reshape(todo.size, hi - lo, -1)
+        chi2[todo, lo:hi] = np.where(np.isfinite(c), c, np.inf).reshape(todo.size, hi - lo)
+        info[todo, lo:hi] = j.reshape(todo.size, hi - lo, model.n, model.n)
+        todo, lo = np.flatnonzero(chi2.min(axis=1) > limit), hi
+        if todo.size == 0:
+            break
+    # the best ``keep`` distinct refined fits (fits that converged to the same minimum count once: a repeat of
+    # the best fills a passage's row at log-likelihood -inf, no weight)
+    sel, found = distinct_rows(chi2, theta @ mid.T, keep, distinct_m)
+    pick = (np.arange(R)[:, None], sel)
+    theta, chi2, info = (a[pick] for a in (theta, chi2, info))
+    if explore > 1:   # polish the kept fits on every sample of the window
+        t, c, j = fit_passages(model, np.repeat(yfit, keep, axis=0), theta.reshape(R * keep, -1), W,
+                               return_information=True, prior=prior, huber=huber,
+                               taus=None if taus is None else np.repeat(taus, keep, axis=0))
+        theta, chi2, info = t.reshape(R, keep, -1), c.reshape(R, keep), j.reshape(R, keep, model.n, model.n)
+        limit = chi2_limit(model, yfit, prior, gof, huber)
+    return WindowFits(theta, np.where(np.isfinite(chi2), chi2, np.inf), info, found, limit)
+
+
+def window_fits(model, yfit, *, ranges, speeds, taus=None, bearing_step_deg=15.0, course_step_deg=30.0,
+                grid_samples=16, keep=5, distinct_m=15.0, source_z=None, max_bytes=512e6, z_std=None, refine=None,
+                gof=0.01, explore_samples=None, huber=None):
+    """Global fits of given windows ``yfit`` (R, W, m) (internal units, NaN = missing): the grid search on
+    about ``grid_samples`` of their samples, then :func:`refine_minima`.  ``taus`` (R, W), optional: the
+    samples' times (s) after each window's first (irregular sampling; the grid search then uses the nominal
+    steps, the fits the times).  Options as for :func:`global_init`; returns :class:`WindowFits`."""
+    R, W, _ = yfit.shape
+    stride = max(1, W // grid_samples)
+    grid = candidate_grid(model, ranges, np.arange(0.0, 360.0, bearing_step_deg),
+                          np.arange(0.0, 360.0, course_step_deg), speeds, source_z)
+    chi2, params = grid_search(model, yfit[:, ::stride], grid, W, stride, max_bytes)
+    return refine_minima(model, yfit, grid, chi2, params, stages=_refine_stages(refine, keep), keep=keep,
+                         distinct_m=distinct_m, prior=depth_prior(model, z_std, source_z), gof=gof,
+                         explore_samples=explore_samples, taus=taus, huber=huber)
+
+
 def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, course_step_deg=30.0,
                 window_s=15.0, grid_samples=16, keep=5, distinct_m=15.0, snr_start=5.0, inflate=2.0,
                 source_z=None, common_start=False, max_bytes=512e6, through_peak=None, z_std=None, refine=None,
-                gof=0.01, explore_samples=None):
+                gof=0.01, explore_samples=None, huber=None):
     """Global initialisation of passages from a grid search with the moment eliminated in closed form.
 
     Parameters
@@ -346,94 +485,28 @@ def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, c
         (:func:`fit_end`): the batch fit then spans the closest approach, and
         the bank starts after it.
 
+    huber : Huber, optional
+        Robust (Huber) fits and their test under the noise's outlier model
+        (:class:`~shipsense.trackers.batchfit.Huber`).
+
     Returns
     -------
     GlobalInit
     """
-
     y_si = np.asarray(measurements, dtype=float)
     R, K, m = y_si.shape
     window = window_samples(model, K, window_s)
-    stride = max(1, window // grid_samples)
     y = y_si / model.y_scale
-    std = np.sqrt(model.R)
     k0 = detection_start(model, y_si, snr_start, window)
     if common_start:   # one bank start for the whole batch: every window starts at the latest detection
         k0 = np.full(R, k0.max())
-    grid = candidate_grid(model, ranges, np.arange(0.0, 360.0, bearing_step_deg),
-                          np.arange(0.0, 360.0, course_step_deg), speeds, source_z)
-    offset, basis = linear_basis(model, grid, window, stride)                            # (C, W', m[, P])
-    Wn = offset.shape[1]
-    idx = k0[:, None] + stride * np.arange(Wn)[None, :]                                   # (R, W')
-    yw_all = y[np.arange(R)[:, None], idx]                                                # (R, W', m)
-    G = basis / std[:, None]                                                              # (C, W', m, P)
-    P = G.shape[-1]
-    C = G.shape[0]
-    Gf = G.reshape(C, Wn * m, P)                                                          # (C, W'm, P)
-    A_all = np.swapaxes(Gf, -1, -2) @ Gf + 1e-9 * np.eye(P)                               # shared by passages
-    clamp = "p" in model.labels                                   # the envelope needs p >= 0
-    if not np.any(offset) and np.isfinite(yw_all).all():
-        # no offset (no bearing channels) and nothing missing: the whitened data d are the same for every
-        # candidate, so b = G^T d is one matmul and chi2 = |d|^2 - 2 par.b + par^T A par (no fit formed)
-        d = (yw_all / std).reshape(R, Wn * m)
-        b = np.matmul(np.swapaxes(Gf, -1, -2), d.T)                                       # (C, P, R)
-        par = np.linalg.inv(A_all) @ b
-        if clamp:
-            par[:, -1] = np.maximum(par[:, -1], 0.0)
-        chi2 = (np.sum(d * d, axis=-1)[None] - 2.0 * np.sum(par * b, axis=1)
-                + np.sum(par * (A_all @ par), axis=1)).T                                  # (R, C)
-        params = np.moveaxis(par, -1, 0)                                                  # (R, C, P)
-    else:
-        chi2, params = _grid_fit_masked(model, yw_all, offset, G, std, max_bytes, clamp)
-    slots = _parameter_slots(model)
-    Ak = powers(model.A, window)
-    mid = Ak[window // 2][:2]
-    mid_grid = grid @ mid.T                                                              # (C, 2)
-    stages = _refine_stages(refine, keep)
-    M = stages[-1]
-
-    def grid_starts(rows, count):   # the ``count`` best distinct grid minima of passages ``rows``, their moments
-        out = np.zeros((len(rows), count, model.n))
-        for i, r in enumerate(rows):
-            chosen = _distinct(chi2[r], mid_grid, count, distinct_m)
-            out[i] = grid[chosen]
-            out[i][:, slots] = params[r, chosen]
-        return out
-
-    prior = depth_prior(model, z_std, source_z)
-    # refine grid minima by batch Levenberg-Marquardt fits over the whole window, stage by stage: a
-    # passage whose best fit so far fails the chi-square test gets the next stage's minima
     yfit = y[np.arange(R)[:, None], k0[:, None] + np.arange(window)[None, :]]           # (R, W, m)
-    if explore_samples is not None and explore_samples < 2:
-        raise ValueError(f"explore_samples must be at least 2, got {explore_samples!r}")
-    explore_stride = 1 if explore_samples is None else max(1, window // int(explore_samples))
-    ysub = yfit[:, ::explore_stride]
-    limit = chi2_limit(model, ysub, prior, gof)
-    theta = np.zeros((R, M, model.n))
-    chi2_fit = np.full((R, M), np.inf)
-    info = np.zeros((R, M, model.n, model.n))
-    todo, lo = np.arange(R), 0
-    for hi in stages:
-        starts = grid_starts(todo, hi)[:, lo:]
-        t, c, j = fit_passages(model, np.repeat(ysub[todo], hi - lo, axis=0), starts.reshape(-1, model.n),
-                               window, stride=explore_stride, return_information=True, prior=prior)
-        theta[todo, lo:hi] = t.reshape(todo.size, hi - lo, -1)
-        chi2_fit[todo, lo:hi] = np.where(np.isfinite(c), c, np.inf).reshape(todo.size, hi - lo)
-        info[todo, lo:hi] = j.reshape(todo.size, hi - lo, model.n, model.n)
-        todo, lo = np.flatnonzero(chi2_fit.min(axis=1) > limit), hi
-        if todo.size == 0:
-            break
-    # the best ``keep`` distinct refined fits seed the bank (fits that converged to the same minimum count
-    # once: a repeat of the best fills a passage's bank at log-likelihood -inf, no weight)
-    sel, found = distinct_rows(chi2_fit, theta @ mid.T, keep, distinct_m)
-    pick = (np.arange(R)[:, None], sel)
-    theta, chi2_fit, info = (a[pick] for a in (theta, chi2_fit, info))
-    M = keep
-    theta, chi2_fit, info = (a.reshape((R * M,) + a.shape[2:]) for a in (theta, chi2_fit, info))
-    if explore_stride > 1:   # polish the kept fits on every sample of the window
-        theta, chi2_fit, info = fit_passages(model, np.repeat(yfit, M, axis=0), theta, window,
-                                             return_information=True, prior=prior)
-        limit = chi2_limit(model, yfit, prior, gof)
+    fits = window_fits(model, yfit, ranges=ranges, speeds=speeds, bearing_step_deg=bearing_step_deg,
+                       course_step_deg=course_step_deg, grid_samples=grid_samples, keep=keep, distinct_m=distinct_m,
+                       source_z=source_z, max_bytes=max_bytes, z_std=z_std, refine=refine, gof=gof,
+                       explore_samples=explore_samples, huber=huber)
+    prior = depth_prior(model, z_std, source_z)
+    theta, chi2, info, limit = fits.theta.reshape(R * keep, -1), fits.chi2.reshape(-1), fits.info, fits.limit
     end = fit_end(model, y_si, k0, window, through_peak)
     if common_start:
         end = np.full(R, end.max())
@@ -442,11 +515,11 @@ def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, c
         ks = k0[:, None] + np.arange(Wf)[None, :]
         yfit = y[np.arange(R)[:, None], np.minimum(ks, K - 1)]                           # (R, Wf, m)
         yfit = np.where((ks < end[:, None])[..., None], yfit, np.nan)                   # each passage to its end
-        theta, chi2_fit, info = fit_passages(model, np.repeat(yfit, M, axis=0), theta, Wf, return_information=True,
-                                             prior=prior)
-        limit = chi2_limit(model, yfit, prior, gof)
-    theta, chi2_fit = theta.reshape(R, M, -1), chi2_fit.reshape(R, M)
-    cov = np.linalg.pinv(info, hermitian=True).reshape(R, M, model.n, model.n) * inflate
+        theta, chi2, info = fit_passages(model, np.repeat(yfit, keep, axis=0), theta, Wf, return_information=True,
+                                         prior=prior, huber=huber)
+        limit = chi2_limit(model, yfit, prior, gof, huber)
+    theta, chi2 = theta.reshape(R, keep, -1), chi2.reshape(R, keep)
+    cov = np.linalg.pinv(info, hermitian=True).reshape(R, keep, model.n, model.n) * inflate
     # propagate to the first sample after the fitted stretch
     Ak = powers(model.A, Wf + 1)
     Aw = Ak[np.minimum(end - k0, Wf)]                                                   # (R, n, n)
@@ -454,8 +527,9 @@ def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, c
     P0 = Aw[:, None] @ cov @ np.swapaxes(Aw, -1, -2)[:, None] + (end - k0)[:, None, None, None] * model.Q
     traj = np.einsum("kij,rmj->rmki", Ak[:Wf], theta)
     xs = model.x_scale
-    return GlobalInit(start=end, seeds=seeds * xs, P0=P0 * np.outer(xs, xs), loglik=distinct_loglik(chi2_fit, found),
-                      window=traj * xs, k0=k0, fit_ok=chi2_fit.min(axis=1) <= limit)
+    return GlobalInit(start=end, seeds=seeds * xs, P0=P0 * np.outer(xs, xs),
+                      loglik=distinct_loglik(chi2, fits.found), window=traj * xs, k0=k0,
+                      fit_ok=chi2.min(axis=1) <= limit)
 
 
 def unalign(values, start, K, fill=np.nan):
