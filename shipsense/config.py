@@ -248,12 +248,17 @@ class BankConfig(_Model):
 
 
 class TrackerConfig(_Model):
-    """The tracker the scenario's source study used."""
+    """The tracker: the source study's filter, process noise and bank (``shipsense track --method bank``), and
+    the options of the project's tracker (:class:`shipsense.trackers.Tracker`)."""
 
     filter: Literal["ekf", "ukf", "ckf", "cdkf", "srcdkf", "puekf", "huber_ukf"] = "ukf"
     n_pu: Annotated[int, Field(ge=1)] = 1
     process_noise: ProcessNoiseConfig = ProcessNoiseConfig()
     bank: BankConfig | None = None
+    robust: bool | None = Field(None, description="Huber updates and robust refits (default: on when the "
+                                "scenario's noise model is 'contaminated').")
+    gap_limit_s: Annotated[Finite, Field(gt=0)] | None = Field(
+        None, description="A gap between samples longer than this (s) is reported (default: 10 periods).")
 
 
 class Scenario(_Model):

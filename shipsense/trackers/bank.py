@@ -202,29 +202,31 @@ class BankState:
     run_of = property(lambda self: self._run_of, doc="Run of every active element (read-only use).")
     hyp_of = property(lambda self: self._hyp_of, doc="Hypothesis of every active element (read-only use).")
 
-    def reset_runs(self, runs, seeds, P0):
-        """Re-seed the hypotheses of some runs (all elements must be active)."""
+    def reset_runs(self, runs, seeds, P0, loglik=None):
+        """Re-seed the hypotheses of some runs (all elements must be active); ``loglik`` (len(runs), H): their
+        prior log-likelihoods (default 0)."""
         if len(self.idx) != self.R * self.H:
             raise ValueError("reset_runs needs a bank without pruning")
         runs = np.asarray(runs, dtype=int)
         xs = self.model.x_scale
         n = xs.size
-        fresh = Belief.from_cov(np.asarray(seeds, float).reshape(-1, n) / xs,
-                                np.broadcast_to(np.asarray(P0, float) / np.outer(xs, xs),
-                                                (len(runs) * self.H, n, n)))
+        P0 = np.broadcast_to(np.asarray(P0, float) / np.outer(xs, xs), (len(runs), self.H, n, n))
+        fresh = Belief.from_cov(np.asarray(seeds, float).reshape(-1, n) / xs, P0.reshape(-1, n, n))
         rows = (runs[:, None] * self.H + np.arange(self.H)).ravel()
         for arr, new in zip(self.belief, fresh):
             arr[rows] = new
         self.belief = Belief(*self.belief)   # written in place: drop a filter's covariance cache
-        self.cum[runs] = 0.0
+        self.cum[runs] = 0.0 if loglik is None else loglik
 
-    def step(self, y, mask=None, predict=True, runs=None):
+    def step(self, y, mask=None, predict=True, runs=None, model=None):
         """Predict (unless ``predict`` is False) and update with the samples ``y`` (R, m) SI.
 
         ``mask`` (R, m) marks the components to use.  With ``runs`` (indices),
         only those runs' hypotheses step (their rows are gathered, stepped and
-        written back); the others are untouched.  Returns the innovation of
-        the stepped elements.
+        written back); the others are untouched.  ``model`` replaces the
+        bank's model for this step (e.g. one with a transition per element,
+        :meth:`~shipsense.trackers.models.FieldModel.stepped`).  Returns the
+        innovation of the stepped elements.
         """
         if runs is None:
             sub, rows = self.belief, None
@@ -235,7 +237,7 @@ class BankState:
             rows = (np.asarray(runs, dtype=int)[:, None] * self.H + np.arange(self.H)).ravel()
             sub = Belief(*(a[rows] for a in self.belief))
             run, hyp = rows // self.H, rows % self.H
-        b = self.unit.predict(sub, self.model) if predict else sub
+        b = self.unit.predict(sub, model if model is not None else self.model) if predict else sub
         yy = np.asarray(y, dtype=float)[run] / self.model.y_scale
         mk = None if mask is None else np.asarray(mask)[run]
         new, inn = self.unit.update(b, yy, self.model, mk)

@@ -223,6 +223,12 @@ def _dof(model, yfit, prior):
     return np.maximum(np.isfinite(yfit).sum(axis=(1, 2)) + rows - model.n, 1)
 
 
+def chi2_expected(model, yfit, prior, huber=None):
+    """Mean (R,) of the chi-square (Huber cost) of fits to ``yfit`` at the noise level."""
+    dof = _dof(model, yfit, prior).astype(float)
+    return dof if huber is None else dof * huber.moments[0]
+
+
 def chi2_limit(model, yfit, prior, gof, huber=None):
     """Chi-square (R,) above which a fit to ``yfit`` fails the goodness-of-fit test at level ``gof``.
 
@@ -296,6 +302,9 @@ class WindowFits:
         False where a passage had fewer distinct fits (the entry repeats its best).
     limit : ndarray, shape (R,)
         The goodness-of-fit test's limit on the chi-square.
+    expected : ndarray, shape (R,)
+        The chi-square's mean for a fit at the noise level (its degrees of freedom; for Huber fits, times
+        the cost's mean per residual).
     """
 
     theta: np.ndarray
@@ -303,6 +312,7 @@ class WindowFits:
     info: np.ndarray
     found: np.ndarray
     limit: np.ndarray
+    expected: np.ndarray
 
     @property
     def fit_ok(self):
@@ -394,7 +404,8 @@ def refine_minima(model, yfit, grid, chi2_grid, params, *, stages, keep, distinc
                                taus=None if taus is None else np.repeat(taus, keep, axis=0))
         theta, chi2, info = t.reshape(R, keep, -1), c.reshape(R, keep), j.reshape(R, keep, model.n, model.n)
         limit = chi2_limit(model, yfit, prior, gof, huber)
-    return WindowFits(theta, np.where(np.isfinite(chi2), chi2, np.inf), info, found, limit)
+    return WindowFits(theta, np.where(np.isfinite(chi2), chi2, np.inf), info, found, limit,
+                      chi2_expected(model, yfit, prior, huber))
 
 
 def window_fits(model, yfit, *, ranges, speeds, taus=None, bearing_step_deg=15.0, course_step_deg=30.0,

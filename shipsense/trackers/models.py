@@ -105,6 +105,18 @@ class FieldModel:
     x_scale = property(lambda self: self._d["x_scale"], doc="SI value of one internal unit per state component.")
     y_scale = property(lambda self: self._d["y_scale"], doc="SI value of one internal unit per channel.")
 
+    def stepped(self, dt):
+        """This model with the transition of time steps ``dt`` (E,) s, one per batch element.
+
+        ``A(dt) = I + (dt / T)(A - I)`` (constant velocity) and ``Q(dt) = (dt / T) Q``: exact for the
+        random walks of the parameters and for no process noise, first order in ``dt / T`` for the
+        white-acceleration block.  Filters' predictions take it as is (irregular sampling).
+        """
+        from shipsense.trackers.batchfit import transitions
+
+        dt = np.asarray(dt, dtype=float)
+        return _Stepped(self, transitions(self, dt), self.Q * (dt / self.period)[..., None, None])
+
     def without_process_noise(self) -> FieldModel:
         """The same model with Q = 0: a straight, constant-velocity passage with a constant source."""
         return replace(self, Q=np.zeros_like(self.Q))
@@ -207,6 +219,16 @@ class FieldModel:
             proj = (np.eye(2) - vhat[..., :, None] * vhat[..., None, :]) * (x[..., iz + 1] / safe)[..., None, None]
             J[..., 2:4] = np.einsum("...mj,...jk->...mk", Jp, proj)
         return J / self.y_scale[:, None]
+
+
+class _Stepped:
+    """A :class:`FieldModel` whose ``A`` and ``Q`` are per batch element (:meth:`FieldModel.stepped`)."""
+
+    def __init__(self, model, A, Q):
+        self._model, self.A, self.Q = model, A, Q
+
+    def __getattr__(self, name):
+        return getattr(self._model, name)
 
 
 @dataclass(frozen=True, eq=False)

@@ -34,9 +34,50 @@ from __future__ import annotations
 
 import numpy as np
 
-from shipsense.trackers.batchfit import fit_passages, powers
-from shipsense.trackers.initialiser import GlobalInit, chi2_limit, distinct_loglik, distinct_rows, fit_end
+from shipsense.trackers.batchfit import fit_passages, powers, transitions
+from shipsense.trackers.initialiser import GlobalInit, WindowFits, chi2_expected, chi2_limit, distinct_rows, fit_end
 from shipsense.trackers.selection import mixture_mse
+
+
+def refit_window(model, yw, starts, *, taus=None, prior=None, keep=1, distinct_m=15.0, gof=0.01, huber=None):
+    """Levenberg-Marquardt fits of passages' windows from several starts; the ``keep`` best distinct ones.
+
+    Parameters
+    ----------
+    model : FieldModel
+    yw : ndarray, shape (R, W, m)
+        The windows' samples (internal units, NaN = missing).
+    starts : ndarray, shape (R, C, n)
+        Initial states at each window's first sample (internal units); rows with a NaN are skipped.
+    taus : ndarray, shape (R, W), optional
+        The samples' times (s) after the window's first (default ``k T``).
+    prior, huber : as for :func:`~shipsense.trackers.batchfit.fit_passages`
+    keep, distinct_m : int, float
+        The best fits whose positions at the window's last sample are more than ``distinct_m`` (m) apart.
+    gof : float or None
+        Level of the goodness-of-fit test (:func:`~shipsense.trackers.initialiser.chi2_limit`).
+
+    Returns
+    -------
+    WindowFits
+        At each window's first sample, best first.
+    """
+    R, W, _ = yw.shape
+    taus = np.broadcast_to(np.arange(W) * model.period, (R, W)) if taus is None else np.asarray(taus, dtype=float)
+    use = np.isfinite(starts).all(axis=-1)
+    pr, pc = np.nonzero(use)
+    t, c, j = fit_passages(model, yw[pr], starts[pr, pc], W, return_information=True, prior=prior, taus=taus[pr],
+                           huber=huber)
+    C = starts.shape[1]
+    fits = np.zeros((R, C, model.n))
+    chi2 = np.full((R, C), np.inf)
+    info = np.zeros((R, C, model.n, model.n))
+    fits[pr, pc], chi2[pr, pc], info[pr, pc] = t, np.where(np.isfinite(c), c, np.inf), j
+    last = np.einsum("rij,rcj->rci", transitions(model, taus[:, -1]), fits)[..., :2] * model.x_scale[:2]
+    pick, found = distinct_rows(chi2, last, keep, distinct_m)
+    rows = np.arange(R)[:, None]
+    return WindowFits(fits[rows, pick], chi2[rows, pick], info[rows, pick], found,
+                      chi2_limit(model, yw, prior, gof, huber), chi2_expected(model, yw, prior, huber))
 
 
 def refit_at(model, measurements, gi, estimates, at, *, prior=None, inflate=1.0, gof=0.01, multistart=None,
@@ -60,8 +101,7 @@ def refit_at(model, measurements, gi, estimates, at, *, prior=None, inflate=1.0,
     inflate : float
         Factor on the inverse Gauss–Newton information.
     gof : float or None
-        Level of the chi-square test that gives ``fit_ok``
-        (:func:`~shipsense.trackers.initialiser.global_init`).
+        Level of the chi-square test that gives ``fit_ok``.
     multistart : ndarray of bool, shape (R,), optional
         Passages whose fit also starts from each of the initialiser's window
         fits (for a track that has diverged, its own estimate may sit in the
@@ -70,10 +110,7 @@ def refit_at(model, measurements, gi, estimates, at, *, prior=None, inflate=1.0,
         Further starts at ``at - 1`` (SI; NaN rows are skipped), e.g. a bank's
         hypotheses that still carry weight.
     keep : int
-        Hypotheses returned per passage: the best fits more than
-        ``distinct_m`` apart at ``at - 1``, with log-likelihood ``-chi2 / 2``
-        (a passage with fewer distinct fits repeats its best, at
-        log-likelihood ``-inf``: no weight).
+        Hypotheses returned per passage (:func:`refit_window`).
 
     Returns
     -------
@@ -81,7 +118,6 @@ def refit_at(model, measurements, gi, estimates, at, *, prior=None, inflate=1.0,
         ``keep`` hypotheses per passage, starting at ``at``; ``fit_ok`` is the
         best fit's chi-square test.
     """
-
     y = np.asarray(measurements, dtype=float) / model.y_scale
     R, K, _ = y.shape
     at = np.asarray(at, dtype=int)
@@ -100,28 +136,17 @@ def refit_at(model, measurements, gi, estimates, at, *, prior=None, inflate=1.0,
     if multistart is not None:   # the initialiser's window fits (at k0) for the passages that ask
         win = np.where(np.asarray(multistart, dtype=bool)[:, None, None], gi.window[:, :, 0] / xs, np.nan)
         theta = np.concatenate([theta, win], axis=1)
-    C = theta.shape[1]
-    use = np.isfinite(theta).all(axis=-1)
-    pr, pc = np.nonzero(use)
     ks = k0[:, None] + np.arange(Wf)[None, :]
     yfit = np.where((ks < at[:, None])[..., None], y[rows[:, None], np.minimum(ks, K - 1)], np.nan)
-    t, c, j = fit_passages(model, yfit[pr], theta[pr, pc], Wf, return_information=True, prior=prior)
-    fits = np.zeros((R, C, model.n))
-    chi2 = np.full((R, C), np.inf)
-    info = np.zeros((R, C, model.n, model.n))
-    fits[pr, pc], chi2[pr, pc], info[pr, pc] = t, np.where(np.isfinite(c), c, np.inf), j
+    fits = refit_window(model, yfit, theta, prior=prior, keep=keep, distinct_m=distinct_m, gof=gof)
     Ak = powers(model.A, Wf + 1)
     Ae = Ak[at - k0]                                                                   # (R, n, n)
-    last = np.einsum("rij,rcj->rci", Ak[at - 1 - k0], fits)[..., :2] * xs[:2]          # positions at at - 1
-    pick, found = distinct_rows(chi2, last, keep, distinct_m)
-    fits, chi2, info = (a[rows[:, None], pick] for a in (fits, chi2, info))
-    cov = np.linalg.pinv(info, hermitian=True) * inflate
-    seeds = np.einsum("rij,rmj->rmi", Ae, fits)
+    cov = np.linalg.pinv(fits.info, hermitian=True) * inflate
+    seeds = np.einsum("rij,rmj->rmi", Ae, fits.theta)
     P0 = Ae[:, None] @ cov @ np.swapaxes(Ae, -1, -2)[:, None]
-    traj = np.einsum("kij,rmj->rmki", Ak[:Wf], fits)
-    return GlobalInit(start=at, seeds=seeds * xs, P0=P0 * np.outer(xs, xs),
-                      loglik=distinct_loglik(chi2, found), window=traj * xs, k0=k0,
-                      fit_ok=chi2[:, 0] <= chi2_limit(model, yfit, prior, gof))
+    traj = np.einsum("kij,rmj->rmki", Ak[:Wf], fits.theta)
+    return GlobalInit(start=at, seeds=seeds * xs, P0=P0 * np.outer(xs, xs), loglik=fits.loglik,
+                      window=traj * xs, k0=k0, fit_ok=fits.fit_ok)
 
 
 def peak_refit_sample(model, measurements, k0, start, through_peak=0.5):

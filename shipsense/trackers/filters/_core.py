@@ -226,9 +226,13 @@ def predict(belief: Belief, model, square_root: bool = False) -> Belief:
     cubature and central-difference predictions equal this one exactly.
     With ``square_root`` the factor is propagated as ``tria([A L, Q^(1/2)])``
     (QR, no covariance formed; the SR-CDKF's form); otherwise the covariance
-    is formed and factorised (cheaper for small states).
+    is formed and factorised (cheaper for small states).  ``model.A`` and
+    ``model.Q`` are (n, n), or (..., n, n) per batch element (irregular
+    sampling: :meth:`~shipsense.trackers.models.FieldModel.stepped`).
     """
     A = model.A
+    if A.ndim > 2:
+        return _predict_batched(belief, A, model.Q, square_root)
     mean = belief.mean @ A.T
     cached = getattr(belief, "_cov", None)
     if cached is not None and not square_root:   # A P A^T + Q from the covariance the update formed
@@ -251,6 +255,22 @@ def predict(belief: Belief, model, square_root: bool = False) -> Belief:
         chol, ok = safe_cholesky(P)
         if ok.all():
             return _BeliefWithCov.with_cov(mean, chol, belief.ok, P)
+    return Belief(mean, chol, belief.ok & ok)
+
+
+def _predict_batched(belief, A, Q, square_root):
+    """:func:`predict` with a transition ``A`` and noise ``Q`` per batch element (..., n, n)."""
+    mean = np.einsum("...ij,...j->...i", A, belief.mean)
+    AL = A @ belief.chol
+    if square_root:
+        w, V = np.linalg.eigh(np.broadcast_to(Q, AL.shape))
+        chol = tria(np.concatenate([AL, V * np.sqrt(np.clip(w, 0.0, None))[..., None, :]], axis=-1))
+        ok = np.isfinite(chol).all(axis=(-1, -2))
+        return Belief(mean, chol, belief.ok & ok)
+    P = AL @ transposed(AL) + Q
+    chol, ok = safe_cholesky(P)
+    if ok.all():
+        return _BeliefWithCov.with_cov(mean, chol, belief.ok, P)
     return Belief(mean, chol, belief.ok & ok)
 
 

@@ -1,0 +1,563 @@
+"""The project's passage tracker: one public tracker behind ``shipsense track``, ``demo``, the environments and
+the Python API.
+
+:class:`Tracker` is built from a scenario and runs, for every passage of a
+batch, the pipeline of this package one sample at a time:
+
+1. **no data** until the passage's first sample with a field value;
+2. **initialising**: detection (the strongest field channel above
+   ``snr_start`` noise standard deviations), then a window of ``window_s``
+   seconds, then the global initialiser's fits of that window
+   (:func:`~shipsense.trackers.initialiser.window_fits`: grid search with the
+   moment eliminated, Levenberg-Marquardt refinement, a chi-square test);
+   until then the reported belief is the prior's (the array centroid with the
+   passage prior's spread: honest, not informative);
+3. **tracking**: a bank of the distinct fits (filter unit ``ukf``, or the
+   Huber UKF when ``robust``), without process noise -- the passages are
+   straight and constant-velocity -- restarted from batch refits of its
+   recent samples (:func:`~shipsense.trackers.restarts.refit_window`): every
+   ``refit_every`` samples until the closest approach, once when the signal
+   has fallen to ``through_peak`` of its peak, when the selected hypothesis's
+   innovations say it has diverged, and when its covariance collapses (see
+   :mod:`~shipsense.trackers.restarts`).  At a refit the status is
+   **restarted**; a fit that fails its goodness-of-fit test makes the status
+   **inconsistent** and its covariance is inflated by the ratio of its
+   chi-square to the expected (never NaN), and it is re-fitted every
+   ``nis_window`` samples until one passes.
+
+The reported estimate is the maximum-likelihood hypothesis, the reported
+covariance its mean-square-error matrix under the mixture of the bank's
+hypotheses (when a passage 20 m away explains the data almost as well, the
+covariance says so).  Everything is causal: the output at sample ``k`` uses
+samples ``<= k`` only.  Time comes from the timestamps (irregular sampling
+works: each prediction and each fit uses the samples' times); a gap longer
+than ``gap_limit_s`` is predicted through and reported once.  A refit uses
+at most the last ``history`` samples, so the cost per sample is bounded.
+
+``method="bank"`` runs the source studies' multiple-initial-value bank
+instead (the scenario's filter, process noise and ``[tracker.bank]``),
+seeded per passage from its own first sample with a field value; it is kept
+to reproduce the studies.
+
+The streaming form, :meth:`Tracker.update`, takes one sample of every passage;
+the batch form, :meth:`Tracker.track`, is the same loop over samples, so the
+two agree exactly.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from shipsense.trackers.bank import BankState
+from shipsense.trackers.batchfit import Huber, transitions
+from shipsense.trackers.filters import get_filter
+from shipsense.trackers.initialiser import depth_prior, strongest_snr, window_fits
+from shipsense.trackers.restarts import refit_window
+from shipsense.trackers.seeding import seed_hypotheses
+from shipsense.trackers.selection import mixture_mse
+
+STATUSES = ("no data", "initialising", "tracking", "restarted", "inconsistent")
+"""Status names, indexed by the status codes of :class:`TrackResult`."""
+NO_DATA, INITIALISING, TRACKING, RESTARTED, INCONSISTENT = range(5)
+_WAITING, _STARTING, _RUNNING = 0, 1, 2   # phases of a passage
+
+
+@dataclass(frozen=True)
+class TrackerOptions:
+    """Options of :class:`Tracker` (defaults: the project's measured settings, EXPERIMENTS.md).
+
+    ``snr_start``, ``refine``, ``explore_samples`` and ``z_std`` default to the
+    global initialiser's settings for the array's family (:func:`family_options`).
+    """
+
+    method: str = "tracker"
+    unit: str | None = None
+    robust: bool | None = None
+    window_s: float = 15.0
+    snr_start: float | None = None
+    refine: tuple | int | None = None
+    explore_samples: int | None = None
+    z_std: float | None = None
+    keep_init: int = 5
+    keep: int = 3
+    refit_every: int | None = 20
+    through_peak: float | None = 0.5
+    nis_window: int = 10
+    nis_limit: float = 3.0
+    max_restarts: int = 4
+    collapse: float | None = 0.25
+    ambiguity_nats: float = 10.0
+    report_nats: float = 3.0
+    report_distance_m: float = 20.0
+    distinct_m: float = 15.0
+    gof: float = 0.01
+    inflate: float = 2.0
+    history: int = 1000
+    gap_limit_s: float | None = None
+
+    def __post_init__(self):
+        if self.method not in ("tracker", "bank"):
+            raise ValueError(f"method must be 'tracker' or 'bank', got {self.method!r}")
+        for name in ("window_s", "nis_window", "keep_init", "keep", "history", "max_restarts"):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and v > 0) and not (name == "max_restarts" and v == 0):
+                raise ValueError(f"{name} must be a positive number, got {v!r}")
+        if self.keep > self.keep_init:
+            raise ValueError(f"keep ({self.keep}) cannot exceed keep_init ({self.keep_init})")
+
+
+def family_options(model, scenario):
+    """The global initialiser's settings for an array's family, as measured on the wide-prior study
+    (EXPERIMENTS.md): envelope electrodes start at SNR 50 with the bank's depth prior and refine (10, 30, 60)
+    grid minima; one magnetometer starts at SNR 400 and explores (20, 60) minima on 15 samples; several
+    magnetometers start at SNR 5 and refine (5, 20)."""
+    types = list(model.array.types)
+    if "electrode" in types:
+        z_std = scenario.tracker.bank.z_std if scenario.tracker is not None and scenario.tracker.bank else 1.0
+        return {"snr_start": 50.0, "refine": (10, 30, 60), "explore_samples": None, "z_std": z_std}
+    if types.count("magnetometer") == 1:
+        return {"snr_start": 400.0, "refine": (20, 60), "explore_samples": 15, "z_std": None}
+    return {"snr_start": 5.0, "refine": (5, 20), "explore_samples": None, "z_std": None}
+
+
+@dataclass(frozen=True)
+class Gap:
+    """A gap in a passage's samples longer than the tracker's limit (predicted through)."""
+
+    passage: int
+    start_s: float
+    end_s: float
+
+    def __str__(self):
+        return (f"passage {self.passage}: no sample for {self.end_s - self.start_s:.3g} s "
+                f"(t = {self.start_s:.6g} to {self.end_s:.6g} s), predicted through")
+
+
+@dataclass
+class Sample:
+    """The tracker's output for one sample of every passage (SI units).
+
+    ``estimate`` (P, n), ``cov`` (P, n, n), ``status`` (P,) (codes of :data:`STATUSES`), ``gap_nats`` (P,)
+    (log-likelihood of the selected hypothesis over the runner-up; inf with one), ``ambiguous`` (P,)
+    (hypotheses far apart within ``report_nats``), ``hypotheses`` (P,) (with weight).
+    """
+
+    estimate: np.ndarray
+    cov: np.ndarray
+    status: np.ndarray
+    gap_nats: np.ndarray
+    ambiguous: np.ndarray
+    hypotheses: np.ndarray
+
+
+@dataclass
+class TrackResult:
+    """A batch of tracked passages (SI): per sample estimates (P, K, n), full covariances (P, K, n, n), status
+    codes (P, K) (:data:`STATUSES`), the selection figures of :class:`Sample`, the times (P, K), and the gaps."""
+
+    labels: tuple
+    times: np.ndarray
+    estimates: np.ndarray
+    covs: np.ndarray
+    status: np.ndarray
+    gap_nats: np.ndarray
+    ambiguous: np.ndarray
+    hypotheses: np.ndarray
+    gaps: list = field(default_factory=list)
+
+    @property
+    def position_cov(self):
+        """Position covariances (P, K, 2, 2), m²."""
+        return self.covs[..., :2, :2]
+
+    def status_names(self):
+        """Status names (P, K)."""
+        return np.asarray(STATUSES, dtype=object)[self.status]
+
+
+class Tracker:
+    """The project's passage tracker (see the module docstring), built from a scenario.
+
+    Parameters
+    ----------
+    scenario : Scenario or str
+        The array, medium, noise, passage prior and ``[tracker]`` options.
+    passages : int
+        Passages tracked side by side (the batch).
+    sensors : list of str, optional
+        The sensor ids to use (default: all).
+    **options
+        :class:`TrackerOptions`.
+
+    Examples
+    --------
+    >>> import shipsense
+    >>> from shipsense.trackers import Tracker
+    >>> sim = shipsense.simulate("S2", runs=2, seed=1, random=True)
+    >>> result = Tracker("S2", passages=2, sensors=["M1", "M2"]).track(sim.times, sim.measurements[..., :6])
+    >>> result.estimates.shape, result.covs.shape, result.status.shape
+    ((2, 80, 7), (2, 80, 7, 7), (2, 80))
+    """
+
+    def __init__(self, scenario, *, passages=1, sensors=None, **options):
+        from shipsense.config import load_scenario
+        from shipsense.trackers.models import model_from_scenario
+        from shipsense.tracking import scenario_tracker
+
+        self.scenario = sc = load_scenario(scenario)
+        opts = TrackerOptions(**options)
+        model = model_from_scenario(sc, sensors=sensors)
+        cfg = sc.tracker
+        if opts.robust is None:
+            robust = cfg.robust if cfg is not None and cfg.robust is not None else sc.noise.model == "contaminated"
+            opts = replace(opts, robust=bool(robust))
+        if opts.gap_limit_s is None:
+            gap = cfg.gap_limit_s if cfg is not None and cfg.gap_limit_s is not None else 10.0 * sc.period
+            opts = replace(opts, gap_limit_s=float(gap))
+        fam = family_options(model, sc)
+        opts = replace(opts, **{k: v for k, v in fam.items() if getattr(opts, k) is None})
+        study_unit, self.bank_config = scenario_tracker(sc, opts.unit if opts.method == "bank" else None)
+        if opts.method == "bank":
+            self.unit, self.model = study_unit, model
+        else:
+            self.unit = get_filter(opts.unit or ("huber_ukf" if opts.robust else "ukf"))
+            self.model = model.without_process_noise()
+        self.options = opts
+        self.huber = None
+        if opts.robust:
+            contaminated = sc.noise.model == "contaminated"
+            self.huber = Huber(eps=sc.noise.eps, scale=sc.noise.outlier_scale) if contaminated else Huber()
+        # the bank's noise: with Huber updates the estimate's variance is kappa times the nominal one
+        kappa = self.huber.variance_factor if self.huber is not None else 1.0
+        self.filter_model = replace(self.model, R=self.model.R * kappa)
+        self.kappa = kappa
+        self.window = max(4, int(round(opts.window_s / sc.period)))
+        self._grid = _grid(sc)
+        self._prior = prior_belief(self.model, sc, self.bank_config)
+        self.reset(passages)
+
+    labels = property(lambda self: self.model.labels, doc="State component names.")
+
+    # -- state ------------------------------------------------------------------------------------------------
+    def reset(self, passages=None):
+        """Start over with ``passages`` passages (default: as many as before)."""
+        P = int(passages if passages is not None else self.P)
+        if P < 1:
+            raise ValueError(f"passages must be at least 1, got {passages}")
+        m, n, H = self.model.m, self.model.n, self._H
+        self.P, self.k = P, 0
+        self.phase = np.zeros(P, dtype=np.int8)
+        self.last_t = np.full(P, np.nan)
+        self.k0 = np.full(P, -1)
+        self.peak = np.zeros(P)
+        self.start = np.zeros(P, dtype=int)
+        self.trusted = np.ones(P, dtype=bool)
+        self.alarms = np.zeros(P, dtype=int)
+        self.restarts = np.zeros(P, dtype=int)
+        self.peak_done = np.zeros(P, dtype=bool)
+        self.ref = np.full(P, np.nan)
+        self.nis = np.full((P, self.options.nis_window), np.nan)
+        self.snr = np.full((P, 3), np.nan)
+        self.win = np.full((P, self.options.keep_init, n), np.nan)     # window fits at k0 (internal)
+        self.win_t0 = np.full(P, np.nan)
+        hist = self.options.history if self.options.method == "tracker" else 1
+        self.y_hist = np.full((P, hist, m), np.nan)
+        self.t_hist = np.full((P, hist), np.nan)
+        self.gaps = []
+        self.own = np.full(P, np.nan)          # trace of the selected hypothesis's own position covariance
+        self.bank = BankState(self.unit, self.filter_model, np.broadcast_to(self._prior[0], (P, H, n)),
+                              self._prior[1])
+        return self
+
+    @property
+    def _H(self):
+        return self.options.keep_init if self.options.method == "tracker" else (
+            len(self.bank_config.levels) * len(self.bank_config.bearings_deg))
+
+    # -- one sample ---------------------------------------------------------------------------------------------
+    def update(self, t, y) -> Sample:
+        """Process one sample of every passage: times ``t`` (P,) s and measurements ``y`` (P, m) SI (NaN =
+        missing: a dropout, or a sensor not read).  Returns the :class:`Sample` at this time."""
+        t = np.broadcast_to(np.asarray(t, dtype=float), (self.P,))
+        y = np.asarray(y, dtype=float)
+        if y.shape != (self.P, self.model.m):
+            raise ValueError(f"y must be (passages, channels) = ({self.P}, {self.model.m}), got {y.shape}")
+        if not np.isfinite(t).all():
+            raise ValueError("times must be finite numbers")
+        back = np.isfinite(self.last_t) & ~(t > self.last_t)
+        if back.any():
+            p = int(np.argmax(back))
+            raise ValueError(f"time must increase: passage {p} goes from {self.last_t[p]:.9g} s to {t[p]:.9g} s")
+        yi = y / self.model.y_scale
+        dt = t - self.last_t
+        for p in np.flatnonzero(dt > self.options.gap_limit_s):
+            self.gaps.append(Gap(int(p), float(self.last_t[p]), float(t[p])))
+        slot = self.k % self.y_hist.shape[1]
+        self.y_hist[:, slot], self.t_hist[:, slot] = yi, t
+        snr = self._snr(yi)
+        out = self._prior_sample()
+        field = np.isfinite(np.where(self.model.axial, np.nan, yi)).any(axis=1)
+        self.phase[(self.phase == _WAITING) & field] = _STARTING
+        out.status[self.phase == _STARTING] = INITIALISING
+        running = np.flatnonzero(self.phase == _RUNNING)
+        if running.size:
+            self._step(running, yi, dt, out)
+        if self.options.method == "bank":
+            fresh = np.flatnonzero(self.phase == _STARTING)
+            if fresh.size:
+                self._seed_bank(fresh, y, out)
+        else:
+            self._initialise(snr, out)
+            if running.size:
+                self._restart(running, snr, out)
+        self.last_t = t.copy()
+        self.k += 1
+        return out
+
+    def track(self, times, measurements, progress=False) -> TrackResult:
+        """Track a batch: ``times`` (K,) or (P, K) s, ``measurements`` (P, K, m) SI (NaN = missing).
+
+        The tracker is reset to the batch; the result is what :meth:`update` gives sample by sample.
+        """
+        y = np.asarray(measurements, dtype=float)
+        if y.ndim != 3 or y.shape[2] != self.model.m:
+            raise ValueError(f"measurements must be (passages, samples, {self.model.m}), got {y.shape}")
+        P, K, _ = y.shape
+        times = np.broadcast_to(np.asarray(times, dtype=float), (P, K))
+        self.reset(P)
+        n = self.model.n
+        est, cov = np.empty((P, K, n)), np.empty((P, K, n, n))
+        status, gap_nats = np.empty((P, K), dtype=np.int8), np.empty((P, K))
+        amb, hyps = np.empty((P, K), dtype=bool), np.empty((P, K), dtype=np.int16)
+        steps = range(K)
+        if progress:
+            from tqdm import tqdm
+
+            steps = tqdm(steps, desc=f"tracking {P} passage(s)", unit="sample", leave=False)
+        for k in steps:
+            s = self.update(times[:, k], y[:, k])
+            est[:, k], cov[:, k], status[:, k] = s.estimate, s.cov, s.status
+            gap_nats[:, k], amb[:, k], hyps[:, k] = s.gap_nats, s.ambiguous, s.hypotheses
+        return TrackResult(tuple(self.labels), np.array(times), est, cov, status, gap_nats, amb, hyps,
+                           list(self.gaps))
+
+    # -- parts --------------------------------------------------------------------------------------------------
+    def _snr(self, yi):
+        """The strongest field channel's SNR (P,); with ``robust``, the median of the last three samples (an
+        outlier alone neither starts a window nor moves the peak)."""
+        snr = strongest_snr(self.model, yi[:, None])[:, 0]
+        if not self.options.robust:
+            return snr
+        self.snr = np.roll(self.snr, -1, axis=1)
+        self.snr[:, -1] = np.where(np.isfinite(yi).any(axis=1), snr, np.nan)
+        with np.errstate(all="ignore"):
+            med = np.nanmedian(np.where(np.isfinite(self.snr).sum(axis=1, keepdims=True) >= 2, self.snr, 0.0), axis=1)
+        return np.nan_to_num(med)
+
+    def _prior_sample(self):
+        P = self.P
+        mean, cov = self._prior
+        return Sample(np.repeat(mean[None], P, axis=0), np.repeat(cov[None], P, axis=0),
+                      np.full(P, NO_DATA, dtype=np.int8), np.full(P, np.inf), np.zeros(P, dtype=bool),
+                      np.zeros(P, dtype=np.int16))
+
+    def _step(self, runs, yi, dt, out):
+        """Predict (time steps ``dt``) and update the banks of passages ``runs``; write their output."""
+        H = self._H
+        d = dt[runs]
+        regular = np.all(np.abs(d - self.model.period) <= 1e-9 * self.model.period)
+        model = None if regular else self.filter_model.stepped(np.repeat(d, H))
+        ysi = yi * self.model.y_scale
+        inn = self.bank.step(ysi, predict=True, runs=runs, model=model)
+        nis = np.where(inn.m > 0, inn.nis / np.maximum(inn.m, 1), np.nan).reshape(runs.size, H)
+        sel = self.bank.selected()[runs]
+        self.nis[runs] = np.roll(self.nis[runs], -1, axis=1)
+        self.nis[runs, -1] = nis[np.arange(runs.size), sel]
+        self._report(runs, out)
+
+    def _report(self, runs, out, cov_scale=None):
+        """Selected estimate, its mixture mean-square error (tracker) or own covariance (bank), and the
+        selection figures of passages ``runs``."""
+        H, n = self._H, self.model.n
+        rows = (runs[:, None] * H + np.arange(H)).ravel()
+        xs = self.model.x_scale
+        means = (self.bank.belief.mean[rows] * xs).reshape(runs.size, H, n)
+        covs = (self.bank.belief.cov[rows] * np.outer(xs, xs)).reshape(runs.size, H, n, n)
+        cum = self.bank.cum[runs]
+        sel = np.argmax(cum, axis=1)
+        pick = np.arange(runs.size)
+        best = means[pick, sel]
+        if self.options.method == "tracker":
+            w = np.exp(cum - cum[pick, sel][:, None])
+            w /= w.sum(axis=1, keepdims=True)
+            cov = mixture_mse(w, means, covs, best[:, None])
+        else:
+            cov = covs[pick, sel]
+        out.estimate[runs], out.cov[runs] = best, _symmetric(cov)
+        self.own[runs] = np.trace(covs[pick, sel, :2, :2], axis1=-2, axis2=-1)
+        out.status[runs] = np.where(self.trusted[runs], TRACKING, INCONSISTENT)
+        self._selection(runs, means, cum, out)
+
+    def _selection(self, runs, means, cum, out):
+        o = self.options
+        live = cum > np.max(cum, axis=1, keepdims=True) - o.report_nats
+        ranked = np.sort(np.where(np.isfinite(cum), cum, -np.inf), axis=1)
+        out.gap_nats[runs] = ranked[:, -1] - ranked[:, -2] if cum.shape[1] > 1 else np.inf
+        d = means[:, :, None, :2] - means[:, None, :, :2]
+        far = np.einsum("rijk,rijk->rij", d, d) > o.report_distance_m ** 2
+        out.ambiguous[runs] = np.any(far & live[:, :, None] & live[:, None, :], axis=(1, 2))
+        out.hypotheses[runs] = np.isfinite(cum).sum(axis=1)
+
+    def _seed_bank(self, fresh, y, out):
+        """The studies' bank: seed passages ``fresh`` from this sample (their first with a field value) and
+        update with it."""
+        seeds, P0 = seed_hypotheses(self.model, y[fresh], self.bank_config)
+        self.bank.reset_runs(fresh, seeds, P0)
+        self.bank.step(y, predict=False, runs=fresh)
+        self.phase[fresh] = _RUNNING
+        self._report(fresh, out)
+
+    def _window(self, runs, first):
+        """Samples ``first .. k`` (R,) of passages ``runs`` from the history: y (R, W, m) internal and the times
+        after each first sample (R, W); W is the longest, shorter windows padded with missing samples."""
+        hist = self.y_hist.shape[1]
+        W = int((self.k - first).max()) + 1
+        ks = first[:, None] + np.arange(W)[None, :]
+        inside = ks <= self.k
+        slots = np.where(inside, ks, self.k) % hist
+        yw = np.where(inside[..., None], self.y_hist[runs[:, None], slots], np.nan)
+        tw = self.t_hist[runs[:, None], slots]
+        taus = np.where(inside, tw - tw[:, :1], tw[:, -1:] - tw[:, :1])
+        return yw, taus
+
+    def _initialise(self, snr, out):
+        """Detection and, once a passage's window is complete, its global fits: the bank starts from them."""
+        o = self.options
+        starting = self.phase == _STARTING
+        detect = starting & (self.k0 < 0) & (snr > o.snr_start)
+        self.k0[detect] = self.k
+        seen = starting & (self.k0 >= 0)
+        self.peak[seen] = np.maximum(self.peak[seen], snr[seen])
+        ready = np.flatnonzero(seen & (self.k - self.k0 + 1 >= self.window))
+        if ready.size == 0:
+            return
+        yw, taus = self._window(ready, self.k0[ready])
+        regular = np.allclose(taus, np.arange(taus.shape[1]) * self.model.period, rtol=0, atol=1e-9)
+        fits = window_fits(self.model, yw, **self._grid, taus=None if regular else taus, keep=o.keep_init,
+                           distinct_m=o.distinct_m, z_std=o.z_std, refine=o.refine, gof=o.gof,
+                           explore_samples=o.explore_samples, huber=self.huber)
+        self.win[ready], self.win_t0[ready] = fits.theta, self.t_hist[ready, self.k0[ready] % self.y_hist.shape[1]]
+        self.phase[ready] = _RUNNING
+        self._start_banks(ready, fits, taus[:, -1], o.inflate, out)
+
+    def _start_banks(self, runs, fits, tau, inflate, out):
+        """(Re)start the banks of passages ``runs`` at this sample from window fits at times ``tau`` (R,) before
+        it; a fit that fails its test has its covariance inflated by its chi-square over the expected."""
+        H, xs = self._H, self.model.x_scale
+        A = transitions(self.model, tau)                                               # (R, n, n)
+        birge = np.maximum(1.0, fits.chi2[:, :1] / np.maximum(fits.expected[:, None], 1e-300))
+        cov = np.linalg.pinv(fits.info, hermitian=True) * (inflate * self.kappa) * np.where(
+            fits.fit_ok[:, None], 1.0, birge)[..., None, None]
+        seeds = np.einsum("rij,rmj->rmi", A, fits.theta)
+        P0 = A[:, None] @ cov @ np.swapaxes(A, -1, -2)[:, None]
+        loglik = fits.loglik
+        M = seeds.shape[1]
+        if M < H:   # fewer fits than hypotheses: the best again, with no weight
+            pad = (slice(None), np.zeros(H - M, dtype=int))
+            seeds, P0 = np.concatenate([seeds, seeds[pad]], 1), np.concatenate([P0, P0[pad]], 1)
+            loglik = np.concatenate([loglik, np.full((len(runs), H - M), -np.inf)], axis=1)
+        self.bank.reset_runs(runs, seeds * xs, P0 * np.outer(xs, xs)[None, None], loglik)
+        self.start[runs], self.trusted[runs] = self.k, fits.fit_ok
+        self.ref[runs] = np.trace(P0[np.arange(len(runs)), 0, :2, :2] * np.outer(xs[:2], xs[:2]), axis1=-2, axis2=-1)
+        self.nis[runs] = np.nan
+        self._report(runs, out)
+
+    def _restart(self, runs, snr, out):
+        """Refit the passages among ``runs`` whose bank is due (alarms, schedule, peak, collapse)."""
+        o = self.options
+        k = self.k
+        since = k - self.start[runs]
+        with np.errstate(all="ignore"):
+            present = np.isfinite(self.nis[runs]).sum(axis=1)
+            level = (np.nanmedian(self.nis[runs], axis=1) if o.robust else np.nanmean(self.nis[runs], axis=1))
+        diverged = (present >= max(1, o.nis_window // 2)) & (level > o.nis_limit)
+        retry = ~self.trusted[runs] & (since >= o.nis_window)
+        alarm = (diverged | retry) & (self.alarms[runs] < o.max_restarts)
+        self.peak[runs] = np.maximum(self.peak[runs], snr[runs])
+        after_peak = (o.through_peak is not None) & ~self.peak_done[runs] & (since > 0) & (
+            snr[runs] < (o.through_peak or 0.0) * self.peak[runs])
+        scheduled = (o.refit_every is not None) & ~self.peak_done[runs] & (since >= (o.refit_every or 0))
+        collapse = np.zeros(runs.size, dtype=bool)
+        if o.collapse is not None:
+            collapse = (since < o.nis_window) & (since > 0) & (self.own[runs] < o.collapse * self.ref[runs])
+        due = alarm | after_peak | scheduled | collapse
+        stuck = diverged & ~alarm                     # diverged with no restarts left: say so
+        out.status[runs[stuck]] = INCONSISTENT
+        out.cov[runs[stuck]] *= np.maximum(1.0, level[stuck])[:, None, None]
+        if due.any():
+            sel = runs[due]
+            self.peak_done[sel] |= after_peak[due]
+            self.alarms[sel] += alarm[due]
+            self.restarts[sel] += 1
+            self._refit(sel, alarm[due], out)
+
+    def _refit(self, runs, multistart, out):
+        """Batch refits of passages ``runs`` to their samples since the window start (at most ``history``),
+        started from the selected estimate, the bank's live hypotheses and (``multistart``) the initial
+        window fits; the bank restarts from the ``keep`` best distinct fits."""
+        o, H, n = self.options, self._H, self.model.n
+        first = np.maximum(self.k0[runs], self.k - self.y_hist.shape[1] + 1)
+        yw, taus = self._window(runs, first)
+        back = transitions(self.model, -taus[:, -1])                                    # now -> window start
+        rows = (runs[:, None] * H + np.arange(H)).ravel()
+        means = self.bank.belief.mean[rows].reshape(runs.size, H, n)
+        cum = self.bank.cum[runs]
+        sel = np.argmax(cum, axis=1)
+        live = cum > cum[np.arange(runs.size), sel][:, None] - o.ambiguity_nats
+        live[np.arange(runs.size), sel] = True
+        starts = np.where(live[..., None], means, np.nan)
+        starts = np.concatenate([starts[np.arange(runs.size), sel][:, None], np.where(
+            (np.arange(H) == sel[:, None])[..., None], np.nan, starts)], axis=1)
+        theta = np.einsum("rij,rhj->rhi", back, starts)
+        t_first = self.t_hist[runs, first % self.y_hist.shape[1]]
+        win = np.einsum("rij,rhj->rhi", transitions(self.model, t_first - self.win_t0[runs]), self.win[runs])
+        theta = np.concatenate([theta, np.where(multistart[:, None, None], win, np.nan)], axis=1)
+        prior = depth_prior(self.model, o.z_std)
+        fits = refit_window(self.model, yw, theta, taus=taus, prior=prior, keep=o.keep, distinct_m=o.distinct_m,
+                            gof=o.gof, huber=self.huber)
+        self._start_banks(runs, fits, taus[:, -1], 1.0, out)
+        out.status[runs] = np.where(fits.fit_ok, RESTARTED, INCONSISTENT)
+
+
+def _symmetric(P):
+    return 0.5 * (P + np.swapaxes(P, -1, -2))
+
+
+def _grid(sc):
+    """The initialiser's grid of start ranges and speeds from the scenario's passage prior (or defaults)."""
+    if sc.prior is not None:
+        return {"ranges": np.geomspace(20.0, 1.2 * sc.prior.range[1], 8), "speeds": np.linspace(*sc.prior.speed, 3)}
+    return {"ranges": np.geomspace(20.0, 500.0, 8), "speeds": np.array([2.0, 6.0, 10.0])}
+
+
+def prior_belief(model, sc, bank):
+    """The belief before a passage is initialised (SI): the array centroid, at rest, with a spread whose 95 %
+    ellipse reaches the passage prior's farthest start (500 m without a prior) and velocities of its top speed."""
+    labels = model.labels
+    mean, std = np.zeros(model.n), np.zeros(model.n)
+    mean[:2] = model.array.positions[:, :2].mean(axis=0)
+    r_max = sc.prior.range[1] if sc.prior is not None else 500.0
+    v_max = sc.prior.speed[1] if sc.prior is not None else 12.0
+    std[:2] = r_max / np.sqrt(-2.0 * np.log(0.05))
+    std[2:4] = v_max / 1.96
+    if "mx" in labels:
+        m_max = sc.prior.moment[1] if sc.prior is not None and sc.prior.moment else bank.moment_std
+        std[labels.index("mx"):labels.index("mx") + 3] = m_max
+    if "z" in labels:
+        iz = labels.index("z")
+        mean[iz], std[iz] = model.source_z, bank.z_std
+        p_max = sc.prior.p[1] if sc.prior is not None and sc.prior.p else bank.p_std
+        mean[iz + 1], std[iz + 1] = 0.5 * p_max, p_max
+    return mean, np.diag(std * std)
