@@ -1,0 +1,132 @@
+"""The project's tracker: streaming = batch, causal, honest covariances, statuses, timestamps, robustness."""
+
+import numpy as np
+import pytest
+
+from shipsense import load_scenario, simulate
+from shipsense.trackers import Tracker
+from shipsense.trackers.tracker import INCONSISTENT, INITIALISING, NO_DATA, RESTARTED, TRACKING
+
+
+@pytest.fixture(scope="module")
+def s2():
+    sc = load_scenario("S2")
+    sim = simulate(sc, runs=4, seed=5, random=True)
+    tr = Tracker(sc, passages=4, sensors=["M1", "M2"])
+    return sc, sim.times, sim.measurements[..., :6], tr.model.state_from_truth(sim.truth), tr.track(
+        sim.times, sim.measurements[..., :6])
+
+
+def _close(a, b, tol):
+    """Arrays equal to ``tol`` of their own scale (covariances: each entry against sqrt(P_ii P_jj))."""
+    if a.ndim >= 2 and a.shape[-1] == a.shape[-2]:
+        sd = np.sqrt(np.einsum("...ii->...i", np.abs(b)))
+        return np.all(np.abs(a - b) <= tol * sd[..., :, None] * sd[..., None, :] + 1e-300)
+    return np.all(np.abs(a - b) <= tol * np.maximum(np.abs(b), 1.0))
+
+
+def test_it_tracks_every_passage_with_honest_finite_covariances(s2):
+    sc, t, y, truth, res = s2
+    err = np.hypot(*(res.estimates[:, -1, :2] - truth[:, -1, :2]).T)
+    assert np.all(err < 1.0), err
+    assert np.isfinite(res.covs).all()
+    np.testing.assert_array_equal(res.covs, np.swapaxes(res.covs, -1, -2))
+    assert np.all(np.linalg.eigvalsh(res.covs) > 0)
+    # statuses: initialising until the window is fitted, then tracking with restarts, never "no data"
+    assert set(np.unique(res.status)) <= {INITIALISING, TRACKING, RESTARTED}
+    assert np.all(res.status[:, 0] == INITIALISING) and np.all((res.status[:, -5:] == TRACKING)
+                                                                | (res.status[:, -5:] == RESTARTED))
+    assert np.all(np.diff((res.status == INITIALISING).astype(int), axis=1) <= 0)   # initialising comes first
+    # the truth lies inside the reported 95 % ellipse about as often as it should once tracking
+    d = res.estimates[..., :2] - truth[..., :2]
+    q = np.einsum("pki,pkij,pkj->pk", d, np.linalg.inv(res.position_cov), d)
+    cover = np.mean(q[res.status != INITIALISING] <= 5.991)
+    assert 0.85 <= cover <= 1.0, cover
+    # before the first fit the belief is the prior's: centred on the array, wide enough to hold the passage
+    assert np.all(q[res.status == INITIALISING] <= 5.991)
+
+
+def test_streaming_equals_batch_and_is_causal(s2):
+    sc, t, y, truth, res = s2
+    tr = Tracker(sc, passages=4, sensors=["M1", "M2"])
+    for k in range(y.shape[1]):
+        s = tr.update(t[k], y[:, k])
+        assert _close(s.estimate, res.estimates[:, k], 1e-9) and _close(s.cov, res.covs[:, k], 1e-9)
+        np.testing.assert_array_equal(s.status, res.status[:, k])
+    # causal: changing the samples after k changes nothing up to k (exactly: the same computations)
+    k = y.shape[1] // 2
+    y2 = y.copy()
+    y2[:, k + 1:] *= 1.5
+    res2 = Tracker(sc, passages=4, sensors=["M1", "M2"]).track(t, y2)
+    np.testing.assert_array_equal(res2.estimates[:, :k + 1], res.estimates[:, :k + 1])
+    np.testing.assert_array_equal(res2.covs[:, :k + 1], res.covs[:, :k + 1])
+    assert not np.allclose(res2.estimates[:, k + 2:], res.estimates[:, k + 2:])
+
+
+def test_each_passage_starts_from_its_own_data_and_nothing_raises_for_the_batch(s2):
+    sc, t, y, truth, res = s2
+    y2 = y.copy()
+    y2[0] = np.nan                       # a passage with no data at all
+    y2[1, :7] = np.nan                   # one whose first samples are missing
+    for method in ("tracker", "bank"):
+        r = Tracker(sc, passages=4, sensors=["M1", "M2"], method=method).track(t, y2)
+        assert np.all(r.status[0] == NO_DATA) and np.all(r.status[1, :7] == NO_DATA)
+        assert np.all(r.status[1, 7:] != NO_DATA)
+        assert np.isfinite(r.covs).all()
+    np.testing.assert_allclose(r.estimates[0], np.broadcast_to(r.estimates[0, :1], r.estimates[0].shape))
+
+
+def test_time_comes_from_the_timestamps(s2):
+    sc, t, y, truth, res = s2
+    shifted = Tracker(sc, passages=4, sensors=["M1", "M2"]).track(t + 1234.5, y)
+    assert _close(shifted.estimates, res.estimates, 1e-6)
+    # irregular sampling: drop a third of the samples at random; the tracker follows the passages in time
+    rng = np.random.default_rng(0)
+    keep = np.sort(np.concatenate([[0], 1 + rng.choice(len(t) - 1, 2 * (len(t) - 1) // 3, replace=False)]))
+    r = Tracker(sc, passages=4, sensors=["M1", "M2"]).track(t[keep], y[:, keep])
+    err = np.hypot(*(r.estimates[:, -1, :2] - truth[:, keep[-1], :2]).T)
+    assert np.all(err < 2.0), err
+    # a gap longer than the limit is predicted through and reported once, naming it
+    hole = np.r_[0:40, 60:len(t)]
+    tr = Tracker(sc, passages=4, sensors=["M1", "M2"], gap_limit_s=5.0)
+    r = tr.track(t[hole], y[:, hole])
+    assert [(g.passage, g.start_s, g.end_s) for g in r.gaps] == [(p, t[39], t[60]) for p in range(4)]
+    assert "predicted through" in str(r.gaps[0])
+    with pytest.raises(ValueError, match="time must increase: passage 0"):
+        tr.update(np.full(4, t[0]), y[:, 0])
+
+
+def test_a_bank_knocked_off_its_track_is_restarted_by_its_alarm(s2):
+    """The bank's hypotheses moved 30 m off with a covariance of centimetres: the innovations raise the
+    divergence alarm and a refit (also from the window's fits) brings the track back."""
+    sc, t, y, truth, res = s2
+    tr = Tracker(sc, passages=4, sensors=["M1", "M2"], refit_every=None, through_peak=None, collapse=None)
+    K = y.shape[1]
+    for k in range(K // 2):
+        tr.update(t[k], y[:, k])
+    assert np.all(tr.phase == 2)
+    tr.bank.belief.mean[:, 0] += 30.0
+    tr.bank.belief = type(tr.bank.belief).from_cov(tr.bank.belief.mean, np.broadcast_to(
+        np.eye(tr.model.n) * 1e-4, tr.bank.belief.chol.shape))
+    for k in range(K // 2, K):
+        s = tr.update(t[k], y[:, k])
+    assert np.all(tr.alarms >= 1)
+    err = np.hypot(*(s.estimate[:, :2] - truth[:, -1, :2]).T)
+    assert np.all(err < 1.0), err
+
+
+def test_robust_mode_with_outliers_and_dropouts_stays_consistent():
+    sc = load_scenario("S2").with_updates(noise={"model": "contaminated", "eps": 0.2, "outlier_scale": 10.0,
+                                                 "dropout": 0.3})
+    sim = simulate(sc, runs=4, seed=3, random=True)
+    tr = Tracker(sc, passages=4, sensors=["M1", "M2"])
+    assert tr.options.robust and tr.unit.name == "huber_ukf" and 1.9 < tr.kappa < 2.1
+    res = tr.track(sim.times, sim.measurements[..., :6])
+    truth = tr.model.state_from_truth(sim.truth)
+    err = np.hypot(*(res.estimates[:, -1, :2] - truth[:, -1, :2]).T)
+    assert np.all(err < 2.0), err
+    assert np.isfinite(res.covs).all() and np.all(np.linalg.eigvalsh(res.covs) > 0)
+    d = res.estimates[..., :2] - truth[..., :2]
+    q = np.einsum("pki,pkij,pkj->pk", d, np.linalg.inv(res.position_cov), d)
+    assert np.mean(q[res.status >= TRACKING] <= 5.991) >= 0.85
+    assert set(np.unique(res.status)) <= {INITIALISING, TRACKING, RESTARTED, INCONSISTENT}
