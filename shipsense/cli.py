@@ -100,42 +100,29 @@ def cmd_demo(args) -> int:
     from shipsense.config import load_scenario
     from shipsense.plotting import plot_simulation, plot_track
     from shipsense.simulator import simulate
-    from shipsense.tracking import track_passage
+    from shipsense.tracking import describe, track_to_files
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     sc = load_scenario("demo")
-    bar = _progress(4, "demo: simulate")
+    bar = _progress(3, "demo: simulate")
     sim = simulate(sc, runs=1)
     bar.update(1)
     bar.set_description("demo: track")
-    tr = track_passage(sc, sim.measurements[0])
+    summary = track_to_files(sc, sim.times, sim.measurements[0], out, truth=sim.truth[0])
     bar.update(1)
-    bar.set_description("demo: save")
+    bar.set_description("demo: save and plot")
     sim.save_npz(out / "passage.npz")
-    bar.update(1)
-    bar.set_description("demo: plot")
     plot_simulation(sim, out / "measurements.png")
-    plot_track(tr, sim.times, out / "demo.png", truth=sim.truth[0, tr.start:],
-               title=f"demo: {tr.filter} bank of {tr.bank.means.shape[1]} hypotheses, fused magnetic + "
-                     "electric + bearing")
+    plot_track(summary, sim.times, out / "demo.png", truth=sim.truth[0],
+               title="demo: the project's tracker, fused magnetic + electric + bearing (2-sigma ellipses)")
     bar.update(1)
     bar.close()
     _print_summary(sim)
-    bank = tr.bank
-    est = bank.selected_means[0]
-    truth = sim.truth[0, tr.start:]
-    err = np.hypot(est[:, 0] - truth[:, 0], est[:, 1] - truth[:, 1])
-    cov = bank.selected_pos_cov[0, -1]
-    print(f"tracking: {tr.filter} bank of {bank.means.shape[1]} hypotheses seeded from the first sample; "
-          f"selected hypothesis {bank.selected[0, -1]}")
-    print(f"  position error: final {err[-1]:.2f} m (2-sigma {2 * np.sqrt(cov[0, 0]):.2f} / "
-          f"{2 * np.sqrt(cov[1, 1]):.2f} m), mean {err.mean():.2f} m over {err.size} steps")
-    amb = bank.ambiguities(nats=tr.config.ambiguity_nats, distance=tr.config.ambiguity_distance)[0]
-    print("  ambiguity: " + ("none (no far-apart hypothesis is within "
-                              f"{tr.config.ambiguity_nats:g} nats)" if not amb else
-                              ", ".join(f"{i} vs {j}" for i, j, _, _ in amb)))
-    print(f"wrote {out / 'demo.png'} (tracks), {out / 'measurements.png'} (traces) and {out / 'passage.npz'}")
+    for line in describe(summary, "the simulated passage"):
+        print(line)
+    print(f"wrote {out / 'demo.png'} (track), {out / 'measurements.png'} (traces), {out / 'estimates.csv'}, "
+          f"{out / 'selection_log.csv'} and {out / 'passage.npz'}")
     return EXIT_OK
 
 
@@ -144,14 +131,12 @@ class _BadInput(Exception):
 
 
 def cmd_track(args) -> int:
-    import csv
-
     from shipsense.config import load_scenario
     from shipsense.plotting import plot_track
     from shipsense.recording import RecordingError, read_recording
     from shipsense.simulator import simulate
     from shipsense.trackers.filters import FILTER_NAMES
-    from shipsense.tracking import track_passage
+    from shipsense.tracking import describe, track_to_files
 
     sc = load_scenario(args.scenario)
     if args.filter is not None and args.filter not in FILTER_NAMES:
@@ -164,7 +149,7 @@ def cmd_track(args) -> int:
         except RecordingError as err:
             raise _BadInput(str(err)) from None
         missing = np.isnan(y).mean()
-        source = f"recording {args.data} ({y.shape[0]} steps, {100 * missing:.1f} % of samples missing)"
+        source = f"recording {args.data} ({y.shape[0]} samples, {100 * missing:.1f} % of values missing)"
     else:
         sim = simulate(sc, runs=1, seed=args.seed, random=args.random)
         times, y, truth = sim.times, sim.measurements[0], sim.truth[0]
@@ -172,52 +157,13 @@ def cmd_track(args) -> int:
         source = f"simulated {'random' if args.random else 'nominal'} passage of {sc.name} (seed {used_seed})"
     out.mkdir(parents=True, exist_ok=True)   # only once the input is known to be good
     try:
-        tr = track_passage(sc, y, args.filter, progress=True)
+        summary = track_to_files(sc, times, y, out, truth=truth, method=args.method, unit=args.filter,
+                                 progress=True)
     except ValueError as err:
         raise _BadInput(str(err)) from None
-    bank, k0 = tr.bank, tr.start
-    t = times[k0:]
-    est = bank.selected_means[0]
-    cov = bank.selected_pos_cov[0]
-    sel = bank.selected[0]
-    labels = list(tr.model.labels)
-    header = ["time", *labels, "std_x", "std_y", "selected"]
-    if truth is not None:
-        header += ["true_x", "true_y", "error_m"]
-    with open(out / "estimates.csv", "w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(header)
-        for k in range(t.size):
-            row = [f"{t[k]:.6g}", *(f"{v:.6g}" for v in est[k]), f"{np.sqrt(cov[k, 0, 0]):.4g}",
-                   f"{np.sqrt(cov[k, 1, 1]):.4g}", int(sel[k])]
-            if truth is not None:
-                tx, ty = truth[k0 + k, 0], truth[k0 + k, 1]                  # STATE_LABELS: x, y first
-                row += [f"{tx:.6g}", f"{ty:.6g}", f"{np.hypot(est[k, 0] - tx, est[k, 1] - ty):.4g}"]
-            w.writerow(row)
-    cum = bank.cum_loglik[0]
-    amb_all = [bank.ambiguities(step=k, nats=tr.config.ambiguity_nats, distance=tr.config.ambiguity_distance)[0]
-               for k in range(t.size)]
-    with open(out / "selection_log.csv", "w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(["time", "selected", "cum_loglik", "gap_to_second_nats", "ambiguous_pairs"])
-        for k in range(t.size):
-            ranked = np.sort(cum[:, k])[::-1]
-            gap = ranked[0] - ranked[1] if ranked.size > 1 else np.inf
-            pairs = ";".join(f"{i}-{j}" for i, j, _, _ in amb_all[k])
-            w.writerow([f"{t[k]:.6g}", int(sel[k]), f"{ranked[0]:.6g}", f"{gap:.4g}", pairs])
-    plot_track(tr, times, out / "track.png", truth=None if truth is None else truth[k0:],
-               title=f"{sc.name}: {tr.filter} bank of {bank.means.shape[1]} hypotheses")
-    final = est[-1]
-    print(f"tracked {source} with a {tr.filter} bank of {bank.means.shape[1]} hypotheses")
-    print(f"  selected hypothesis {sel[-1]}; final estimate x = {final[0]:.1f} m, y = {final[1]:.1f} m, "
-          f"v = ({final[2]:.2f}, {final[3]:.2f}) m/s, 2-sigma {2 * np.sqrt(cov[-1, 0, 0]):.1f} / "
-          f"{2 * np.sqrt(cov[-1, 1, 1]):.1f} m")
-    if truth is not None:
-        err = np.hypot(est[:, 0] - truth[k0:, 0], est[:, 1] - truth[k0:, 1])
-        print(f"  position error: final {err[-1]:.2f} m, mean {err.mean():.2f} m")
-    if amb_all[-1]:
-        print("  AMBIGUOUS: near-tied hypotheses far apart at the end: "
-              + ", ".join(f"{i} and {j} ({d:.0f} m apart, {dn:.2f} nats)" for i, j, dn, d in amb_all[-1]))
+    plot_track(summary, times, out / "track.png", truth=truth, title=f"{sc.name}: {args.method} (2-sigma ellipses)")
+    for line in describe(summary, source):
+        print(line)
     print(f"wrote {out / 'estimates.csv'}, {out / 'selection_log.csv'} and {out / 'track.png'}")
     return EXIT_OK
 
@@ -292,8 +238,8 @@ def cmd_design(args) -> int:
     from shipsense.design.placement import CRITERIA, build_problem, grid_candidates, place, place_with_cuts
     from shipsense.plotting import plot_design
     from shipsense.simulator import sample_passages
+    from shipsense.trackers.bank import study_bank
     from shipsense.trackers.models import candidate_model
-    from shipsense.tracking import scenario_tracker
 
     sc = load_scenario(args.scenario)
     if args.criterion not in CRITERIA:
@@ -316,7 +262,7 @@ def cmd_design(args) -> int:
     truth = sample_passages(sc, args.passages if sc.prior is not None else 1, seed=args.seed,
                             random=sc.prior is not None)
     thetas = model.to_internal(model.state_from_truth(truth))
-    _, b = scenario_tracker(sc)
+    _, b = study_bank(sc)
     std = {"x": b.position_std, "y": b.position_std, "vx": b.velocity_std, "vy": b.velocity_std,
            "mx": b.moment_std, "my": b.moment_std, "mz": b.moment_std, "z": b.z_std, "p": b.p_std}
     prior_std = model.to_internal(np.array([std[c] for c in model.labels]))
@@ -477,10 +423,13 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("--plot", default=None, help="write a picture of the array, passages and traces to FILE.png")
     m.set_defaults(func=cmd_simulate)
 
-    t = sub.add_parser("track", help="track a simulated passage, or a recorded one (--data), with the bank")
+    t = sub.add_parser("track", help="track a simulated passage, or a recorded one (--data)")
     t.add_argument("scenario", help="a shipped scenario name or a TOML file (the array, medium and tracker)")
     t.add_argument("--data", default=None, help="recorded long-format CSV: time,sensor,channel,value (SI units)")
-    t.add_argument("--filter", default=None, help="filter unit (default: the scenario's)")
+    t.add_argument("--method", choices=["tracker", "bank"], default="tracker",
+                   help="tracker: the project's tracker (default); bank: the source studies' bank")
+    t.add_argument("--filter", default=None,
+                   help="filter unit (default: ukf for the tracker, huber_ukf when robust; the bank: the scenario's)")
     t.add_argument("--out", default="shipsense-track", help="output directory (default: %(default)s)")
     t.add_argument("--seed", type=int, default=None, help="seed of the simulated passage")
     t.add_argument("--random", action="store_true", help="simulate a random passage from the [prior]")

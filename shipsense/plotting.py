@@ -88,27 +88,32 @@ def _ellipse(ax, mean, cov, color, nsig=2.0):
     ax.plot(pts[0], pts[1], "-", color=color, lw=0.8, alpha=0.8)
 
 
-def plot_track(track, times, path, truth=None, title=None, ellipses=8):
-    """Array, truth (if known), every hypothesis, and the selected track with 2-sigma ellipses, to a PNG."""
-    bank = track.bank
+def plot_track(summary, times, path, truth=None, title=None, ellipses=8):
+    """A tracked passage (:class:`~shipsense.tracking.TrackSummary`) to a PNG: the array, the truth (if known)
+    and the estimated track with 2-sigma ellipses, coloured by status; and over time the position error
+    against the reported 2-sigma (or the 2-sigma alone)."""
+    from shipsense.trackers.tracker import INITIALISING, STATUSES
+
+    pl = summary.plot
+    k, est, cov, status = pl["k"], pl["estimate"], pl["cov"][:, :2, :2], pl["status"]
+    t = np.asarray(times)[k]
+    tracked = status > INITIALISING
     fig, ax = plt.subplots(1, 2, figsize=(14, 6.5), layout="constrained", width_ratios=[1.3, 1])
     a = ax[0]
-    H = bank.means.shape[1]
-    sel = bank.selected[0, -1]
-    for h in range(H):
-        xy = bank.means[0, h, :, :2]
-        a.plot(xy[:, 0], xy[:, 1], "-", lw=0.7, color="0.6", alpha=0.8,
-               label="hypotheses" if h == 0 else None)
-        a.plot(*bank.seeds[0, h, :2], "x", color="0.4", ms=5)
     if truth is not None:
         a.plot(truth[:, 0], truth[:, 1], "-", color="tab:red", lw=2, label="truth")
-    est = bank.selected_means[0]
-    cov = bank.selected_pos_cov[0]
-    a.plot(est[:, 0], est[:, 1], "-", color="tab:blue", lw=1.8, label=f"selected (hyp. {sel})")
-    for k in np.linspace(0, est.shape[0] - 1, ellipses).astype(int):
-        _ellipse(a, est[k, :2], cov[k], "tab:blue")
-    draw_array(a, track.model.array)
-    span = np.concatenate([est[:, :2], truth[:, :2]] if truth is not None else [est[:, :2]])
+    a.plot(est[tracked, 0], est[tracked, 1], "-", color="tab:blue", lw=1.6, label="estimate (tracking)")
+    colours = {2: "tab:blue", 3: "tab:green", 4: "tab:orange"}
+    for code, colour in colours.items():
+        at = status == code
+        if at.any() and code != 2:
+            a.plot(est[at, 0], est[at, 1], "o", ms=4, color=colour, label=STATUSES[code])
+    shown = np.flatnonzero(tracked)
+    for i in shown[np.linspace(0, shown.size - 1, min(ellipses, shown.size)).astype(int)] if shown.size else []:
+        _ellipse(a, est[i, :2], cov[i], colours.get(int(status[i]), "tab:blue"))
+    draw_array(a, summary.tracker.model.array)
+    span = np.concatenate([est[tracked, :2], summary.tracker.model.array.positions[:, :2]]
+                          + ([truth[:, :2]] if truth is not None else []))
     lo, hi = span.min(axis=0), span.max(axis=0)
     pad = 0.15 * max(hi - lo) + 20
     a.set_xlim(lo[0] - pad, hi[0] + pad)
@@ -118,17 +123,23 @@ def plot_track(track, times, path, truth=None, title=None, ellipses=8):
     a.set_ylabel("y north [m]")
     a.grid(alpha=0.3)
     a.legend(fontsize=8, loc="best")
-    a.set_title(title or f"{track.filter} bank, {H} hypotheses (2-sigma ellipses)")
+    a.set_title(title or "tracked passage (2-sigma ellipses)")
     b = ax[1]
-    t = times[track.start:]
-    norm = bank.normalised_loglik[0]
-    for h in range(H):
-        b.plot(t, np.maximum(norm[h], -1e4), lw=1.5 if h == sel else 0.8, label=f"{h}" if h == sel else None)
-    b.set_yscale("symlog", linthresh=1.0)
+    two_sigma = 2 * np.sqrt(np.maximum(np.linalg.eigvalsh(cov)[:, -1], 0.0))
+    b.plot(t[tracked], two_sigma[tracked], "-", color="tab:blue", label="reported 2-sigma (major axis)")
+    if truth is not None:
+        err = np.hypot(*(est[:, :2] - truth[k, :2]).T)
+        b.plot(t[tracked], err[tracked], "-", color="tab:red", lw=1, label="position error")
+    for code, colour in ((1, "0.8"), (4, "tab:orange")):
+        if np.any(status == code):
+            b.fill_between(t, 0, 1, where=status == code, step="mid", transform=b.get_xaxis_transform(),
+                           color=colour, alpha=0.3, lw=0, label=STATUSES[code])
+    b.set_yscale("log")
     b.set_xlabel("time [s]")
-    b.set_ylabel("cumulative log-likelihood - best [nats]")
-    b.grid(alpha=0.3)
-    b.set_title("hypothesis likelihoods (selected: thick)")
+    b.set_ylabel("m")
+    b.grid(alpha=0.3, which="both")
+    b.legend(fontsize=8)
+    b.set_title("error against the reported uncertainty")
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path

@@ -44,7 +44,7 @@ def evaluate_layout(scenario, passages=50, seed=HELD_OUT_SEED, filter_name=None,
     """Evaluate a scenario's array with its tracker on ``passages`` random passages from its prior."""
     from shipsense.config import load_scenario
     from shipsense.simulator import simulate
-    from shipsense.tracking import scenario_tracker
+    from shipsense.trackers.bank import study_bank
 
     sc = load_scenario(scenario)
     if sc.prior is None:
@@ -52,7 +52,7 @@ def evaluate_layout(scenario, passages=50, seed=HELD_OUT_SEED, filter_name=None,
     model = model_from_scenario(sc)
     sim = simulate(sc, runs=passages, seed=seed, random=True)
     truth = model.state_from_truth(sim.truth)
-    unit, bank_cfg = scenario_tracker(sc, filter_name)
+    unit, bank_cfg = study_bank(sc, filter_name)
     seeds, P0 = seed_hypotheses(model, sim.measurements[:, 0], bank_cfg)
     bank = run_bank(unit, model, sim.measurements, seeds, P0, prune_nats=bank_cfg.prune_nats)
     est = bank.selected_means

@@ -56,11 +56,10 @@ from shipsense.design.fisher import passage_fim
 from shipsense.design.observability import check_array
 from shipsense.design.placement import grid_candidates
 from shipsense.simulator import keel_dipole, sample_passages, simulate
-from shipsense.trackers.bank import run_bank
+from shipsense.trackers.bank import run_bank, study_bank
 from shipsense.trackers.metrics import convergence_rate, trmse
 from shipsense.trackers.models import candidate_model, subset_model
 from shipsense.trackers.seeding import seed_hypotheses
-from shipsense.tracking import scenario_tracker
 
 
 class ArrayDesignEnv(gym.Env):
@@ -130,7 +129,7 @@ class ArrayDesignEnv(gym.Env):
         model = subset_model(self.model, self.chosen)
         # measurements of the chosen sensors: the template's channels at the chosen positions
         meas = simulate_layout(sc, self.candidates[self.chosen], self._sim)
-        unit, cfg = scenario_tracker(sc)
+        unit, cfg = study_bank(sc)
         seeds, P0 = seed_hypotheses(model, meas[:, 0], cfg)
         bank = run_bank(unit, model, meas, seeds, P0)
         est = bank.selected_means

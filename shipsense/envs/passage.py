@@ -62,10 +62,9 @@ from gymnasium.vector.utils import batch_space
 
 from shipsense.config import load_scenario
 from shipsense.simulator import simulate
-from shipsense.trackers.bank import BankState
+from shipsense.trackers.bank import BankState, study_bank
 from shipsense.trackers.models import model_from_scenario
 from shipsense.trackers.seeding import seed_hypotheses
-from shipsense.tracking import scenario_tracker
 
 SEED_HIGH = 2**31 - 1
 PASSAGE_BLOCK = 16
@@ -84,7 +83,7 @@ class PassageCore:
             raise ValueError(f"scenario {sc.name!r} has no [prior]: Passage-v0 draws passages from it")
         self.scenario = sc
         self.model = model_from_scenario(sc)
-        self.unit, self.bank_cfg = scenario_tracker(sc, filter)
+        self.unit, self.bank_cfg = study_bank(sc, filter)
         arr = self.model.array
         self.S = len(arr.ids)
         self.H = len(self.bank_cfg.levels) * len(self.bank_cfg.bearings_deg)

@@ -58,11 +58,10 @@ import numpy as np
 from shipsense.config import BankConfig, load_scenario
 from shipsense.reproduce.common import Output, Stages, refit_stage, track_global, track_restarting
 from shipsense.simulator import simulate
-from shipsense.trackers.bank import run_bank
+from shipsense.trackers.bank import run_bank, study_bank
 from shipsense.trackers.metrics import converged_until, passage_ends
 from shipsense.trackers.models import model_from_scenario
 from shipsense.trackers.seeding import seed_hypotheses
-from shipsense.tracking import scenario_tracker
 
 PERIOD, STEPS = 0.5, 330
 SIGMA_A = 0.02
@@ -143,7 +142,7 @@ def position_bounds(model, truth, P0):
 def family_passages(name, passages, seed):
     """A family's scenario, model, filter unit, and ``passages`` random passages: y (SI), truth and ends."""
     sc, model = family_scenario(name)
-    unit, _ = scenario_tracker(sc)
+    unit, _ = study_bank(sc)
     sim = simulate(sc, runs=passages, seed=seed, random=True)
     y = sim.measurements[..., np.isin([c[0] for c in sim.channels], model.array.ids)]
     truth = model.state_from_truth(sim.truth)

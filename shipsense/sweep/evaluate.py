@@ -89,7 +89,7 @@ def _chunk(task):
     sim = simulate(sc, runs=task.passages, seed=task.seed, random=True)
     y, truth = sim.measurements, model.state_from_truth(sim.truth)
     t0 = time.perf_counter()
-    est, pos_cov = track_passages(task.method, sc, model, y)
+    est, pos_cov = track_passages(task.method, sc, sim.times, y)
     seconds = (time.perf_counter() - t0) / task.passages
     ends = passage_ends(truth, model.array.positions[:, :2].mean(axis=0), sc.period)
     conv, err, valid = converged_until(est, truth, ends)
@@ -125,9 +125,9 @@ def crlb_position_trace(sc, model, truth):
     """Trace (R, K) of the position block of each passage's constant-velocity CRLB, m², with the prior
     information of the tracker's bank (its initial standard deviations)."""
     from shipsense.design.fisher import pcrlb
-    from shipsense.tracking import scenario_tracker
+    from shipsense.trackers.bank import study_bank
 
-    _, bank = scenario_tracker(sc)
+    _, bank = study_bank(sc)
     std = {"x": bank.position_std, "y": bank.position_std, "vx": bank.velocity_std, "vy": bank.velocity_std,
            "mx": bank.moment_std, "my": bank.moment_std, "mz": bank.moment_std, "z": bank.z_std, "p": bank.p_std}
     J0 = np.diag((np.array([std[c] for c in model.labels]) / model.x_scale) ** -2.0)
@@ -135,40 +135,11 @@ def crlb_position_trace(sc, model, truth):
     return b[..., 0, 0] * model.x_scale[0] ** 2 + b[..., 1, 1] * model.x_scale[1] ** 2
 
 
-def _init_options(model, sc):
-    # The wide study's measured initialiser settings per sensor family (EXPERIMENTS.md), until the public
-    # tracker of issue 16 chooses its own.
-    types = set(model.array.types)
-    if "electrode" in types:
-        from shipsense.tracking import scenario_tracker
+def track_passages(method, sc, times, y):
+    """Estimates (R, K, n) and position covariances (R, K, 2, 2), SI, of passages ``y`` (R, K, m):
+    :class:`~shipsense.trackers.Tracker` with ``method`` (``tracker``: the project's tracker; ``bank``: the
+    studies' bank)."""
+    from shipsense.trackers import Tracker
 
-        return {"snr_start": 50.0, "refine": (10, 30, 60), "z_std": scenario_tracker(sc)[1].z_std}
-    if len(model.array.ids) == 1:
-        return {"snr_start": 400.0, "refine": (20, 60), "explore_samples": 15}
-    return {"snr_start": 5.0, "refine": (5, 20)}
-
-
-def track_passages(method, sc, model, y):
-    """Estimates (R, K, n) and position covariances (R, K, 2, 2), SI, of passages ``y`` (R, K, m).
-
-    ``tracker``: the project's tracker (global initialiser, a bank without process noise restarted from batch
-    refits); ``bank``: the studies' multiple-initial-value bank seeded from the first sample.
-    """
-    from shipsense.trackers.initialiser import depth_prior, global_init
-    from shipsense.trackers.seeding import seed_hypotheses
-    from shipsense.trackers.studies import track_with_restarts
-    from shipsense.tracking import scenario_tracker
-
-    unit, bank_cfg = scenario_tracker(sc)
-    if method == "bank":
-        from shipsense.trackers.bank import run_bank
-
-        seeds, P0 = seed_hypotheses(model, y[:, 0], bank_cfg)
-        bank = run_bank(unit, model, y, seeds, P0, prune_nats=bank_cfg.prune_nats)
-        return bank.selected_means, bank.selected_pos_cov
-    still = model.without_process_noise()
-    opts = _init_options(model, sc)
-    grid = {"ranges": np.geomspace(20.0, 1.2 * sc.prior.range[1], 8), "speeds": np.linspace(*sc.prior.speed, 3)}
-    gi = global_init(still, y, **grid, **opts)
-    est, cov, _ = track_with_restarts(unit, still, y, gi, prior=depth_prior(still, opts.get("z_std")))
-    return est, cov
+    res = Tracker(sc, passages=len(y), method=method).track(times, y)
+    return res.estimates, res.position_cov

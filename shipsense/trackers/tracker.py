@@ -141,7 +141,8 @@ class Sample:
 
     ``estimate`` (P, n), ``cov`` (P, n, n), ``status`` (P,) (codes of :data:`STATUSES`), ``gap_nats`` (P,)
     (log-likelihood of the selected hypothesis over the runner-up; inf with one), ``ambiguous`` (P,)
-    (hypotheses far apart within ``report_nats``), ``hypotheses`` (P,) (with weight).
+    (hypotheses far apart within ``report_nats``), ``hypotheses`` (P,) (with weight), ``selected`` (P,) (the
+    selected hypothesis of the bank, -1 before there is one).
     """
 
     estimate: np.ndarray
@@ -150,6 +151,7 @@ class Sample:
     gap_nats: np.ndarray
     ambiguous: np.ndarray
     hypotheses: np.ndarray
+    selected: np.ndarray
 
 
 @dataclass
@@ -203,8 +205,8 @@ class Tracker:
 
     def __init__(self, scenario, *, passages=1, sensors=None, **options):
         from shipsense.config import load_scenario
+        from shipsense.trackers.bank import study_bank
         from shipsense.trackers.models import model_from_scenario
-        from shipsense.tracking import scenario_tracker
 
         self.scenario = sc = load_scenario(scenario)
         opts = TrackerOptions(**options)
@@ -218,7 +220,7 @@ class Tracker:
             opts = replace(opts, gap_limit_s=float(gap))
         fam = family_options(model, sc)
         opts = replace(opts, **{k: v for k, v in fam.items() if getattr(opts, k) is None})
-        study_unit, self.bank_config = scenario_tracker(sc, opts.unit if opts.method == "bank" else None)
+        study_unit, self.bank_config = study_bank(sc, opts.unit if opts.method == "bank" else None)
         if opts.method == "bank":
             self.unit, self.model = study_unit, model
         else:
@@ -361,7 +363,7 @@ class Tracker:
         mean, cov = self._prior
         return Sample(np.repeat(mean[None], P, axis=0), np.repeat(cov[None], P, axis=0),
                       np.full(P, NO_DATA, dtype=np.int8), np.full(P, np.inf), np.zeros(P, dtype=bool),
-                      np.zeros(P, dtype=np.int16))
+                      np.zeros(P, dtype=np.int16), np.full(P, -1, dtype=np.int16))
 
     def _step(self, runs, yi, dt, out):
         """Predict (time steps ``dt``) and update the banks of passages ``runs``; write their output."""
@@ -409,6 +411,7 @@ class Tracker:
         far = np.einsum("rijk,rijk->rij", d, d) > o.report_distance_m ** 2
         out.ambiguous[runs] = np.any(far & live[:, :, None] & live[:, None, :], axis=(1, 2))
         out.hypotheses[runs] = np.isfinite(cum).sum(axis=1)
+        out.selected[runs] = np.argmax(cum, axis=1)
 
     def _seed_bank(self, fresh, y, out):
         """The studies' bank: seed passages ``fresh`` from this sample (their first with a field value) and
