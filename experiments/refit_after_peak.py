@@ -52,10 +52,10 @@ def main(argv=None):
                                  prior=depth_prior(model, opts.get("z_std"))).start
     else:
         t0 = time.perf_counter()
-        est2, cov2, _, restarts, gi = track_restarting(unit, model, y, sc, return_init=True, **opts)
+        est2, cov2, _, restarts, tr = track_restarting(unit, model, y, sc, **opts)
         print(f"tracker: {(time.perf_counter() - t0) / args.runs:.4f} s per passage, "
               f"restarts per passage {np.bincount(restarts)} (count of passages with 0, 1, ...)")
-        start = peak_refit_sample(model, y, gi.k0, gi.start, wide.REFIT_PEAK)
+        start = peak_refit_sample(model, y, tr.k0, tr.k0 + tr.window, wide.REFIT_PEAK)
     conv, err, valid = wide.converged(est2, truth, ends)
     k = np.arange(y.shape[1])[None, :]
     second = valid & (k >= (ends // 2)[:, None]) & conv[:, None]

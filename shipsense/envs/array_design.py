@@ -4,10 +4,10 @@
 
 One episode places ``k`` copies of the scenario's first sensor on a grid of
 candidate positions.  When the k-th sensor is placed, the finished layout is
-judged by the tracker itself: the scenario's bank tracks a fixed batch of
-passages drawn from the prior (the same batch every episode, so rewards are
-comparable), and the reward is its convergence rate minus its mean TRMSE /
-100 m.  Optionally each placement is shaped by its information gain (the
+judged by the tracker itself: the project's tracker (``observer="bank"``:
+the scenario's bank) tracks a fixed batch of passages drawn from the prior
+(the same batch every episode, so rewards are comparable), and the reward is
+its convergence rate minus its mean TRMSE / 100 m.  Optionally each placement is shaped by its information gain (the
 increase of the prior-averaged log det of the Fisher information).  The
 ambiguity verdict of the finished layout is in ``info``.
 
@@ -38,11 +38,14 @@ Terminated after k valid placements.
 
 ``scenario``, ``k`` (3), ``half_width`` (m, 30), ``spacing`` (m, 7.5),
 ``passages`` (8), ``shaping`` (0.0), ``continuous`` (False), ``seed_passages``
-(10000), ``check_ambiguity`` (True), ``render_mode``.  All JSON-able.
+(10000), ``check_ambiguity`` (True), ``observer`` (``"tracker"`` or
+``"bank"``), ``render_mode``.  All JSON-able.
 
 ## Version history
 
-* v0: initial version.
+* v0 (revised with the one-tracker change): layouts are judged with the
+  project's tracker; ``observer="bank"`` keeps the first version's judge.
+* v0 (first version): the scenario's bank as the judge.
 """
 
 from __future__ import annotations
@@ -56,10 +59,9 @@ from shipsense.design.fisher import passage_fim
 from shipsense.design.observability import check_array
 from shipsense.design.placement import grid_candidates
 from shipsense.simulator import keel_dipole, sample_passages, simulate
-from shipsense.trackers.bank import run_bank, study_bank
+from shipsense.trackers import Tracker
 from shipsense.trackers.metrics import convergence_rate, trmse
 from shipsense.trackers.models import candidate_model, subset_model
-from shipsense.trackers.seeding import seed_hypotheses
 
 
 class ArrayDesignEnv(gym.Env):
@@ -67,12 +69,15 @@ class ArrayDesignEnv(gym.Env):
     metadata = {"render_modes": ["rgb_array"], "render_fps": 2}
 
     def __init__(self, scenario="S1-P2", k=3, half_width=30.0, spacing=7.5, passages=8, shaping=0.0,
-                 continuous=False, seed_passages=10_000, check_ambiguity=True, render_mode=None):
+                 continuous=False, seed_passages=10_000, check_ambiguity=True, render_mode=None, observer="tracker"):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
         sc = load_scenario(scenario)
         if sc.prior is None:
             raise ValueError(f"scenario {sc.name!r} has no [prior]: the layout is judged on passages from it")
+        if observer not in ("tracker", "bank"):
+            raise ValueError(f"observer must be 'tracker' or 'bank', got {observer!r}")
+        self.observer = observer
         self.scenario = sc
         self.k = int(k)
         z = sc.sensors[0].position[2]
@@ -101,7 +106,7 @@ class ArrayDesignEnv(gym.Env):
         self.render_mode = render_mode
         self._kwargs = dict(scenario=scenario, k=k, half_width=half_width, spacing=spacing, passages=passages,
                             shaping=shaping, continuous=continuous, seed_passages=seed_passages,
-                            check_ambiguity=check_ambiguity, render_mode=render_mode)
+                            check_ambiguity=check_ambiguity, render_mode=render_mode, observer=observer)
         self.chosen = []
 
     # -- helpers -----------------------------------------------------------------
@@ -124,15 +129,16 @@ class ArrayDesignEnv(gym.Env):
         return float(np.linalg.slogdet(M)[1].mean())
 
     def _judge(self):
-        """Track the fixed passages with the finished layout's bank."""
+        """Track the fixed passages with the finished layout (the observer: the project's tracker or the bank)."""
         sc = self.scenario
         model = subset_model(self.model, self.chosen)
         # measurements of the chosen sensors: the template's channels at the chosen positions
         meas = simulate_layout(sc, self.candidates[self.chosen], self._sim)
-        unit, cfg = study_bank(sc)
-        seeds, P0 = seed_hypotheses(model, meas[:, 0], cfg)
-        bank = run_bank(unit, model, meas, seeds, P0)
-        est = bank.selected_means
+        template = sc.sensors[0]
+        layout = sc.model_copy(update={"sensors": [
+            template.model_copy(update={"id": f"C{i}", "position": tuple(map(float, self.candidates[i]))})
+            for i in self.chosen]})
+        est = Tracker(layout, passages=len(meas), method=self.observer).track(self._sim.times, meas).estimates
         conv = convergence_rate(est, self._truth)
         err = float(trmse(est, self._truth).mean())
         info = {"convergence_rate": conv, "trmse_m": err, "layout": self.candidates[self.chosen].tolist()}

@@ -3,11 +3,13 @@
 ## Description
 
 One episode is one ship passage drawn from the scenario's prior past its
-array.  A multiple-initial-value bank (the scenario's ``[tracker.bank]``)
-runs inside the environment as the observer: it is seeded from the first
-sample of every sensor (the detection), and from then on the agent chooses at
-every step which sensors to read.  Reading costs energy, which is what limits
-seabed nodes.  The agent sees the tracker's output, never the truth.
+array.  The project's tracker (:class:`shipsense.trackers.Tracker`) runs
+inside the environment as the observer (``observer="bank"``: the studies'
+multiple-initial-value bank instead): it sees every sensor's first sample,
+and from then on the agent chooses at every step which sensors to read.
+Reading costs energy, which is what limits seabed nodes.  The agent sees the
+tracker's output (its estimate, covariance, hypotheses and status), never the
+truth.
 
 ## Action space
 
@@ -18,15 +20,17 @@ and the rest dropped; ``info["trimmed"]`` counts the dropped ones.
 
 ## Observation space
 
-``Box(-1, 1, (7 + H + S,), float32)``, all finite and clipped:
+``Box(-1, 1, (8 + H + S,), float32)``, all finite and clipped (H: the
+observer's hypotheses, 5 for the tracker):
 
 | index | content |
 | --- | --- |
 | 0-1 | selected estimate's position relative to the array centroid / ``position_scale`` |
 | 2-3 | its velocity / 10 m/s |
-| 4-5 | ``(log10(std_x), log10(std_y)) / 3`` of its position |
+| 4-5 | ``(log10(std_x), log10(std_y)) / 3`` of its position (the tracker's covariance) |
 | 6 .. 6+H-1 | the hypotheses' normalised log-likelihoods / 50, in [-1, 0] |
 | 6+H .. 6+H+S-1 | per sensor: ``log10(1 + SNR) / 5`` of its strongest channel if read this step, else 0 |
+| 6+H+S | the tracker's status / 4 (0 no data, 0.25 initialising, 0.5 tracking, 0.75 restarted, 1 inconsistent) |
 | last | elapsed fraction of the passage |
 
 ## Rewards
@@ -43,13 +47,20 @@ adds one (none is registered).
 ## Arguments
 
 ``scenario`` (shipped name or TOML path), ``overrides`` (dict of top-level
-scenario fields, e.g. ``{"steps": 60}``), ``filter`` (filter unit name),
-``max_reads`` (default: all sensors), ``energy_cost`` (0.01 per read),
-``error_scale`` (10 m), ``render_mode`` (``"rgb_array"``).  All JSON-able.
+scenario fields, e.g. ``{"steps": 60}``), ``observer`` (``"tracker"``, the
+default, or ``"bank"``), ``filter`` (filter unit name; default the tracker's,
+or the scenario's for the bank), ``max_reads`` (default: all sensors),
+``energy_cost`` (0.01 per read), ``error_scale`` (10 m), ``render_mode``
+(``"rgb_array"``).  All JSON-able.
 
 ## Version history
 
-* v0: initial version.
+* v0 (revised with the one-tracker change): the observer is the project's
+  tracker, its covariance and status in the observation (width ``8 + H + S``).
+  ``observer="bank"`` keeps the first version's observer (the studies' bank,
+  seeded from the first sample), with the status entry added.  Results from
+  the first version are comparable only with ``observer="bank"``.
+* v0 (first version): the studies' bank as the observer.
 """
 
 from __future__ import annotations
@@ -62,9 +73,7 @@ from gymnasium.vector.utils import batch_space
 
 from shipsense.config import load_scenario
 from shipsense.simulator import simulate
-from shipsense.trackers.bank import BankState, study_bank
-from shipsense.trackers.models import model_from_scenario
-from shipsense.trackers.seeding import seed_hypotheses
+from shipsense.trackers import Tracker
 
 SEED_HIGH = 2**31 - 1
 PASSAGE_BLOCK = 16
@@ -75,18 +84,20 @@ class PassageCore:
     """The environment's state and dynamics for E environments at once (E = 1 for :class:`PassageEnv`)."""
 
     def __init__(self, num_envs=1, scenario="S2", overrides=None, filter=None, max_reads=None, energy_cost=0.01,
-                 error_scale=10.0):
+                 error_scale=10.0, observer="tracker"):
         sc = load_scenario(scenario)
         if overrides:
             sc = sc.with_updates(**overrides)
         if sc.prior is None:
             raise ValueError(f"scenario {sc.name!r} has no [prior]: Passage-v0 draws passages from it")
+        if observer not in ("tracker", "bank"):
+            raise ValueError(f"observer must be 'tracker' or 'bank', got {observer!r}")
         self.scenario = sc
-        self.model = model_from_scenario(sc)
-        self.unit, self.bank_cfg = study_bank(sc, filter)
+        self.tracker = Tracker(sc, passages=int(num_envs), method=observer, unit=filter)
+        self.model = self.tracker.model
         arr = self.model.array
         self.S = len(arr.ids)
-        self.H = len(self.bank_cfg.levels) * len(self.bank_cfg.bearings_deg)
+        self.H = self.tracker._H
         self.max_reads = self.S if max_reads is None else int(max_reads)
         if not 1 <= self.max_reads <= self.S:
             raise ValueError(f"max_reads must be between 1 and {self.S}, got {max_reads}")
@@ -99,15 +110,15 @@ class PassageCore:
         self.sensor_of = arr.channel_sensor
         self.first_channel = np.flatnonzero(np.diff(np.concatenate([[-1], self.sensor_of])))   # channels by sensor
         self.std = sc.channel_std
-        self.obs_dim = 7 + self.H + self.S
+        self.obs_dim = 8 + self.H + self.S
         self.y = np.zeros((self.E, self.K, self.model.m))
         self.truth = np.zeros((self.E, self.K, self.model.n))
         self._snr_obs = np.zeros((self.E, self.K, self.S))
         self._env_index = np.arange(self.E)
-        self._row_base = self._env_index * self.H
         self.k = np.zeros(self.E, dtype=int)
         self.last_read = np.zeros((self.E, self.S), dtype=bool)
-        self.bank = None
+        self.times = sc.times
+        self.last = self.tracker._prior_sample()    # the observer's latest output per environment
         self._passages = {}   # environment -> passages simulated ahead (measurements, truth)
 
     # -- episodes ---------------------------------------------------------------
@@ -122,7 +133,6 @@ class PassageCore:
         the sequence of passages depends only on the seeds.
         """
         envs = np.asarray(envs, dtype=int)
-        seeds_, P0 = [], None
         for e, s in zip(envs, seeds):  # each environment draws from its own reproducible stream
             queue = self._passages.setdefault(int(e), [])
             if fresh:
@@ -132,14 +142,9 @@ class PassageCore:
                 queue.extend(zip(sim.measurements, self.model.state_from_truth(sim.truth)))
             self.y[e], self.truth[e] = queue.pop(0)
             self._snr_obs[e] = self._snr_feature(self.y[e])
-            x0, P0 = seed_hypotheses(self.model, self.y[e][None, 0], self.bank_cfg)
-            seeds_.append(x0[0])
-        seeds_ = np.array(seeds_)
-        if self.bank is None:   # the first reset creates the bank; later ones re-seed its runs
-            self.bank = BankState(self.unit, self.model, np.zeros((self.E, self.H, self.model.n)), P0)
-        self.bank.reset_runs(envs, seeds_, P0)
-        # the detection: every sensor's first sample updates the reset environments' banks
-        self.bank.step(self.y[:, 0], predict=False, runs=envs)
+        self.tracker.reset_passages(envs)
+        # the detection: every sensor's first sample goes to the reset environments' observer
+        self._record(self.tracker.update(self.times[0], self.y[envs, 0], passages=envs), envs)
         self.k[envs] = 0
         self.last_read[envs] = True
         return self._observe()[envs]
@@ -165,19 +170,21 @@ class PassageCore:
             self.k += 1
         else:
             self.k[np.asarray(envs, dtype=int)] += 1
-        y = self.y[self._env_index, self.k]
-        mask = read[:, self.sensor_of]
-        self.bank.step(y, mask, runs=None if envs is None or len(envs) == self.E else envs)
+        who = self._env_index if envs is None else np.asarray(envs, dtype=int)
+        y = np.where(read[:, self.sensor_of], self.y[self._env_index, self.k], np.nan)[who]
+        self._record(self.tracker.update(self.times[self.k[who]], y, passages=who), who)
         if envs is None:
             self.last_read[:] = read
         else:
             self.last_read[envs] = read[envs]
         return self._rewards(read, trimmed)
 
+    def _record(self, sample, envs):
+        for name in ("estimate", "cov", "status", "selected"):
+            getattr(self.last, name)[envs] = getattr(sample, name)
+
     def _selected(self):
-        sel = self.bank.selected()
-        rows = self._row_base + sel
-        return sel, self.bank.means(rows), self.bank.position_cov(rows)
+        return self.last.selected, self.last.estimate, self.last.cov[:, :2, :2]
 
     def _rewards(self, read, trimmed):
         self._cache = sel, est, cov = self._selected()
@@ -206,10 +213,12 @@ class PassageCore:
         var[:, 0], var[:, 1] = cov[:, 0, 0], cov[:, 1, 1]
         np.log10(np.maximum(var, 1e-12, out=var), out=var)
         var /= 6.0                                                   # log10(std) / 3
-        cum = self.bank.cum
-        np.subtract(cum, cum.max(axis=1, keepdims=True), out=obs[:, 6:6 + self.H])
+        cum = self.tracker.bank.cum
+        with np.errstate(invalid="ignore"):
+            np.subtract(cum, cum.max(axis=1, keepdims=True), out=obs[:, 6:6 + self.H])
         obs[:, 6:6 + self.H] /= 50.0
-        np.multiply(self._snr_obs[self._env_index, self.k], self.last_read, out=obs[:, 6 + self.H:-1])
+        np.multiply(self._snr_obs[self._env_index, self.k], self.last_read, out=obs[:, 6 + self.H:-2])
+        obs[:, -2] = self.last.status / 4.0
         obs[:, -1] = self.k
         obs[:, -1] /= max(self.K - 1, 1)
         np.clip(obs, -1.0, 1.0, out=obs)
@@ -228,10 +237,10 @@ class PassageCore:
         draw_array(ax, self.model.array, label=False)
         k = self.k[e]
         ax.plot(*self.truth[e, : k + 1, :2].T, "-", color="tab:red", label="truth")
-        means = self.bank.means().reshape(self.E, self.H, -1)[e]
-        ax.scatter(means[:, 0], means[:, 1], s=10, color="0.5", label="hypotheses")
-        sel = self.bank.selected()[e]
-        ax.plot(means[sel, 0], means[sel, 1], "o", color="tab:blue", label="estimate")
+        means = self.tracker.bank.means().reshape(self.E, self.H, -1)[e]
+        live = np.isfinite(self.tracker.bank.cum[e])
+        ax.scatter(means[live, 0], means[live, 1], s=10, color="0.5", label="hypotheses")
+        ax.plot(*self.last.estimate[e, :2], "o", color="tab:blue", label="estimate")
         r = self.position_scale
         ax.set_xlim(self.centre[0] - r, self.centre[0] + r)
         ax.set_ylim(self.centre[1] - r, self.centre[1] + r)
@@ -244,7 +253,7 @@ class PassageCore:
 def _spaces(core):
     low = -np.ones(core.obs_dim, dtype=np.float32)
     high = np.ones(core.obs_dim, dtype=np.float32)
-    low[-1] = 0.0
+    low[-2:] = 0.0
     high[6:6 + core.H] = 0.0
     return spaces.Box(low, high, dtype=np.float32), spaces.MultiBinary(core.S)
 
@@ -254,22 +263,25 @@ class PassageEnv(gym.Env):
     metadata = {"render_modes": ["rgb_array"], "render_fps": 4}
 
     def __init__(self, scenario="S2", overrides=None, filter=None, max_reads=None, energy_cost=0.01,
-                 error_scale=10.0, render_mode=None):
+                 error_scale=10.0, render_mode=None, observer="tracker"):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
-        self.core = PassageCore(1, scenario, overrides, filter, max_reads, energy_cost, error_scale)
+        self.core = PassageCore(1, scenario, overrides, filter, max_reads, energy_cost, error_scale, observer)
         self.observation_space, self.action_space = _spaces(self.core)
         self.render_mode = render_mode
+        self._started = False
         self._kwargs = dict(scenario=scenario, overrides=overrides, filter=filter, max_reads=max_reads,
-                            energy_cost=energy_cost, error_scale=error_scale, render_mode=render_mode)
+                            energy_cost=energy_cost, error_scale=error_scale, render_mode=render_mode,
+                            observer=observer)
 
     def reset(self, *, seed=None, options=None):
         super().reset(seed=seed)
         obs = self.core.reset_envs([0], [int(self.np_random.integers(SEED_HIGH))], fresh=seed is not None)
+        self._started = True
         return obs[0], {}
 
     def step(self, action):
-        if self.core.bank is None:
+        if not self._started:
             raise RuntimeError("call reset() before step()")
         if self.core.k[0] >= self.core.K - 1:
             raise RuntimeError("the passage has ended: call reset()")
@@ -283,12 +295,14 @@ class PassageEnv(gym.Env):
         return None
 
     def __getstate__(self):  # rebuild from the JSON-able arguments (and keep the episode state)
-        return {"kwargs": self._kwargs, "core": self.core.__dict__, "np_random": self._np_random}
+        return {"kwargs": self._kwargs, "core": self.core.__dict__, "np_random": self._np_random,
+                "started": self._started}
 
     def __setstate__(self, state):
         self.__init__(**state["kwargs"])
         self.core.__dict__.update(state["core"])
         self._np_random = state["np_random"]
+        self._started = state["started"]
 
 
 class PassageVectorEnv(VectorEnv):
@@ -304,9 +318,10 @@ class PassageVectorEnv(VectorEnv):
     metadata = {"render_modes": ["rgb_array"], "autoreset_mode": AutoresetMode.NEXT_STEP}
 
     def __init__(self, num_envs=1, scenario="S2", overrides=None, filter=None, max_reads=None, energy_cost=0.01,
-                 error_scale=10.0, render_mode=None):
+                 error_scale=10.0, render_mode=None, observer="tracker"):
         self.num_envs = int(num_envs)
-        self.core = PassageCore(self.num_envs, scenario, overrides, filter, max_reads, energy_cost, error_scale)
+        self.core = PassageCore(self.num_envs, scenario, overrides, filter, max_reads, energy_cost, error_scale,
+                                observer)
         self.single_observation_space, self.single_action_space = _spaces(self.core)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)

@@ -176,25 +176,20 @@ def track_global(unit, model, y, sc, *, refit_peak=None, return_init=False, **op
     return (est, cov, t_init, gi) if return_init else (est, cov, t_init)
 
 
-def track_restarting(unit, model, y, sc, *, return_init=False, **options):
-    """The project's tracker: a constant-velocity model without process noise, the global initialiser, and
-    the bank restarted from batch refits (:func:`~shipsense.trackers.studies.track_with_restarts` with its
-    defaults: every 20 samples until the closest approach and once after it, on divergence alarms and on
-    covariance collapses; up to three distinct fits, the mixture's mean-square error reported).
+def track_restarting(unit, model, y, sc, **options):
+    """The project's tracker (:class:`~shipsense.trackers.Tracker`) on passages ``y`` (R, K, m) of scenario
+    ``sc`` (the sensors of ``model``), with the filter ``unit`` and initialiser ``options`` (``snr_start``,
+    ``refine``, ``explore_samples``, ``z_std``).
 
-    Returns estimates (R, K, n) SI, position covariances (R, K, 2, 2) (NaN before the bank starts), the
-    initialiser's seconds, the restarts per passage (R,) (and, with ``return_init``, the
-    :class:`~shipsense.trackers.initialiser.GlobalInit`).  ``options`` go to the initialiser.
+    Returns estimates (R, K, n) SI, position covariances (R, K, 2, 2), the seconds per passage spent in the
+    initialiser's window fits, the restarts per passage (R,) and the tracker (its state after the last sample:
+    e.g. ``k0``, the detection of each passage).
     """
-    from shipsense.trackers.initialiser import depth_prior, global_init
-    from shipsense.trackers.studies import track_with_restarts
+    from shipsense.trackers import Tracker
 
-    still = model.without_process_noise()
-    t1 = time.perf_counter()
-    gi = global_init(still, y, **prior_grid(sc), **options)
-    t_init = time.perf_counter() - t1
-    est, cov, restarts = track_with_restarts(unit, still, y, gi, prior=depth_prior(still, options.get("z_std")))
-    return (est, cov, t_init, restarts, gi) if return_init else (est, cov, t_init, restarts)
+    tr = Tracker(sc, passages=len(y), sensors=list(model.array.ids), unit=unit.name, **options)
+    res = tr.track(sc.times[: y.shape[1]], y)
+    return res.estimates, res.position_cov, tr.seconds["initialiser"], tr.restarts, tr
 
 
 def refit_stage(unit, model, y, gi, est, cov, refit_peak, z_std=None):

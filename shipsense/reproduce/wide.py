@@ -38,7 +38,7 @@ its bank restarted from batch refits every 20 samples until the closest
 approach and once after it, on divergence alarms and on covariance
 collapses, each refit keeping up to three distinct fits and the reported
 covariance the selected estimate's mean-square error under their mixture
-(:func:`~shipsense.trackers.studies.track_with_restarts`); also
+(:class:`~shipsense.trackers.Tracker`); also
 ``restarts_per_passage``.
 
 ``consistency``: NEES of the project's tracker (``ukf`` unit) on S0, S1-P2
@@ -247,7 +247,7 @@ def consistency(runs=100, seed=0, tracker="restarts", sigma_a=TRACKER_SIGMA_A):
         K = y.shape[1]
         opts = init_options(family, sc)
         if tracker == "restarts":
-            est, pos_cov, _, _ = track_restarting(get_filter("ukf"), model, y, sc, **opts)
+            est, pos_cov, _, _, _ = track_restarting(get_filter("ukf"), model, y, sc, **opts)
             noise = "none (constant velocity)"
         else:
             est, pos_cov, _ = track_global(get_filter("ukf"), model, y, sc, refit_peak=REFIT_PEAK, **opts)
@@ -289,7 +289,7 @@ def run_family(name, passages, seed):
     out["global_init_refit"]["refit_seconds_per_passage"] = t_refit / passages
     # the project's tracker: no process noise, the bank restarted from batch refits
     t0 = time.perf_counter()
-    est, pos_cov, t_init, restarts = track_restarting(unit, model, y, sc, **opts)
+    est, pos_cov, t_init, restarts, _ = track_restarting(unit, model, y, sc, **opts)
     t_restart = time.perf_counter() - t0
     out["global_init_restarts"] = _metrics(est, pos_cov, truth, bounds, t_restart / passages, ends)
     out["global_init_restarts"]["init_seconds_per_passage"] = t_init / passages

@@ -160,44 +160,12 @@ def peak_refit_sample(model, measurements, k0, start, through_peak=0.5):
     return np.where(end > start, end, K - 1)
 
 
-def selected_nis(bank):
-    """NIS per measurement component of each passage's selected hypothesis (R, J) (NaN without a measurement)."""
-    idx = bank.selected[:, None, :]
-    nis = np.take_along_axis(bank.nis, idx, axis=1)[:, 0]
-    m = np.take_along_axis(bank.m, idx, axis=1)[:, 0]
-    return np.where(m > 0, nis / np.maximum(m, 1), np.nan)
 
 
-def divergence_alarm(nis, start, window, limit):
-    """First sample (R,) after which a bank started at ``start`` restarts: the sample after the first
-    ``window`` samples whose mean ``nis`` (per component, (R, K)) exceeds ``limit`` (at least half of
-    them measured); ``K`` when there is none (an alarm on the last sample has nothing to restart)."""
-    R, K = nis.shape
-    v = np.where(np.arange(K)[None, :] >= np.asarray(start)[:, None], nis, np.nan)
-    present = np.isfinite(v)
-    zero = np.zeros((R, 1))
-    s = np.concatenate([zero, np.cumsum(np.where(present, v, 0.0), axis=1)], axis=1)
-    n = np.concatenate([zero, np.cumsum(present, axis=1)], axis=1)
-    s_w, n_w = s[:, window:] - s[:, :-window], n[:, window:] - n[:, :-window]      # windows ending at window-1..K-1
-    alarm = (n_w >= max(1, window // 2)) & (s_w > limit * np.maximum(n_w, 1))
-    alarm[:, -1] = False
-    return np.where(alarm.any(axis=1), np.argmax(alarm, axis=1) + window, K)
 
 
-def collapse_alarm(spread, start, ref, fraction, window):
-    """First sample (R,) after ``start`` plus one at which a bank started at ``start`` from a fit whose position
-    covariance has trace ``ref`` (R,) reports a trace ``spread`` (R, K) below ``fraction`` of it, within
-    ``window`` samples of the start; ``K`` when there is none."""
-    R, K = spread.shape
-    k = np.arange(K)[None, :]
-    start = np.asarray(start)[:, None]
-    low = (k >= start) & (k < start + window) & (spread < fraction * np.asarray(ref)[:, None]) & (k < K - 1)
-    return np.where(low.any(axis=1), np.argmax(low, axis=1) + 1, K)
 
 
-def trace2(cov):
-    """Trace of position covariances (..., 2, 2) or the position block of state covariances (..., n, n)."""
-    return cov[..., 0, 0] + cov[..., 1, 1]
 
 
 def _fit_at_last(model, gi, inv_A, mixture):
@@ -214,10 +182,3 @@ def _fit_at_last(model, gi, inv_A, mixture):
     w = np.exp(gi.loglik - gi.loglik[rows, best][:, None])
     w /= w.sum(axis=1, keepdims=True)
     return x[rows, best], mixture_mse(w, x[..., :2], P[..., :2, :2], x[rows, best][:, None, :2])
-
-
-def passages_of(gi, sel):
-    """The :class:`~shipsense.trackers.initialiser.GlobalInit` of passages ``sel``."""
-    from dataclasses import fields, replace
-
-    return replace(gi, **{f.name: getattr(gi, f.name)[sel] for f in fields(gi) if getattr(gi, f.name) is not None})

@@ -46,6 +46,7 @@ two agree exactly.
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -249,7 +250,8 @@ class Tracker:
         if P < 1:
             raise ValueError(f"passages must be at least 1, got {passages}")
         m, n, H = self.model.m, self.model.n, self._H
-        self.P, self.k = P, 0
+        self.P = P
+        self.n = np.zeros(P, dtype=int)        # samples seen per passage: the index of the next one
         self.phase = np.zeros(P, dtype=np.int8)
         self.last_t = np.full(P, np.nan)
         self.k0 = np.full(P, -1)
@@ -268,9 +270,22 @@ class Tracker:
         self.y_hist = np.full((P, hist, m), np.nan)
         self.t_hist = np.full((P, hist), np.nan)
         self.gaps = []
+        self.seconds = {"initialiser": 0.0, "refits": 0.0}   # time spent in window fits and in refits
         self.own = np.full(P, np.nan)          # trace of the selected hypothesis's own position covariance
         self.bank = BankState(self.unit, self.filter_model, np.broadcast_to(self._prior[0], (P, H, n)),
                               self._prior[1])
+        return self
+
+    def reset_passages(self, passages):
+        """Start passages ``passages`` (indices) over, leaving the others as they are."""
+        idx = np.asarray(passages, dtype=int)
+        for name, value in (("n", 0), ("phase", _WAITING), ("last_t", np.nan), ("k0", -1), ("peak", 0.0),
+                            ("start", 0), ("trusted", True), ("alarms", 0), ("restarts", 0), ("peak_done", False),
+                            ("ref", np.nan), ("nis", np.nan), ("snr", np.nan), ("win", np.nan), ("win_t0", np.nan),
+                            ("y_hist", np.nan), ("t_hist", np.nan), ("own", np.nan)):
+            getattr(self, name)[idx] = value
+        H, n = self._H, self.model.n
+        self.bank.reset_runs(idx, np.broadcast_to(self._prior[0], (idx.size, H, n)), self._prior[1])
         return self
 
     @property
@@ -279,44 +294,50 @@ class Tracker:
             len(self.bank_config.levels) * len(self.bank_config.bearings_deg))
 
     # -- one sample ---------------------------------------------------------------------------------------------
-    def update(self, t, y) -> Sample:
-        """Process one sample of every passage: times ``t`` (P,) s and measurements ``y`` (P, m) SI (NaN =
-        missing: a dropout, or a sensor not read).  Returns the :class:`Sample` at this time."""
-        t = np.broadcast_to(np.asarray(t, dtype=float), (self.P,))
+    def update(self, t, y, passages=None) -> Sample:
+        """Process one sample: times ``t`` (P,) s and measurements ``y`` (P, m) SI of every passage (NaN =
+        missing: a dropout, or a sensor not read), or of the passages ``passages`` (indices) only, the others
+        left as they are.  Returns the :class:`Sample` of those passages at this time."""
+        act = np.arange(self.P) if passages is None else np.asarray(passages, dtype=int)
+        t = np.broadcast_to(np.asarray(t, dtype=float), act.shape)
         y = np.asarray(y, dtype=float)
-        if y.shape != (self.P, self.model.m):
-            raise ValueError(f"y must be (passages, channels) = ({self.P}, {self.model.m}), got {y.shape}")
+        if y.shape != (act.size, self.model.m):
+            raise ValueError(f"y must be (passages, channels) = ({act.size}, {self.model.m}), got {y.shape}")
         if not np.isfinite(t).all():
             raise ValueError("times must be finite numbers")
-        back = np.isfinite(self.last_t) & ~(t > self.last_t)
+        back = np.isfinite(self.last_t[act]) & ~(t > self.last_t[act])
         if back.any():
-            p = int(np.argmax(back))
-            raise ValueError(f"time must increase: passage {p} goes from {self.last_t[p]:.9g} s to {t[p]:.9g} s")
-        yi = y / self.model.y_scale
-        dt = t - self.last_t
-        for p in np.flatnonzero(dt > self.options.gap_limit_s):
-            self.gaps.append(Gap(int(p), float(self.last_t[p]), float(t[p])))
-        slot = self.k % self.y_hist.shape[1]
-        self.y_hist[:, slot], self.t_hist[:, slot] = yi, t
-        snr = self._snr(yi)
+            p = int(act[np.argmax(back)])
+            raise ValueError(f"time must increase: passage {p} goes from {self.last_t[p]:.9g} s to "
+                             f"{t[np.argmax(back)]:.9g} s")
+        yi = np.full((self.P, self.model.m), np.nan)
+        yi[act] = y / self.model.y_scale
+        dt = np.full(self.P, np.nan)
+        dt[act] = t - self.last_t[act]
+        for p in act[dt[act] > self.options.gap_limit_s]:
+            self.gaps.append(Gap(int(p), float(self.last_t[p]), float(t[act == p][0])))
+        slot = self.n[act] % self.y_hist.shape[1]
+        self.y_hist[act, slot], self.t_hist[act, slot] = yi[act], t
+        snr = self._snr(yi, act)
         out = self._prior_sample()
-        field = np.isfinite(np.where(self.model.axial, np.nan, yi)).any(axis=1)
+        field = np.zeros(self.P, dtype=bool)
+        field[act] = np.isfinite(np.where(self.model.axial, np.nan, yi[act])).any(axis=1)
         self.phase[(self.phase == _WAITING) & field] = _STARTING
-        out.status[self.phase == _STARTING] = INITIALISING
-        running = np.flatnonzero(self.phase == _RUNNING)
+        starting = act[self.phase[act] == _STARTING]
+        out.status[starting] = INITIALISING
+        running = act[self.phase[act] == _RUNNING]
         if running.size:
             self._step(running, yi, dt, out)
         if self.options.method == "bank":
-            fresh = np.flatnonzero(self.phase == _STARTING)
-            if fresh.size:
-                self._seed_bank(fresh, y, out)
+            if starting.size:
+                self._seed_bank(starting, yi * self.model.y_scale, out)
         else:
-            self._initialise(snr, out)
+            self._initialise(starting, snr, out)
             if running.size:
                 self._restart(running, snr, out)
-        self.last_t = t.copy()
-        self.k += 1
-        return out
+        self.last_t[act] = t
+        self.n[act] += 1
+        return out if passages is None else Sample(*(getattr(out, f)[act] for f in Sample.__dataclass_fields__))
 
     def track(self, times, measurements, progress=False) -> TrackResult:
         """Track a batch: ``times`` (K,) or (P, K) s, ``measurements`` (P, K, m) SI (NaN = missing).
@@ -346,17 +367,20 @@ class Tracker:
                            list(self.gaps))
 
     # -- parts --------------------------------------------------------------------------------------------------
-    def _snr(self, yi):
-        """The strongest field channel's SNR (P,); with ``robust``, the median of the last three samples (an
-        outlier alone neither starts a window nor moves the peak)."""
-        snr = strongest_snr(self.model, yi[:, None])[:, 0]
+    def _snr(self, yi, act):
+        """The strongest field channel's SNR (P,) of the passages ``act`` (0 elsewhere); with ``robust``, the
+        median of their last three samples (an outlier alone neither starts a window nor moves the peak)."""
+        snr = np.zeros(self.P)
+        snr[act] = strongest_snr(self.model, yi[act, None])[:, 0]
         if not self.options.robust:
             return snr
-        self.snr = np.roll(self.snr, -1, axis=1)
-        self.snr[:, -1] = np.where(np.isfinite(yi).any(axis=1), snr, np.nan)
+        ring = np.roll(self.snr[act], -1, axis=1)
+        ring[:, -1] = np.where(np.isfinite(yi[act]).any(axis=1), snr[act], np.nan)
+        self.snr[act] = ring
         with np.errstate(all="ignore"):
-            med = np.nanmedian(np.where(np.isfinite(self.snr).sum(axis=1, keepdims=True) >= 2, self.snr, 0.0), axis=1)
-        return np.nan_to_num(med)
+            med = np.nanmedian(np.where(np.isfinite(ring).sum(axis=1, keepdims=True) >= 2, ring, 0.0), axis=1)
+        snr[act] = np.nan_to_num(med)
+        return snr
 
     def _prior_sample(self):
         P = self.P
@@ -418,7 +442,7 @@ class Tracker:
         update with it."""
         seeds, P0 = seed_hypotheses(self.model, y[fresh], self.bank_config)
         self.bank.reset_runs(fresh, seeds, P0)
-        self.bank.step(y, predict=False, runs=fresh)
+        self.bank.step(np.nan_to_num(y), mask=np.isfinite(y), predict=False, runs=fresh)
         self.phase[fresh] = _RUNNING
         self._report(fresh, out)
 
@@ -426,31 +450,33 @@ class Tracker:
         """Samples ``first .. k`` (R,) of passages ``runs`` from the history: y (R, W, m) internal and the times
         after each first sample (R, W); W is the longest, shorter windows padded with missing samples."""
         hist = self.y_hist.shape[1]
-        W = int((self.k - first).max()) + 1
+        cur = self.n[runs]
+        W = int((cur - first).max()) + 1
         ks = first[:, None] + np.arange(W)[None, :]
-        inside = ks <= self.k
-        slots = np.where(inside, ks, self.k) % hist
+        inside = ks <= cur[:, None]
+        slots = np.where(inside, ks, cur[:, None]) % hist
         yw = np.where(inside[..., None], self.y_hist[runs[:, None], slots], np.nan)
         tw = self.t_hist[runs[:, None], slots]
         taus = np.where(inside, tw - tw[:, :1], tw[:, -1:] - tw[:, :1])
         return yw, taus
 
-    def _initialise(self, snr, out):
+    def _initialise(self, starting, snr, out):
         """Detection and, once a passage's window is complete, its global fits: the bank starts from them."""
         o = self.options
-        starting = self.phase == _STARTING
-        detect = starting & (self.k0 < 0) & (snr > o.snr_start)
-        self.k0[detect] = self.k
-        seen = starting & (self.k0 >= 0)
+        detect = starting[(self.k0[starting] < 0) & (snr[starting] > o.snr_start)]
+        self.k0[detect] = self.n[detect]
+        seen = starting[self.k0[starting] >= 0]
         self.peak[seen] = np.maximum(self.peak[seen], snr[seen])
-        ready = np.flatnonzero(seen & (self.k - self.k0 + 1 >= self.window))
+        ready = seen[self.n[seen] - self.k0[seen] + 1 >= self.window]
         if ready.size == 0:
             return
         yw, taus = self._window(ready, self.k0[ready])
         regular = np.allclose(taus, np.arange(taus.shape[1]) * self.model.period, rtol=0, atol=1e-9)
+        t0 = time.perf_counter()
         fits = window_fits(self.model, yw, **self._grid, taus=None if regular else taus, keep=o.keep_init,
                            distinct_m=o.distinct_m, z_std=o.z_std, refine=o.refine, gof=o.gof,
                            explore_samples=o.explore_samples, huber=self.huber)
+        self.seconds["initialiser"] += time.perf_counter() - t0
         self.win[ready], self.win_t0[ready] = fits.theta, self.t_hist[ready, self.k0[ready] % self.y_hist.shape[1]]
         self.phase[ready] = _RUNNING
         self._start_banks(ready, fits, taus[:, -1], o.inflate, out)
@@ -472,7 +498,7 @@ class Tracker:
             seeds, P0 = np.concatenate([seeds, seeds[pad]], 1), np.concatenate([P0, P0[pad]], 1)
             loglik = np.concatenate([loglik, np.full((len(runs), H - M), -np.inf)], axis=1)
         self.bank.reset_runs(runs, seeds * xs, P0 * np.outer(xs, xs)[None, None], loglik)
-        self.start[runs], self.trusted[runs] = self.k, fits.fit_ok
+        self.start[runs], self.trusted[runs] = self.n[runs], fits.fit_ok
         self.ref[runs] = np.trace(P0[np.arange(len(runs)), 0, :2, :2] * np.outer(xs[:2], xs[:2]), axis1=-2, axis2=-1)
         self.nis[runs] = np.nan
         self._report(runs, out)
@@ -480,8 +506,7 @@ class Tracker:
     def _restart(self, runs, snr, out):
         """Refit the passages among ``runs`` whose bank is due (alarms, schedule, peak, collapse)."""
         o = self.options
-        k = self.k
-        since = k - self.start[runs]
+        since = self.n[runs] - self.start[runs]
         with np.errstate(all="ignore"):
             present = np.isfinite(self.nis[runs]).sum(axis=1)
             level = (np.nanmedian(self.nis[runs], axis=1) if o.robust else np.nanmean(self.nis[runs], axis=1))
@@ -511,7 +536,7 @@ class Tracker:
         started from the selected estimate, the bank's live hypotheses and (``multistart``) the initial
         window fits; the bank restarts from the ``keep`` best distinct fits."""
         o, H, n = self.options, self._H, self.model.n
-        first = np.maximum(self.k0[runs], self.k - self.y_hist.shape[1] + 1)
+        first = np.maximum(self.k0[runs], self.n[runs] - self.y_hist.shape[1] + 1)
         yw, taus = self._window(runs, first)
         back = transitions(self.model, -taus[:, -1])                                    # now -> window start
         rows = (runs[:, None] * H + np.arange(H)).ravel()
@@ -528,8 +553,10 @@ class Tracker:
         win = np.einsum("rij,rhj->rhi", transitions(self.model, t_first - self.win_t0[runs]), self.win[runs])
         theta = np.concatenate([theta, np.where(multistart[:, None, None], win, np.nan)], axis=1)
         prior = depth_prior(self.model, o.z_std)
+        t0 = time.perf_counter()
         fits = refit_window(self.model, yw, theta, taus=taus, prior=prior, keep=o.keep, distinct_m=o.distinct_m,
                             gof=o.gof, huber=self.huber)
+        self.seconds["refits"] += time.perf_counter() - t0
         self._start_banks(runs, fits, taus[:, -1], 1.0, out)
         out.status[runs] = np.where(fits.fit_ok, RESTARTED, INCONSISTENT)
 

@@ -130,3 +130,20 @@ def test_robust_mode_with_outliers_and_dropouts_stays_consistent():
     q = np.einsum("pki,pkij,pkj->pk", d, np.linalg.inv(res.position_cov), d)
     assert np.mean(q[res.status >= TRACKING] <= 5.991) >= 0.85
     assert set(np.unique(res.status)) <= {INITIALISING, TRACKING, RESTARTED, INCONSISTENT}
+
+
+def test_passages_step_and_start_over_on_their_own(s2):
+    """The environments' use: passages advance (``update(..., passages=)``) and restart
+    (``reset_passages``) independently; a passage's track does not depend on when the others run."""
+    sc, t, y, truth, res = s2
+    K = y.shape[1]
+    tr = Tracker(sc, passages=2, sensors=["M1", "M2"])
+    for k in range(10):
+        tr.update(t[k:k + 1], y[0:1, k], passages=[0])
+    for k in range(10, K):
+        s = tr.update(np.array([t[k], t[k - 10]]), np.stack([y[0, k], y[1, k - 10]]))
+    assert _close(s.estimate[0], res.estimates[0, -1], 1e-6) and _close(s.cov[0], res.covs[0, -1], 1e-6)
+    tr.reset_passages([0])
+    assert tr.n.tolist() == [0, K - 10]
+    s = tr.update(t[:1], y[0:1, 0], passages=[0])
+    assert s.status[0] == INITIALISING and _close(s.estimate, res.estimates[0:1, 0], 1e-12)
