@@ -107,17 +107,34 @@ def linear_basis(model, theta, steps, stride=1):
 
 
 def _linear_basis(model, theta, steps, stride):
+    """Each sensor type evaluated only for what it depends on: field channels are linear and homogeneous in
+    their own source (the moment for magnetometers, ``p`` for electrodes), so their offset is zero and each
+    parameter slot needs only its own sensors; bearings are the offset.  (A fused model's electric field --
+    the dearest kernel -- is then evaluated once, not once per parameter.)"""
+    from shipsense.trackers.models import _channel_columns, subset_model
 
     slots = _parameter_slots(model)
     Ak = powers(model.A, steps)[::stride]
     X = np.einsum("kij,cj->cki", Ak, theta)
     X[..., slots] = 0.0
-    offset = model.h(X)
-    basis = np.empty(offset.shape + (len(slots),))
-    for j, s in enumerate(slots):
-        Xj = X.copy()
-        Xj[..., s] = 1.0
-        basis[..., j] = model.h(Xj) - offset
+    offset = np.zeros(X.shape[:-1] + (model.m,))
+    basis = np.zeros(offset.shape + (len(slots),))
+    types = model.array.types
+    labels = model.labels
+    for kind in dict.fromkeys(types):
+        keep = [i for i, t in enumerate(types) if t == kind]
+        sub = subset_model(model, keep) if len(keep) < len(types) else model
+        cols = _channel_columns(model.array, keep)
+        Xs = X[..., [labels.index(c) for c in sub.labels]]
+        if kind == "accelerometer":
+            offset[..., cols] = sub.h(Xs)
+            continue
+        for j, s in enumerate(slots):
+            if labels[s] not in sub.labels:
+                continue
+            Xj = Xs.copy()
+            Xj[..., sub.labels.index(labels[s])] = 1.0
+            basis[..., cols, j] = sub.h(Xj)
     return offset, basis
 
 

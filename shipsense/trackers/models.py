@@ -276,9 +276,13 @@ def _channel_columns(array: SensorArray, keep):
 def subset_model(model: FieldModel, keep) -> FieldModel:
     """The model of the sensors ``keep`` (indices) of ``model``'s array (same motion model and units)."""
     keep = np.asarray(keep, dtype=int)
-    return FieldModel(subset_array(model.array, keep), model.period, model.Q,
-                      model.R[_channel_columns(model.array, keep)], source_z=model.source_z,
-                      moment_unit=model.moment_unit)
+    array = subset_array(model.array, keep)
+    types = set(array.types)
+    labels = ["x", "y", "vx", "vy"] + ["mx", "my", "mz"] * ("magnetometer" in types)
+    labels += ["z", "p"] * ("electrode" in types)
+    idx = [model.labels.index(c) for c in labels]       # a fused model's subset keeps its own state's block of Q
+    return FieldModel(array, model.period, model.Q[np.ix_(idx, idx)], model.R[_channel_columns(model.array, keep)],
+                      source_z=model.source_z, moment_unit=model.moment_unit)
 
 
 MOMENT_WALK = 0.0085
