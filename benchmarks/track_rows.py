@@ -61,7 +61,7 @@ def main(argv=None):
     args = ap.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    rates = []
+    rates, seconds, rows_ = [], [], []
     print(f"{'rows':>9} {'samples':>8} {'seconds':>8} {'us per row':>10} {'peak MB':>8}")
     for size in args.sizes:
         rec = out / f"rec-{int(size)}.csv"
@@ -71,8 +71,16 @@ def main(argv=None):
         res = json.loads(run.stdout.strip().splitlines()[-1])
         rate = 1e6 * res["seconds"] / rows
         rates.append(rate)
-        print(f"{rows:>9} {rows // CHANNELS:>8} {res['seconds']:>8.1f} {rate:>10.1f} {res['peak_mb']:>8.0f}", flush=True)
-    print(f"largest / smallest time per row: {max(rates) / min(rates):.2f}")
+        seconds.append(res["seconds"])
+        rows_.append(rows)
+        print(f"{rows:>9} {rows // CHANNELS:>8} {res['seconds']:>8.1f} {rate:>10.1f} {res['peak_mb']:>8.0f}",
+              flush=True)
+    print(f"largest / smallest time per row of the whole command: {max(rates) / min(rates):.2f} (the fixed costs -- "
+          "start-up, the window's grid search, the refits -- weigh on the smallest file)")
+    marginal = [(seconds[i + 1] - seconds[i]) / (rows_[i + 1] - rows_[i]) * 1e6 for i in range(len(rows_) - 1)]
+    steps = ", ".join(f"{m:.1f} us ({rows_[i]:.0e} -> {rows_[i + 1]:.0e} rows)" for i, m in enumerate(marginal))
+    print("time per additional row: " + steps
+          + (f"; ratio {max(marginal) / min(marginal):.2f}" if len(marginal) > 1 else ""))
 
 
 if __name__ == "__main__":
