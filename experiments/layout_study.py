@@ -17,6 +17,7 @@ one sweep folder per family and ``layouts.csv`` (the table printed).
 from __future__ import annotations
 
 import argparse
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -88,7 +89,8 @@ def main(argv=None):
                             "passages": args.passages, "chunk": 10, "method": args.method,
                             "layouts": [{"name": m, "file": str(p.resolve())} for m, (p, _) in files.items()]},
                            f"layout study ({family})")
-        run_sweep(spec, out, out / f"sweep-{family}", workers=args.workers, restart=True)
+        shutil.rmtree(out / f"sweep-{family}", ignore_errors=True)   # an experiment: always from scratch
+        run_sweep(spec, out, out / f"sweep-{family}", workers=args.workers)
         import pandas as pd
 
         res = pd.read_parquet(out / f"sweep-{family}" / "results.parquet")

@@ -50,9 +50,16 @@ class SweepRun:
     workers: int
 
 
+FORMAT = 2
+"""Version of the folder layout and of the seed derivation (2: common random numbers per condition); part of
+the sweep hash, so that a folder written by another scheme is never resumed."""
+
+
 def sweep_hash(spec: SweepSpec) -> str:
-    """The identity of a sweep: the hash of its validated spec (formatting and comments do not count)."""
-    return canonical_hash(spec.model_dump(mode="json"))
+    """The identity of a sweep: the hash of its validated spec (formatting and comments do not count) and of
+    :data:`FORMAT`.  (A folder written by another shipsense version with the same scheme is resumed: the
+    versions are in ``sweep.json``.)"""
+    return canonical_hash({"format": FORMAT, "spec": spec.model_dump(mode="json")})
 
 
 def _versions():
