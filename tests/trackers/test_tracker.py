@@ -96,16 +96,25 @@ def test_time_comes_from_the_timestamps(s2):
         tr.update(np.full(4, t[0]), y[:, 0])
 
 
-def test_a_bank_knocked_off_its_track_is_restarted_by_its_alarm(s2):
+@pytest.mark.parametrize("initial_fits_too", [False, True])
+def test_a_bank_knocked_off_its_track_is_restarted_by_its_alarm(s2, initial_fits_too):
     """The bank's hypotheses moved 30 m off with a covariance of centimetres: the innovations raise the
-    divergence alarm and a refit (also from the window's fits) brings the track back."""
+    divergence alarm and a refit brings the track back.  Also when the bank and the initial window's fits
+    are all 150 m off and sailing the other way, beyond the reach of a local refit: the restart after an
+    alarm runs the global initialiser again on everything since the detection."""
     sc, t, y, truth, res = s2
     tr = Tracker(sc, passages=4, sensors=["M1", "M2"], refit_every=None, through_peak=None, collapse=None)
     K = y.shape[1]
     for k in range(K // 2):
         tr.update(t[k], y[:, k])
     assert np.all(tr.phase == 2)
-    tr.bank.belief.mean[:, 0] += 30.0
+    if initial_fits_too:
+        tr.bank.belief.mean[:, 0] += 150.0
+        tr.bank.belief.mean[:, 2:4] *= -1.0
+        tr.win[..., 0] += 150.0 / tr.model.x_scale[0]
+        tr.win[..., 2:4] *= -1.0
+    else:
+        tr.bank.belief.mean[:, 0] += 30.0
     tr.bank.belief = type(tr.bank.belief).from_cov(tr.bank.belief.mean, np.broadcast_to(
         np.eye(tr.model.n) * 1e-4, tr.bank.belief.chol.shape))
     for k in range(K // 2, K):
