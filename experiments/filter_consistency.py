@@ -30,11 +30,11 @@ from shipsense.trackers.models import model_from_scenario
 
 SETTINGS = {
     "study: Q = 0.1 I": ProcessNoiseConfig(model="identity", sigma_q=0.1),
-    "dwna 0.05, moment 1e-4": ProcessNoiseConfig(model="dwna", sigma_a=(0.05, 0.05), param_var=[1e-4] * 3),
-    "dwna 0.2, moment 1e-2": ProcessNoiseConfig(model="dwna", sigma_a=(0.2, 0.2), param_var=[1e-2] * 3),
-    "dwna 0.5, moment 1e-1": ProcessNoiseConfig(model="dwna", sigma_a=(0.5, 0.5), param_var=[1e-1] * 3),
-    "dwna 1.0, moment 0.5": ProcessNoiseConfig(model="dwna", sigma_a=(1.0, 1.0), param_var=[0.5] * 3),
-    "default: dwna 1.0, moment 0.6": ProcessNoiseConfig(model="dwna", sigma_a=(1.0, 1.0), param_var=[0.6] * 3),
+    "dwna 0.05, moment 1e8": ProcessNoiseConfig(model="dwna", sigma_a=(0.05, 0.05), param_var=[1e8] * 3),
+    "dwna 0.2, moment 1e10": ProcessNoiseConfig(model="dwna", sigma_a=(0.2, 0.2), param_var=[1e10] * 3),
+    "dwna 0.5, moment 1e11": ProcessNoiseConfig(model="dwna", sigma_a=(0.5, 0.5), param_var=[1e11] * 3),
+    "dwna 1.0, moment 5e11": ProcessNoiseConfig(model="dwna", sigma_a=(1.0, 1.0), param_var=[5e11] * 3),
+    "default: dwna 1.0, moment 6e11": ProcessNoiseConfig(model="dwna", sigma_a=(1.0, 1.0), param_var=[6e11] * 3),
 }
 
 

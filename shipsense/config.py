@@ -201,14 +201,16 @@ class SeismicConfig(_Model):
 
 
 class ProcessNoiseConfig(_Model):
-    """Process noise of the tracker's motion model (physics.md §4), in the tracker's internal units.
+    """Process noise of the tracker's motion model (physics.md §4), in **SI units of the state**.
 
     ``identity``: ``sigma_q I``; ``dwna``: white acceleration ``sigma_a`` (m/s²) plus a per-step
-    random-walk variance ``param_var`` on each parameter (moment in (1e6 A·m²)², z in m², p in
-    (A·m)²); ``diagonal``: ``diag(q_diag)``.  The defaults (DWNA, sigma_a = 1 m/s², a moment walk
-    of 0.85 % of the scenario's moment magnitude per step) are the consistent setting measured on
-    S0 by ``experiments/filter_consistency.py`` (0.6 (1e6 A·m²)² there), made relative so that it
-    transfers to ships of other sizes.
+    random-walk variance ``param_var`` on each parameter (moment in (A·m²)², z in m², p in
+    (A·m)²); ``diagonal``: ``diag(q_diag)`` (m², (m/s)², then the parameters as for ``param_var``).
+    A model that scales its state (the trackers keep the moment in 1e6 A·m²) rescales Q with it:
+    ``sigma_q = 0.1`` is 0.1 (A·m²)² on the moment, 1e-13 in (1e6 A·m²)².  The defaults (DWNA,
+    sigma_a = 1 m/s², a moment walk of 0.85 % of the scenario's moment magnitude per step) are the
+    consistent setting measured on S0 by ``experiments/filter_consistency.py`` (6e11 (A·m²)² there),
+    made relative so that it transfers to ships of other sizes.
     """
 
     model: Literal["identity", "dwna", "diagonal"] = "dwna"
@@ -230,6 +232,9 @@ class BankConfig(_Model):
 
     levels: list[Positive] = Field(min_length=1, description="Moment magnitudes (A·m²) or p levels (A·m).")
     bearings_deg: list[Finite] = Field(min_length=1)
+    bearing_convention: Literal["east", "north"] = Field(
+        "east", description="east: bearings counter-clockwise from +x, seed = (r cos phi, r sin phi); north: "
+        "clockwise from north (+y), seed = (r sin phi, r cos phi) (the magnetic source study's S0 bank).")
     initial_velocity: Vec2 = (6.0, 6.0)
     initial_course: Literal["fixed", "towards_array"] = Field(
         "fixed", description="fixed: every hypothesis gets initial_velocity; towards_array: the speed "

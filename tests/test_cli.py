@@ -103,6 +103,11 @@ def test_reproduce_writes_the_documented_summary_keys(tmp_path):
     assert set(s0["hypotheses"][0]) == {"range_m", "bearing_rad", "trmse_m", "mean_loglik"}
     assert set(s0["selected_mrmse_m"]) == {"x", "y", "r"}
     assert set(s0["filter_units"]["srcdkf"]) == {"mrmse_r_m", "convergence_rate", "us_per_filter_step"}
+    # the study's S0 (Q = 0.1 I in SI units, bearings from north): a seed 16 m from the truth and hypotheses
+    # #11, #12, #7 on top by likelihood (its Figure 7); read from +x, no seed is within 90 m
+    assert s0["bearing_convention"] == "north" and s0["loglik_top3"] == [11, 12, 7]
+    assert 15.0 < s0["seed_nearest_m"] < 17.0 and s0["bearing_conventions"]["east"]["seed_nearest_m"] > 90.0
+    assert s0["top3_mrmse_m"][0]["hypothesis"] == 11 and s0["top3_mrmse_m"][0]["r"] < 10.0
     s1 = json.loads((tmp_path / "S1" / "summary.json").read_text())
     assert {"hypotheses", "selection_accuracy", "ambiguous_pairs"} <= set(s1["P1"])
     assert set(s1["raw_chain"]) >= {"ideal_mrmse_r_m", "raw_mrmse_r_m"}

@@ -290,6 +290,7 @@ MOMENT_WALK = 0.0085
 
 
 def _process_noise(sc, pn, types, period, moment_unit=1e6):
+    """Q of a scenario's process noise in SI units of the state (m, m/s, A·m², m, A·m)."""
     n_params = 3 * ("magnetometer" in types) + 2 * ("electrode" in types)
     if pn.model == "identity":
         return q_identity(n_params, pn.sigma_q)
@@ -298,7 +299,7 @@ def _process_noise(sc, pn, types, period, moment_unit=1e6):
     scale = float(np.linalg.norm(sc.passage.moment)) if sc.passage.moment is not None else moment_unit
     if sc.prior is not None and sc.prior.moment is not None:
         scale = float(np.sqrt(sc.prior.moment[0] * sc.prior.moment[1]))
-    walk = (MOMENT_WALK * scale / moment_unit) ** 2
+    walk = (MOMENT_WALK * scale) ** 2
     default = [walk] * (3 * ("magnetometer" in types)) + [0.0, 1e-3] * ("electrode" in types)
     param_var = pn.param_var if pn.param_var is not None and len(pn.param_var) == n_params else default
     return q_dwna(period, pn.sigma_a, param_var)
@@ -308,7 +309,8 @@ def model_from_scenario(scenario, sensors=None, *, moment_unit=1e6, process_nois
     """The tracker model of a scenario (all sensors, or the ids in ``sensors``).
 
     Process noise comes from ``[tracker.process_noise]`` (or ``process_noise``,
-    a ProcessNoiseConfig), in internal units.  Defaults when the scenario has
+    a ProcessNoiseConfig), in SI units of the state (m², (m/s)², (A·m²)², m², (A·m)²), and is
+    rescaled once here to the model's internal state (moment in ``moment_unit`` A·m²).  Defaults when the scenario has
     no tracker section, or ``param_var`` is not given: DWNA with sigma_a = 1
     m/s² and per-step random walks with standard deviation 0.85 % of the
     moment magnitude (the nominal passage's, or the geometric mean of the
@@ -324,8 +326,10 @@ def model_from_scenario(scenario, sensors=None, *, moment_unit=1e6, process_nois
     y_scale = np.array([CHANNEL_UNIT[sub.types[s]] for s in sub.channel_sensor])
     R = (sc.channel_std[_channel_columns(array, keep)] / y_scale) ** 2
     pn = process_noise or (sc.tracker.process_noise if sc.tracker is not None else ProcessNoiseConfig())
-    Q = _process_noise(sc, pn, set(sub.types), sc.period)
-    return FieldModel(sub, sc.period, Q, R, source_z=sc.passage.z, moment_unit=moment_unit)
+    Q = _process_noise(sc, pn, set(sub.types), sc.period, moment_unit)
+    model = FieldModel(sub, sc.period, Q, R, source_z=sc.passage.z, moment_unit=moment_unit)
+    # Q is in SI units of the state; the model's state is scaled (moment in moment_unit A·m²): rescale it once
+    return replace(model, Q=Q / np.outer(model.x_scale, model.x_scale))
 
 
 def candidate_model(scenario, positions, template: int = 0) -> FieldModel:

@@ -11,7 +11,9 @@ source strengths, the range formulas of physics.md give K ranges,
 
 and the horizontal-range correction :math:`\rho = \sqrt{r^2 - \Delta z^2}`
 (zero when ``r < |dz|``).  On each range, ``l`` bearings give ``K l``
-positions around that sensor (trackers.md §2).
+positions around that sensor (trackers.md §2), at bearings measured from +x
+counter-clockwise (``bearing_convention = "east"``) or clockwise from north,
++y (``"north"``: the S0 study's bank, scenarios.md).
 """
 
 from __future__ import annotations
@@ -76,7 +78,8 @@ def seed_hypotheses(model, y, bank, source_z=None):
     phi = np.deg2rad(np.asarray(bank.bearings_deg, dtype=float))
     K, L = len(bank.levels), phi.size
     centre = model.array.positions[best, :2]                             # (..., 2)
-    pos = centre[..., None, None, :] + rho[..., :, None, None] * np.stack([np.cos(phi), np.sin(phi)], -1)
+    unit = [np.sin(phi), np.cos(phi)] if bank.bearing_convention == "north" else [np.cos(phi), np.sin(phi)]
+    pos = centre[..., None, None, :] + rho[..., :, None, None] * np.stack(unit, -1)
     pos = pos.reshape(pos.shape[:-3] + (K * L, 2))
     n = model.n
     x0 = np.zeros(pos.shape[:-1] + (n,))
