@@ -29,7 +29,7 @@ batch, the pipeline of this package one sample at a time:
    or a failed fit) also starts from the global initialiser's fits of every
    sample since the detection, so it can leave a wrong track that a local
    refit would stay near (measured with 20 % outliers on two magnetometers:
-   convergence 0.93 -> 0.995 over 200 passages, EXPERIMENTS.md).
+   convergence 0.933 -> 0.999 over the same 1,000 passages, EXPERIMENTS.md).
 
 The reported estimate is the maximum-likelihood hypothesis, the reported
 covariance its mean-square-error matrix under the mixture of the bank's
