@@ -111,6 +111,15 @@ def test_reproduce_writes_the_documented_summary_keys(tmp_path):
     s1 = json.loads((tmp_path / "S1" / "summary.json").read_text())
     assert {"hypotheses", "selection_accuracy", "ambiguous_pairs"} <= set(s1["P1"])
     assert set(s1["raw_chain"]) >= {"ideal_mrmse_r_m", "raw_mrmse_r_m"}
+    # the study's S1: on P2 hypotheses #3, #7, #11 converge and the other nine diverge; on the collinear P1
+    # #4, #8, #12 reach the mirror track
+    assert s1["P2"]["converged_hypotheses"] == [3, 7, 11] and s1["P1"]["mirror_hypotheses"] == [4, 8, 12]
+    assert s1["P2"]["mirror_hypotheses"] == []
+    # a sensor at the origin cannot tell passages mirrored about either axis; one on an axis, about that axis
+    groups = {(r["sensor"], r["channel"]): r["identical_passages"] for r in s1["symmetry_table"]}
+    for ch in ("ex", "ey", "ez"):
+        assert groups[("(0,0)", ch)] == [[1, 2, 3, 4]]
+        assert groups[("(0,5)", ch)] == [[1, 2], [3, 4]] and groups[("(5,0)", ch)] == [[1, 4], [2, 3]]
     # the project's tracker (global initialiser + the scenario's unit) tracks S0 and S1-P2 to a few metres
     assert s0["global_init"]["final_error_median_m"] < 3.0 and s0["global_init"]["convergence_rate"] == 1.0
     assert s1["P2_global_init"]["final_error_median_m"] < 3.0 and s1["P2_global_init"]["convergence_rate"] == 1.0

@@ -12,13 +12,37 @@ from shipsense.reproduce.common import Output, Stages, bank_summary, bar_charts,
 from shipsense.simulator import simulate
 from shipsense.trackers.bank import run_bank
 from shipsense.trackers.filters import get_filter
-from shipsense.trackers.metrics import rmse_k
+from shipsense.trackers.metrics import converged, rmse_k
 from shipsense.trackers.models import model_from_scenario
 from shipsense.trackers.seeding import seed_hypotheses
 
 SYMMETRY_SENSORS = ((0.0, 5.0), (0.0, 0.0), (5.0, 0.0))
 SYMMETRY_BEARINGS = (np.pi / 4, 3 * np.pi / 4, 5 * np.pi / 4, 7 * np.pi / 4)
 AMBIGUOUS_RUN_FRACTION = 0.5
+HYPOTHESIS_RUN_FRACTION = 0.5   # a hypothesis "converges" (or "reaches the mirror") in at least half the runs
+
+
+def mirror_truth(truth, positions):
+    """The passages ``truth`` (R, K, n) reflected across the line through the sensors ``positions`` (S, 2)
+    (their principal axis): positions and velocities mirrored, the other states unchanged."""
+    c = positions.mean(axis=0)
+    _, _, vt = np.linalg.svd(positions - c)
+    d = vt[0]
+    M = 2.0 * np.outer(d, d) - np.eye(2)
+    out = truth.copy()
+    out[..., 0:2] = c + (truth[..., 0:2] - c) @ M.T
+    out[..., 2:4] = truth[..., 2:4] @ M.T
+    return out
+
+
+def hypothesis_rates(bank, truth, positions):
+    """Per hypothesis (1-based, level-major as the study numbers them): the share of runs in which it
+    converges to the truth and to the truth's mirror image across the sensors' line."""
+    mirror = mirror_truth(truth, positions)
+    H = bank.means.shape[1]
+    conv = [float(np.mean(converged(bank.means[:, h], truth))) for h in range(H)]
+    mirr = [float(np.mean(converged(bank.means[:, h], mirror))) for h in range(H)]
+    return conv, mirr
 
 
 def symmetry_table(sc, o):
@@ -83,6 +107,11 @@ def bank_for(sc, runs, seed, unit, o=None, tag=None, chain=None):
             counts[(i, j)] = counts.get((i, j), 0) + 1
     summ["ambiguous_pairs"] = sorted([list(k) for k, v in counts.items() if v >= AMBIGUOUS_RUN_FRACTION * runs])
     summ["ambiguous_run_fraction"] = float(np.mean([bool(p) for p in amb]))
+    conv, mirr = hypothesis_rates(b, truth, model.array.positions[:, :2])
+    for h, (c, m) in enumerate(zip(conv, mirr)):
+        summ["hypotheses"][h].update(convergence_rate=c, mirror_rate=m)
+    summ["converged_hypotheses"] = [h + 1 for h, c in enumerate(conv) if c >= HYPOTHESIS_RUN_FRACTION]
+    summ["mirror_hypotheses"] = [h + 1 for h, m in enumerate(mirr) if m >= HYPOTHESIS_RUN_FRACTION]
     if o is not None:
         bar_charts(o, f"{tag}_bars.png", f"S1 {tag}: per-hypothesis TRMSE and likelihood ({runs} runs)",
                    summ["hypotheses"])
@@ -104,9 +133,10 @@ def run(runs=100, out="results/S1", seed=0, progress=True):
         summ, b, truth = bank_for(sc, runs, seed, unit, o, tag)
         result[tag] = summ
         curves[f"{tag} selected"] = rmse_k(b.selected_means, truth)
-        o.csv(f"{tag}_hypotheses.csv", ["hypothesis", "range_m", "bearing_rad", "trmse_m", "mean_loglik"],
-              [[i, h["range_m"], h["bearing_rad"], h["trmse_m"], h["mean_loglik"]]
-               for i, h in enumerate(summ["hypotheses"])])
+        o.csv(f"{tag}_hypotheses.csv", ["hypothesis", "range_m", "bearing_from_x_rad", "trmse_m", "mean_loglik",
+                                        "convergence_rate", "mirror_rate"],
+              [[i + 1, h["range_m"], h["bearing_rad"], h["trmse_m"], h["mean_loglik"], h["convergence_rate"],
+                h["mirror_rate"]] for i, h in enumerate(summ["hypotheses"])])
         st.done()
     rmse_plot(o, "P1_vs_P2_rmse.png", f"S1 exp. 2: selected estimate, {unit.name} (N_pu = {p2.tracker.n_pu})",
               p2.times, curves)
