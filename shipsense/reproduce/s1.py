@@ -105,7 +105,8 @@ def bank_for(sc, runs, seed, unit, o=None, tag=None, chain=None):
     for pairs in amb:
         for i, j, _, _ in pairs:
             counts[(i, j)] = counts.get((i, j), 0) + 1
-    summ["ambiguous_pairs"] = sorted([list(k) for k, v in counts.items() if v >= AMBIGUOUS_RUN_FRACTION * runs])
+    summ["ambiguous_pairs"] = sorted([[i + 1, j + 1] for (i, j), v in counts.items()     # 1-based, as the study
+                                      if v >= AMBIGUOUS_RUN_FRACTION * runs])
     summ["ambiguous_run_fraction"] = float(np.mean([bool(p) for p in amb]))
     conv, mirr = hypothesis_rates(b, truth, model.array.positions[:, :2])
     for h, (c, m) in enumerate(zip(conv, mirr)):
