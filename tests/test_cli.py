@@ -127,6 +127,11 @@ def test_reproduce_writes_the_documented_summary_keys(tmp_path):
     assert set(s2["one_vs_two"]["ekf"]) >= {"one_mrmse_r_m", "two_mrmse_r_m"}
     assert set(s2["outliers"]["0.1"]) == {"ukf_mrmse_r_m", "huber_ukf_mrmse_r_m"}
     assert {"magnetic_only_mrmse_r_m", "fused_mrmse_r_m"} <= set(s2["seismic_low_snr"])
+    # the study's outlier ordering: the Huber UKF (its Figure 4 filter) beats the UKF once there are outliers
+    assert s2["seismic_low_snr"]["filter"] == "huber_ukf"
+    assert all(s2["outliers"][e]["huber_ukf_mrmse_r_m"] < s2["outliers"][e]["ukf_mrmse_r_m"] for e in ("0.1", "0.2"))
+    low = s2["seismic_low_snr"]
+    assert low["with_outliers"]["magnetic_only_mrmse_r_m"] < low["ukf"]["with_outliers"]["magnetic_only_mrmse_r_m"]
     assert main(["reproduce", "S9"]) == 2
 
 
