@@ -114,8 +114,10 @@ def test_puekf_with_one_sub_update_is_the_ekf(s0):
     sim, model, _, x0, P0 = s0
     a = run_filter("ekf", model, sim.measurements, x0, P0)
     b = run_filter(get_filter("puekf", n_pu=1), model, sim.measurements, x0, P0)
-    np.testing.assert_allclose(b.means, a.means, rtol=1e-12, atol=1e-9)
-    np.testing.assert_allclose(b.loglik, a.loglik, rtol=1e-12)
+    # the same update computed in another order: over 300 steps with S0's Q (0.1 (A·m²)² on moments of 1e7,
+    # a nearly singular moment block) rounding grows to ~2e-11 relative, and differs between BLAS builds
+    np.testing.assert_allclose(b.means, a.means, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(b.loglik, a.loglik, rtol=1e-9)
     c = run_filter(get_filter("puekf", n_pu=5), model, sim.measurements, x0, P0)
     assert not np.allclose(c.means, a.means)  # the sub-updates do something on a nonlinear model
 
