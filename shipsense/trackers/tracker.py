@@ -69,6 +69,7 @@ STATUSES = ("no data", "initialising", "tracking", "restarted", "inconsistent")
 """Status names, indexed by the status codes of :class:`TrackResult`."""
 NO_DATA, INITIALISING, TRACKING, RESTARTED, INCONSISTENT = range(5)
 _WAITING, _STARTING, _RUNNING = 0, 1, 2   # phases of a passage
+BANK_INFLATION_MAX = 100.0   # largest chi-square inflation a failed fit's bank starts from (the rest is reported)
 
 
 @dataclass(frozen=True)
@@ -251,6 +252,8 @@ class Tracker:
         self.window = max(4, int(round(opts.window_s / sc.period)))
         self._grid = _grid(sc)
         self._prior = prior_belief(self.model, sc, self.bank_config)
+        self._prior_info = np.diag(np.outer(self.model.x_scale, self.model.x_scale).diagonal()
+                                   / np.diag(self._prior[1]))                 # internal units
         self.reset(passages)
 
     labels = property(lambda self: self.model.labels, doc="State component names.")
@@ -270,6 +273,7 @@ class Tracker:
         self.peak = np.zeros(P)
         self.start = np.zeros(P, dtype=int)
         self.trusted = np.ones(P, dtype=bool)
+        self.excess = np.ones(P)               # reported / bank covariance of a failed fit (see _start_banks)
         self.alarms = np.zeros(P, dtype=int)
         self.restarts = np.zeros(P, dtype=int)
         self.peak_done = np.zeros(P, dtype=bool)
@@ -292,7 +296,8 @@ class Tracker:
         """Start passages ``passages`` (indices) over, leaving the others as they are."""
         idx = np.asarray(passages, dtype=int)
         for name, value in (("n", 0), ("phase", _WAITING), ("last_t", np.nan), ("k0", -1), ("peak", 0.0),
-                            ("start", 0), ("trusted", True), ("alarms", 0), ("restarts", 0), ("peak_done", False),
+                            ("start", 0), ("trusted", True), ("excess", 1.0), ("alarms", 0), ("restarts", 0),
+                            ("peak_done", False),
                             ("ref", np.nan), ("nis", np.nan), ("snr", np.nan), ("win", np.nan), ("win_t0", np.nan),
                             ("y_hist", np.nan), ("t_hist", np.nan), ("own", np.nan)):
             getattr(self, name)[idx] = value
@@ -433,7 +438,7 @@ class Tracker:
             cov = mixture_mse(w, means, covs, best[:, None])
         else:
             cov = covs[pick, sel]
-        out.estimate[runs], out.cov[runs] = best, _symmetric(cov)
+        out.estimate[runs], out.cov[runs] = best, _symmetric(cov) * self.excess[runs, None, None]
         self.own[runs] = np.trace(covs[pick, sel, :2, :2], axis1=-2, axis2=-1)
         out.status[runs] = np.where(self.trusted[runs], TRACKING, INCONSISTENT)
         self._selection(runs, means, cum, out)
@@ -513,9 +518,18 @@ class Tracker:
         it; a fit that fails its test has its covariance inflated by its chi-square over the expected."""
         H, xs = self._H, self.model.x_scale
         A = transitions(self.model, tau)                                               # (R, n, n)
-        birge = np.maximum(1.0, fits.chi2[:, :1] / np.maximum(fits.expected[:, None], 1e-300))
-        cov = np.linalg.pinv(fits.info, hermitian=True) * (inflate * self.kappa) * np.where(
-            fits.fit_ok[:, None], 1.0, birge)[..., None, None]
+        birge = np.where(fits.fit_ok[:, None], 1.0,
+                         np.maximum(1.0, fits.chi2[:, :1] / np.maximum(fits.expected[:, None], 1e-300)))
+        # the bank starts from at most BANK_INFLATION_MAX times the fit's covariance (a nonlinear filter
+        # started from a covariance 1e6 times too wide throws its sigma points far outside the model's
+        # domain: measured, a one-magnetometer passage went to 1e23 m); the rest of the inflation is
+        # reported on top of the bank's covariance until a fit passes
+        bank_birge = np.minimum(birge, BANK_INFLATION_MAX)
+        self.excess[runs] = (birge / bank_birge)[:, 0]
+        # no start is wider than the passage prior: the fit's information plus the prior's (a weak fit -- the
+        # range-moment trade-off of one magnetometer -- otherwise starts a bank kilometres wide)
+        scale = (inflate * self.kappa) * bank_birge[..., None, None]
+        cov = _symmetric(np.linalg.inv(fits.info / scale + self._prior_info))
         seeds = np.einsum("rij,rmj->rmi", A, fits.theta)
         P0 = A[:, None] @ cov @ np.swapaxes(A, -1, -2)[:, None]
         loglik = fits.loglik

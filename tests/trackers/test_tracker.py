@@ -156,3 +156,19 @@ def test_passages_step_and_start_over_on_their_own(s2):
     assert tr.n.tolist() == [0, K - 10]
     s = tr.update(t[:1], y[0:1, 0], passages=[0])
     assert s.status[0] == INITIALISING and _close(s.estimate, res.estimates[0:1, 0], 1e-12)
+
+
+def test_a_weak_window_fit_does_not_start_a_bank_wider_than_the_prior():
+    """A one-magnetometer passage of the wide-prior study whose window fit hardly tells range from moment: its
+    covariance was kilometres wide, the SRCDKF's sigma points left the model's domain and the track went to
+    1e23 m.  The bank now starts from the fit's information plus the passage prior's, so the estimate stays
+    within the prior's reach and the passage is tracked to the end."""
+    from shipsense.reproduce import wide
+
+    sc, model, unit, y, truth, ends = wide.family_passages("one_magnetometer", 500, 0)
+    tr = Tracker(sc, passages=1, sensors=list(model.array.ids), unit=unit.name,
+                 **wide.init_options("one_magnetometer", sc))
+    res = tr.track(sc.times[: y.shape[1]], y[394:395])
+    err = np.hypot(*(res.estimates[0, : ends[394], :2] - truth[394, : ends[394], :2]).T)
+    assert err.max() < 500.0 and err[-10:].max() < 1.0, (err.max(), err[-10:])
+    assert np.isfinite(res.covs).all()
