@@ -13,7 +13,8 @@ batch, the pipeline of this package one sample at a time:
    (:func:`~shipsense.trackers.initialiser.window_fits`: grid search with the
    moment eliminated, Levenberg-Marquardt refinement, a chi-square test);
    until then the reported belief is the prior's (the array centroid with the
-   passage prior's spread: honest, not informative);
+   passage prior's spread: honest, not informative); a bank starts from a
+   fit's information plus that prior's, so never wider than the prior;
 3. **tracking**: a bank of the distinct fits (filter unit ``ukf``, or the
    Huber UKF when ``robust``), without process noise -- the passages are
    straight and constant-velocity -- restarted from batch refits of its
