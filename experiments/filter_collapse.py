@@ -29,9 +29,25 @@ from shipsense.trackers.bank import run_bank
 from shipsense.trackers.filters import get_filter
 from shipsense.trackers.initialiser import global_init
 from shipsense.trackers.models import model_from_scenario
-from shipsense.trackers.restarts import _fit_at_last, refit_at
+from shipsense.trackers.restarts import refit_at
+from shipsense.trackers.selection import mixture_mse
 from shipsense.trackers.studies import track_with_global_init
 
+
+def fit_at_last(model, gi, inv_A, mixture):
+    """A refit's estimate (R, n) and position covariance (R, 2, 2) (SI) at its last fitted sample ``gi.start - 1``:
+    the best hypothesis, and its covariance or (``mixture``) its mean-square-error matrix under the
+    hypotheses' likelihood weights."""
+    xs = model.x_scale
+    x = np.einsum("ij,rhj->rhi", inv_A, gi.seeds / xs) * xs                             # (R, H, n)
+    P = inv_A @ (gi.P0 / np.outer(xs, xs)) @ inv_A.T * np.outer(xs, xs)
+    best = np.argmax(gi.loglik, axis=1)
+    rows = np.arange(len(best))
+    if not mixture:
+        return x[rows, best], P[rows, best, :2, :2]
+    w = np.exp(gi.loglik - gi.loglik[rows, best][:, None])
+    w /= w.sum(axis=1, keepdims=True)
+    return x[rows, best], mixture_mse(w, x[..., :2], P[..., :2, :2], x[rows, best][:, None, :2])
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -56,7 +72,7 @@ def main(argv=None):
     rows = {"batch fit": []}
     inv_A = np.linalg.inv(model.A)
     for k in ks:   # the fit of samples up to k, at k (the refit for a bank from k + 1, at its last sample)
-        x, P = _fit_at_last(model, refit_at(model, y, gi, est, np.array([k + 1])), inv_A, mixture=False)
+        x, P = fit_at_last(model, refit_at(model, y, gi, est, np.array([k + 1])), inv_A, mixture=False)
         rows["batch fit"].append((sd(P[0]), np.hypot(*(x[0, :2] - truth[0, k, :2]))))
     fit = refit_at(model, y, gi, est, np.array([args.at]))
     for name in ("ekf", "ukf", "ckf", "cdkf"):

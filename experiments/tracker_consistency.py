@@ -46,6 +46,7 @@ from pathlib import Path
 import numpy as np
 
 from shipsense import load_scenario, simulate
+from shipsense.sweep.evaluate import crlb_position_trace
 from shipsense.trackers import Tracker
 from shipsense.trackers.metrics import converged_until, passage_ends
 
@@ -59,18 +60,6 @@ CHUNK = 100
 def scenario(family, condition):
     sc = load_scenario(FAMILIES[family][0])
     return sc.with_updates(noise=FAULTY) if condition == "faulty" else sc
-
-
-def crlb_trace(tracker, truth):
-    """Position CRLB trace (R, K) of constant-velocity passages with the bank's initial spread as prior."""
-    from shipsense.design.fisher import pcrlb
-
-    model, b = tracker.model, tracker.bank_config
-    std = {"x": b.position_std, "y": b.position_std, "vx": b.velocity_std, "vy": b.velocity_std, "mx": b.moment_std,
-           "my": b.moment_std, "mz": b.moment_std, "z": b.z_std, "p": b.p_std}
-    J0 = np.diag((np.array([std[c] for c in model.labels]) / model.x_scale) ** -2.0)
-    bound = pcrlb(model, model.to_internal(truth), J0, per_run=True, Q=np.zeros_like(model.Q))
-    return bound[..., 0, 0] * model.x_scale[0] ** 2 + bound[..., 1, 1] * model.x_scale[1] ** 2
 
 
 def chunk_stats(family, condition, method, seed, passages):
@@ -98,7 +87,7 @@ def chunk_stats(family, condition, method, seed, passages):
     with np.errstate(invalid="ignore"):
         q = np.einsum("pki,pkij,pkj->pk", d, np.linalg.inv(np.where(np.isfinite(P), P, np.eye(2))), d)
     q = np.where(np.isfinite(P).all(axis=(-1, -2)), q, np.inf)
-    bound = crlb_trace(tr, truth)
+    bound = crlb_position_trace(sc, tr.model, truth)
     c = tr.model.array.positions[:, :2].mean(axis=0)
     closest = np.argmin(np.hypot(truth[..., 0] - c[0], truth[..., 1] - c[1]), axis=1)
     return {"converged": conv, "approach": closest < K - 1, "post_sq": np.where(post, err**2, 0.0).sum(1),

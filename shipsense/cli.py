@@ -263,9 +263,7 @@ def cmd_design(args) -> int:
                             random=sc.prior is not None)
     thetas = model.to_internal(model.state_from_truth(truth))
     _, b = study_bank(sc)
-    std = {"x": b.position_std, "y": b.position_std, "vx": b.velocity_std, "vy": b.velocity_std,
-           "mx": b.moment_std, "my": b.moment_std, "mz": b.moment_std, "z": b.z_std, "p": b.p_std}
-    prior_std = model.to_internal(np.array([std[c] for c in model.labels]))
+    prior_std = model.to_internal(b.state_std(model.labels))
     bar = _progress(2, f"design: {len(cands)} candidates x {len(thetas)} passages")
     problem = build_problem(model, thetas, sc.steps, args.k, prior_std)
     if (costs is None) != (args.budget is None):

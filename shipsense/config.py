@@ -251,6 +251,13 @@ class BankConfig(_Model):
     ambiguity_distance: Positive = Field(20.0, description="Near-ties farther apart than this (m) are ambiguous.")
     divergence_window: Annotated[int, Field(ge=2)] = 10
 
+    def state_std(self, labels):
+        """The hypotheses' initial standard deviations (SI) of the state components named ``labels``."""
+        std = {"x": self.position_std, "y": self.position_std, "vx": self.velocity_std, "vy": self.velocity_std,
+               "mx": self.moment_std, "my": self.moment_std, "mz": self.moment_std, "z": self.z_std,
+               "p": self.p_std}
+        return np.array([std[c] for c in labels])
+
 
 class TrackerConfig(_Model):
     """The tracker: the source study's filter, process noise and bank (``shipsense track --method bank``), and

@@ -39,10 +39,9 @@ def hypothesis_rates(bank, truth, positions):
     """Per hypothesis (1-based, level-major as the study numbers them): the share of runs in which it
     converges to the truth and to the truth's mirror image across the sensors' line."""
     mirror = mirror_truth(truth, positions)
-    H = bank.means.shape[1]
-    conv = [float(np.mean(converged(bank.means[:, h], truth))) for h in range(H)]
-    mirr = [float(np.mean(converged(bank.means[:, h], mirror))) for h in range(H)]
-    return conv, mirr
+    conv = converged(bank.means, truth[:, None]).mean(axis=0)          # (H,): every hypothesis at once
+    mirr = converged(bank.means, mirror[:, None]).mean(axis=0)
+    return conv.tolist(), mirr.tolist()
 
 
 def symmetry_table(sc, o):

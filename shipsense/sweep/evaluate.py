@@ -128,9 +128,7 @@ def crlb_position_trace(sc, model, truth):
     from shipsense.trackers.bank import study_bank
 
     _, bank = study_bank(sc)
-    std = {"x": bank.position_std, "y": bank.position_std, "vx": bank.velocity_std, "vy": bank.velocity_std,
-           "mx": bank.moment_std, "my": bank.moment_std, "mz": bank.moment_std, "z": bank.z_std, "p": bank.p_std}
-    J0 = np.diag((np.array([std[c] for c in model.labels]) / model.x_scale) ** -2.0)
+    J0 = np.diag((bank.state_std(model.labels) / model.x_scale) ** -2.0)
     b = pcrlb(model, model.to_internal(truth), J0, per_run=True, Q=np.zeros_like(model.Q))
     return b[..., 0, 0] * model.x_scale[0] ** 2 + b[..., 1, 1] * model.x_scale[1] ** 2
 

@@ -1,4 +1,4 @@
-"""Batch refits of tracked passages, and a tracker that restarts its bank from them.
+"""Batch refits of tracked passages: the restarts of :class:`~shipsense.trackers.Tracker`'s bank.
 
 The passages the trackers are built for are straight, constant-velocity
 tracks with a constant source: everything up to sample ``k`` is one initial
@@ -7,27 +7,16 @@ Levenberg–Marquardt fit of it to every sample so far is the maximum-
 likelihood (with a prior, MAP) estimate of those data.  A recursive filter
 instead linearises each sample once, at the estimate of its time; where the
 field is most nonlinear -- the closest approach -- it can keep a track
-metres off with a covariance of centimetres.  :func:`track_with_restarts`
-therefore runs the bank and restarts it from a refit when
-
-* the signal has fallen to ``through_peak`` of its peak (once, after the
-  closest approach: :func:`~shipsense.trackers.initialiser.refit_after_peak`), or
-* the selected hypothesis's innovations say it has diverged: its normalised
-  innovation squared per measurement component, averaged over
-  ``nis_window`` samples, exceeds ``nis_limit`` (trackers.md §3's
-  divergence flag, acted on),
-* every ``refit_every`` samples until the refit after the closest approach,
-* its covariance collapses: within ``nis_window`` samples of a refit it
-  falls below ``collapse`` of the fit's, more than the samples can carry.
-
-A refit keeps up to ``keep`` distinct fits (also started from the bank's
+metres off with a covariance of centimetres.  The tracker therefore restarts
+its bank from :func:`refit_window` (when, see :mod:`shipsense.trackers.tracker`):
+a refit keeps up to ``keep`` distinct fits (also started from the bank's
 hypotheses that still carry weight) as the next bank's hypotheses, weighted
-by their likelihoods, and the tracker reports the selected estimate's
-mean-square error under that mixture: when a passage 20 m away explains the
-data almost as well, the covariance says so.
+by their likelihoods.  Every refit uses only the samples before the restart
+(causal), and all passages that restart together are one batch.
 
-Every refit uses only the samples before the restart (causal), and all
-passages that restart together are one batch.
+:func:`refit_at` and :func:`peak_refit_sample` are the batch form of one
+refit after the closest approach, used by the studies' ``global_init_refit``
+method (:mod:`shipsense.trackers.studies`).
 """
 
 from __future__ import annotations
@@ -36,7 +25,6 @@ import numpy as np
 
 from shipsense.trackers.batchfit import fit_passages, powers, transitions
 from shipsense.trackers.initialiser import GlobalInit, WindowFits, chi2_expected, chi2_limit, distinct_rows, fit_end
-from shipsense.trackers.selection import mixture_mse
 
 
 def refit_window(model, yw, starts, *, taus=None, prior=None, keep=1, distinct_m=15.0, gof=0.01, huber=None):
@@ -158,27 +146,3 @@ def peak_refit_sample(model, measurements, k0, start, through_peak=0.5):
     start = np.asarray(start, dtype=int)
     end = np.minimum(fit_end(model, measurements, k0, start - np.asarray(k0), through_peak), K - 1)
     return np.where(end > start, end, K - 1)
-
-
-
-
-
-
-
-
-
-
-def _fit_at_last(model, gi, inv_A, mixture):
-    """A refit's estimate (R, n) and position covariance (R, 2, 2) (SI) at its last fitted sample ``gi.start - 1``:
-    the best hypothesis, and its covariance or (``mixture``) its mean-square-error matrix under the
-    hypotheses' likelihood weights."""
-    xs = model.x_scale
-    x = np.einsum("ij,rhj->rhi", inv_A, gi.seeds / xs) * xs                             # (R, H, n)
-    P = inv_A @ (gi.P0 / np.outer(xs, xs)) @ inv_A.T * np.outer(xs, xs)
-    best = np.argmax(gi.loglik, axis=1)
-    rows = np.arange(len(best))
-    if not mixture:
-        return x[rows, best], P[rows, best, :2, :2]
-    w = np.exp(gi.loglik - gi.loglik[rows, best][:, None])
-    w /= w.sum(axis=1, keepdims=True)
-    return x[rows, best], mixture_mse(w, x[..., :2], P[..., :2, :2], x[rows, best][:, None, :2])

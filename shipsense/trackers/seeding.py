@@ -91,14 +91,10 @@ def seed_hypotheses(model, y, bank, source_z=None):
         x0[..., 2:4] = speed * heading / np.where(norm > 0, norm, 1.0)
     else:
         x0[..., 2:4] = bank.initial_velocity
-    std = [bank.position_std] * 2 + [bank.velocity_std] * 2
-    labels = model.labels
-    if "mx" in labels:
-        std += [bank.moment_std] * 3                                       # moment starts at zero
+    labels = model.labels                                                  # a moment starts at zero
     if "z" in labels:
         iz = labels.index("z")
         x0[..., iz] = model.source_z if source_z is None else source_z
         # electric levels seed p; in a fused (magnetic + electric) model the levels are magnetic
         x0[..., iz + 1] = bank.p_initial if "mx" in labels else np.repeat(np.asarray(bank.levels, dtype=float), L)
-        std += [bank.z_std, bank.p_std]
-    return x0, np.diag(np.square(std))
+    return x0, np.diag(np.square(bank.state_std(labels)))

@@ -61,6 +61,7 @@ import numpy as np
 from shipsense.trackers.bank import BankState
 from shipsense.trackers.batchfit import Huber, transitions
 from shipsense.trackers.filters import get_filter
+from shipsense.trackers.filters._core import symmetrize
 from shipsense.trackers.initialiser import depth_prior, strongest_snr, window_fits
 from shipsense.trackers.restarts import refit_window
 from shipsense.trackers.seeding import seed_hypotheses
@@ -253,8 +254,7 @@ class Tracker:
         self.window = max(4, int(round(opts.window_s / sc.period)))
         self._grid = _grid(sc)
         self._prior = prior_belief(self.model, sc, self.bank_config)
-        self._prior_info = np.diag(np.outer(self.model.x_scale, self.model.x_scale).diagonal()
-                                   / np.diag(self._prior[1]))                 # internal units
+        self._prior_info = np.diag(self.model.x_scale ** 2 / np.diag(self._prior[1]))   # internal units
         self.reset(passages)
 
     labels = property(lambda self: self.model.labels, doc="State component names.")
@@ -265,30 +265,12 @@ class Tracker:
         P = int(passages if passages is not None else self.P)
         if P < 1:
             raise ValueError(f"passages must be at least 1, got {passages}")
-        m, n, H = self.model.m, self.model.n, self._H
+        n, H = self.model.n, self._H
         self.P = P
-        self.n = np.zeros(P, dtype=int)        # samples seen per passage: the index of the next one
-        self.phase = np.zeros(P, dtype=np.int8)
-        self.last_t = np.full(P, np.nan)
-        self.k0 = np.full(P, -1)
-        self.peak = np.zeros(P)
-        self.start = np.zeros(P, dtype=int)
-        self.trusted = np.ones(P, dtype=bool)
-        self.excess = np.ones(P)               # reported / bank covariance of a failed fit (see _start_banks)
-        self.alarms = np.zeros(P, dtype=int)
-        self.restarts = np.zeros(P, dtype=int)
-        self.peak_done = np.zeros(P, dtype=bool)
-        self.ref = np.full(P, np.nan)
-        self.nis = np.full((P, self.options.nis_window), np.nan)
-        self.snr = np.full((P, 3), np.nan)
-        self.win = np.full((P, self.options.keep_init, n), np.nan)     # window fits at k0 (internal)
-        self.win_t0 = np.full(P, np.nan)
-        hist = self.options.history if self.options.method == "tracker" else 1
-        self.y_hist = np.full((P, hist, m), np.nan)
-        self.t_hist = np.full((P, hist), np.nan)
+        for name, (shape, dtype, value) in self._state_fields().items():
+            setattr(self, name, np.full((P, *shape), value, dtype=dtype))
         self.gaps = []
         self.seconds = {"initialiser": 0.0, "refits": 0.0}   # time spent in window fits and in refits
-        self.own = np.full(P, np.nan)          # trace of the selected hypothesis's own position covariance
         self.bank = BankState(self.unit, self.filter_model, np.broadcast_to(self._prior[0], (P, H, n)),
                               self._prior[1])
         return self
@@ -296,15 +278,37 @@ class Tracker:
     def reset_passages(self, passages):
         """Start passages ``passages`` (indices) over, leaving the others as they are."""
         idx = np.asarray(passages, dtype=int)
-        for name, value in (("n", 0), ("phase", _WAITING), ("last_t", np.nan), ("k0", -1), ("peak", 0.0),
-                            ("start", 0), ("trusted", True), ("excess", 1.0), ("alarms", 0), ("restarts", 0),
-                            ("peak_done", False),
-                            ("ref", np.nan), ("nis", np.nan), ("snr", np.nan), ("win", np.nan), ("win_t0", np.nan),
-                            ("y_hist", np.nan), ("t_hist", np.nan), ("own", np.nan)):
+        for name, (_, _, value) in self._state_fields().items():
             getattr(self, name)[idx] = value
         H, n = self._H, self.model.n
         self.bank.reset_runs(idx, np.broadcast_to(self._prior[0], (idx.size, H, n)), self._prior[1])
         return self
+
+    def _state_fields(self):
+        """Per-passage state: name -> (shape after the passage axis, dtype, value at a passage's start)."""
+        m, n = self.model.m, self.model.n
+        hist = self.options.history if self.options.method == "tracker" else 1
+        return {
+            "n": ((), int, 0),                      # samples seen: the index of the next one
+            "phase": ((), np.int8, _WAITING),
+            "last_t": ((), float, np.nan),
+            "k0": ((), int, -1),                    # detection sample (-1: none yet)
+            "peak": ((), float, 0.0),
+            "start": ((), int, 0),                  # sample the bank (re)started at
+            "trusted": ((), bool, True),            # the last fit passed its test
+            "excess": ((), float, 1.0),             # reported / bank covariance of a failed fit (_start_banks)
+            "alarms": ((), int, 0),
+            "restarts": ((), int, 0),
+            "peak_done": ((), bool, False),
+            "ref": ((), float, np.nan),             # position covariance trace at the last (re)start
+            "nis": ((self.options.nis_window,), float, np.nan),
+            "snr": ((3,), float, np.nan),
+            "win": ((self.options.keep_init, n), float, np.nan),   # window fits at k0 (internal)
+            "win_t0": ((), float, np.nan),
+            "y_hist": ((hist, m), float, np.nan),
+            "t_hist": ((hist,), float, np.nan),
+            "own": ((), float, np.nan),             # trace of the selected hypothesis's own position covariance
+        }
 
     @property
     def _H(self):
@@ -421,7 +425,7 @@ class Tracker:
         self.nis[runs, -1] = nis[np.arange(runs.size), sel]
         self._report(runs, out)
 
-    def _report(self, runs, out, cov_scale=None):
+    def _report(self, runs, out):
         """Selected estimate, its mixture mean-square error (tracker) or own covariance (bank), and the
         selection figures of passages ``runs``."""
         H, n = self._H, self.model.n
@@ -439,7 +443,7 @@ class Tracker:
             cov = mixture_mse(w, means, covs, best[:, None])
         else:
             cov = covs[pick, sel]
-        out.estimate[runs], out.cov[runs] = best, _symmetric(cov) * self.excess[runs, None, None]
+        out.estimate[runs], out.cov[runs] = best, symmetrize(cov) * self.excess[runs, None, None]
         self.own[runs] = np.trace(covs[pick, sel, :2, :2], axis1=-2, axis2=-1)
         out.status[runs] = np.where(self.trusted[runs], TRACKING, INCONSISTENT)
         self._selection(runs, means, cum, out)
@@ -530,7 +534,7 @@ class Tracker:
         # no start is wider than the passage prior: the fit's information plus the prior's (a weak fit -- the
         # range-moment trade-off of one magnetometer -- otherwise starts a bank kilometres wide)
         scale = (inflate * self.kappa) * bank_birge[..., None, None]
-        cov = _symmetric(np.linalg.inv(fits.info / scale + self._prior_info))
+        cov = symmetrize(np.linalg.inv(fits.info / scale + self._prior_info))
         seeds = np.einsum("rij,rmj->rmi", A, fits.theta)
         P0 = A[:, None] @ cov @ np.swapaxes(A, -1, -2)[:, None]
         loglik = fits.loglik
@@ -607,10 +611,6 @@ class Tracker:
         self.seconds["refits"] += time.perf_counter() - t0
         self._start_banks(runs, fits, taus[:, -1], 1.0, out)
         out.status[runs] = np.where(fits.fit_ok, RESTARTED, INCONSISTENT)
-
-
-def _symmetric(P):
-    return 0.5 * (P + np.swapaxes(P, -1, -2))
 
 
 def _grid(sc):
