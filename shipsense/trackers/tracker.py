@@ -26,7 +26,10 @@ batch, the pipeline of this package one sample at a time:
    **restarted**; a fit that fails its goodness-of-fit test makes the status
    **inconsistent** and its covariance is inflated by the ratio of its
    chi-square to the expected (never NaN), and it is re-fitted every
-   ``nis_window`` samples until one passes.  A refit after an alarm (divergence
+   ``nis_window`` samples until one passes; while a passage is inconsistent
+   its reported covariance also holds the passage prior's spread (the model
+   does not explain its data, so its estimate may be anywhere the prior
+   allows).  A refit after an alarm (divergence
    or a failed fit) also starts from the global initialiser's fits of every
    sample since the detection, so it can leave a wrong track that a local
    refit would stay near (measured with 20 % outliers on two magnetometers:
@@ -357,6 +360,11 @@ class Tracker:
             self._initialise(starting, snr, out)
             if running.size:
                 self._restart(running, snr, out)
+        # a failed fit or a diverged bank: the model does not explain the data, so the estimate is located no
+        # better than the passage prior says (its spread is added: an inconsistent track's own covariance was
+        # centimetres to metres while it was 20-150 m off, EXPERIMENTS.md)
+        bad = act[out.status[act] == INCONSISTENT]
+        out.cov[bad] += self._prior[1]
         self.last_t[act] = t
         self.n[act] += 1
         return out if passages is None else Sample(*(getattr(out, f)[act] for f in Sample.__dataclass_fields__))
