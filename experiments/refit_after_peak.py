@@ -52,7 +52,8 @@ def main(argv=None):
                                  prior=depth_prior(model, opts.get("z_std"))).start
     else:
         t0 = time.perf_counter()
-        est2, cov2, _, restarts, tr = track_restarting(unit, model, y, sc, **opts)
+        res, _, restarts, tr = track_restarting(unit, model, y, sc, **opts)
+        est2, cov2 = res.estimates, res.position_cov
         print(f"tracker: {(time.perf_counter() - t0) / args.runs:.4f} s per passage, "
               f"restarts per passage {np.bincount(restarts)} (count of passages with 0, 1, ...)")
         start = peak_refit_sample(model, y, tr.k0, tr.k0 + tr.window, wide.REFIT_PEAK)

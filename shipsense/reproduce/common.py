@@ -178,18 +178,19 @@ def track_global(unit, model, y, sc, *, refit_peak=None, return_init=False, **op
 
 def track_restarting(unit, model, y, sc, **options):
     """The project's tracker (:class:`~shipsense.trackers.Tracker`) on passages ``y`` (R, K, m) of scenario
-    ``sc`` (the sensors of ``model``), with the filter ``unit`` and initialiser ``options`` (``snr_start``,
-    ``refine``, ``explore_samples``, ``z_std``).
+    ``sc`` (the sensors of ``model``), with the filter ``unit`` (None: the tracker's own, as users get it) and
+    initialiser ``options`` (``snr_start``, ``refine``, ``explore_samples``, ``z_std``).
 
-    Returns estimates (R, K, n) SI, position covariances (R, K, 2, 2), the seconds per passage spent in the
-    initialiser's window fits, the restarts per passage (R,) and the tracker (its state after the last sample:
-    e.g. ``k0``, the detection of each passage).
+    Returns the :class:`~shipsense.trackers.tracker.TrackResult` (estimates, covariances and status per
+    sample, SI), the seconds per passage spent in the initialiser's window fits, the restarts per passage
+    (R,) and the tracker (its state after the last sample: e.g. ``k0``, the detection of each passage).
     """
     from shipsense.trackers import Tracker
 
-    tr = Tracker(sc, passages=len(y), sensors=list(model.array.ids), unit=unit.name, **options)
+    kw = {} if unit is None else {"unit": unit.name}
+    tr = Tracker(sc, passages=len(y), sensors=list(model.array.ids), **kw, **options)
     res = tr.track(sc.times[: y.shape[1]], y)
-    return res.estimates, res.position_cov, tr.seconds["initialiser"], tr.restarts, tr
+    return res, tr.seconds["initialiser"], tr.restarts, tr
 
 
 def refit_stage(unit, model, y, gi, est, cov, refit_peak, z_std=None):
