@@ -93,7 +93,7 @@ def test_reproduce_writes_the_documented_summary_keys(tmp_path):
         "S0": ["seed_ranges_m", "true_range_m", "basin_radius_m", "hypotheses", "selected_index", "selected_mrmse_m",
                "selection_accuracy", "convergence_rate", "filter_units"],
         "S1": ["P1", "P2", "symmetry_table", "raw_chain"],
-        "S2": ["one_vs_two", "outliers", "seismic_low_snr", "field_trial_geometry"],
+        "S2": ["one_vs_two", "outliers", "seismic_low_snr", "field_trial_geometry", "field_trial"],
     }
     for name, expected in keys.items():
         assert main(["reproduce", name, "--runs", "3", "--out", str(tmp_path / name)]) == 0
@@ -132,6 +132,13 @@ def test_reproduce_writes_the_documented_summary_keys(tmp_path):
     assert all(s2["outliers"][e]["huber_ukf_mrmse_r_m"] < s2["outliers"][e]["ukf_mrmse_r_m"] for e in ("0.1", "0.2"))
     low = s2["seismic_low_snr"]
     assert low["with_outliers"]["magnetic_only_mrmse_r_m"] < low["ukf"]["with_outliers"]["magnetic_only_mrmse_r_m"]
+    # the study's field-trial findings (one passage per road): magnetic tracking within ~5 m near the closest
+    # approach; misalignment a main error source; bearings biased by 20 degrees worse than magnetic-only
+    trial = s2["field_trial"]
+    mag = trial["bias_deg"]["0"]["magnetic_only"]
+    assert mag["error_near_cpa_m"] < 5.0
+    assert mag["error_near_cpa_m"] > 2.0 * trial["magnetic_only_aligned"]["error_near_cpa_m"]
+    assert trial["bias_deg"]["20"]["fused"]["error_near_cpa_m"] > 2.0 * mag["error_near_cpa_m"]
     assert main(["reproduce", "S9"]) == 2
 
 

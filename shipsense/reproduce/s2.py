@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
 from shipsense.config import load_scenario
@@ -17,6 +19,19 @@ EPSILONS = (0.0, 0.05, 0.1, 0.2)
 MOMENT_SCALES = (1.0, 0.3, 0.1, 0.03)
 SEISMIC_UNITS = ("huber_ukf", "ukf")   # the study's Figure 4 filter first, the plain UKF beside it
 AMBIGUITY_CHI2 = 1.0
+TRIAL_ROADS_M = (10.0, 15.0, 20.0)
+"""Exp. 4's roads: straight, parallel to the line of nodes at these distances, 400 m long (x from -200 m)."""
+TRIAL_SPEED, TRIAL_MOMENT = 5.0, (1e3, 1e3, 1e3)
+"""(chosen) A small vehicle: 5 m/s (160 samples of 0.5 s over the road) and a moment of 1.7e3 A·m²."""
+TRIAL_MISALIGN_DEG = 3.0
+"""(chosen) "A few degrees": each magnetometer's axes rotated by this angle about a random axis (one draw per
+road, seeded); the tracker assumes aligned axes."""
+TRIAL_BIASES_DEG = (0.0, 5.0, 10.0, 20.0)
+TRIAL_RUNS = 10
+"""Exp. 4's passages per road (at most; fewer when ``runs`` is small): a fused track with biased bearings fails
+its fits and is re-fitted from the global initialiser every few samples, ~2 s per passage."""
+TRIAL_NEAR_M = 50.0
+"""Exp. 4's "near the closest approach": samples within this along-road distance of it."""
 
 
 def _columns(sim, sensors):
@@ -162,11 +177,17 @@ def run(runs=100, out="results/S2", seed=0, progress=True):
     }
     o.csv("field_trial.csv", ["sensors", "mirror_min_chi2", "verdict"],
           [[k, v["mirror_min_chi2"], v["verdict"]] for k, v in field_trial.items() if isinstance(v, dict)])
+    tracking, curves = field_trial_tracking(trial, max(1, min(TRIAL_RUNS, runs // len(TRIAL_ROADS_M))), seed)
+    o.csv("field_trial_tracking.csv", ["sensors", "misaligned", "bias_deg", *TRIAL_METRICS],
+          [[*key.split("|"), *(tracking[key][m] for m in TRIAL_METRICS)] for key in tracking])
+    rmse_plot(o, "field_trial.png", "S2 exp. 4: the field trial (the project's tracker, roads 10-20 m off)",
+              curves.pop("x"), curves, ylabel="RMS position error [m]")
+    trial_summary = _trial_summary(tracking)
     st.done()
     elapsed = st.close()
     summary = {"scenario": "S2", "runs": runs, "seed": seed, "seconds": elapsed,
                "reference_offset_m": REFERENCE_OFFSET, "one_vs_two": one_vs_two, "outliers": outliers,
-               "seismic_low_snr": seismic, "field_trial_geometry": field_trial}
+               "seismic_low_snr": seismic, "field_trial_geometry": field_trial, "field_trial": trial_summary}
     o.summary(summary)
     return summary
 
@@ -182,3 +203,95 @@ def _low_snr(by_scale, unit):
             "with_outliers": {"eps": 0.1, "magnetic_only_mrmse_r_m": by_scale[(unit, True, low)][0],
                               "fused_mrmse_r_m": by_scale[(unit, True, low)][1]},
             "full_moment": {"magnetic_only_mrmse_r_m": base, "fused_mrmse_r_m": by_scale[(unit, False, 1.0)][1]}}
+
+
+TRIAL_METRICS = ("error_near_cpa_m", "error_near_cpa_median_m", "error_m", "first_track_m", "inconsistent_share",
+                 "coverage95")
+
+
+def _rotation(rng, deg):
+    """A rotation by ``deg`` degrees about a random axis."""
+    from scipy.spatial.transform import Rotation
+
+    axis = rng.standard_normal(3)
+    return Rotation.from_rotvec(np.deg2rad(deg) * axis / np.linalg.norm(axis)).as_matrix()
+
+
+def field_trial_tracking(trial, runs, seed):
+    """Exp. 4, tracking: the project's tracker (:class:`~shipsense.trackers.Tracker`, its defaults) on the
+    field-trial nodes, a vehicle on roads :data:`TRIAL_ROADS_M` off the line of nodes (``runs`` passages
+    each), magnetometers aligned or misaligned by :data:`TRIAL_MISALIGN_DEG`, seismic bearings from the
+    eigenvector chain biased by :data:`TRIAL_BIASES_DEG`.  Magnetic-only and fused (magnetometers and the
+    three bearings).
+
+    Returns ``{"sensors|misaligned|bias": metrics}`` (:data:`TRIAL_METRICS`: RMS and median position error
+    over the samples within :data:`TRIAL_NEAR_M` of the closest approach where the tracker reports an
+    estimate (not initialising), RMS error over all those samples, the median along-road position of the
+    first one relative to the closest approach, the share of them `inconsistent`, and the share inside the
+    reported 95 % ellipse) and the RMS error curves by along-road position (``"x"``).
+    """
+    from shipsense.trackers import Tracker
+    from shipsense.trackers.tracker import INCONSISTENT, INITIALISING, NO_DATA
+
+    mags, accs = ["M1", "M2", "M3"], ["A1", "A2", "A3"]
+    steps = int(round(400.0 / TRIAL_SPEED / trial.period))
+    prior = {"range": (5.0, 250.0), "bearing_deg": (0.0, 360.0), "course_offset_deg": (-90.0, 90.0),
+             "speed": (3.0, 7.0), "moment": (3e2, 1e4)}
+    nominal = trial.with_updates(steps=steps, prior=prior)
+    rng = np.random.default_rng(seed + 4)
+    out, errs, x_all = {}, {}, None
+    for misaligned in (False, True):
+        parts = {}   # configuration -> list over roads of (error, status, q, x)
+        for road in TRIAL_ROADS_M:
+            rot = {s: _rotation(rng, TRIAL_MISALIGN_DEG) for s in mags}
+            sensors = [s.model_copy(update={"orientation": tuple(map(tuple, rot[s.id]))})
+                       if misaligned and s.id in rot else s for s in nominal.sensors]
+            for bias in TRIAL_BIASES_DEG:
+                sim_sc = nominal.with_updates(
+                    sensors=[s.model_dump() for s in sensors], seismic={"mode": "chain", "bias_deg": bias},
+                    passage={"start": [-200.0, road], "velocity": [TRIAL_SPEED, 0.0], "z": 0.0,
+                             "moment": list(TRIAL_MOMENT)})
+                sim = simulate(sim_sc, runs=runs, seed=seed + int(road))
+                for label, use in (("magnetic", mags), ("fused", mags + accs)):
+                    if label == "magnetic" and bias != TRIAL_BIASES_DEG[0]:
+                        continue   # the same magnetometer data at every bias
+                    res = Tracker(nominal, passages=runs, sensors=use).track(sim.times,
+                                                                            sim.measurements[..., _columns(sim, use)])
+                    truth = sim.truth[..., :2]
+                    d = res.estimates[..., :2] - truth
+                    q = np.einsum("pki,pkij,pkj->pk", d, np.linalg.inv(res.position_cov), d)
+                    key = f"{label}|{misaligned}|{bias:g}" if label == "fused" else f"{label}|{misaligned}|"
+                    parts.setdefault(key, []).append((np.hypot(*d.transpose(2, 0, 1)), res.status, q,
+                                                      truth[..., 0]))
+        for key, lst in parts.items():
+            err, status, q, x = (np.concatenate([p[i] for p in lst]) for i in range(4))
+            shown = ~np.isin(status, (NO_DATA, INITIALISING))
+            near = shown & (np.abs(x) <= TRIAL_NEAR_M)
+            first = np.where(shown.any(axis=1), x[np.arange(len(x)), np.argmax(shown, axis=1)], np.nan)
+            out[key] = {"error_near_cpa_m": float(np.sqrt(np.mean(err[near] ** 2))) if near.any() else None,
+                        "error_near_cpa_median_m": float(np.median(err[near])) if near.any() else None,
+                        "error_m": float(np.sqrt(np.mean(err[shown] ** 2))) if shown.any() else None,
+                        "first_track_m": float(np.nanmedian(first)),
+                        "inconsistent_share": float(np.mean(status[shown] == INCONSISTENT)) if shown.any() else None,
+                        "coverage95": float(np.mean(q[shown] <= 5.991)) if shown.any() else None}
+            with warnings.catch_warnings():   # (no passage is tracked yet at the road's start)
+                warnings.simplefilter("ignore", RuntimeWarning)
+                errs[key] = np.sqrt(np.nanmean(np.where(shown, err, np.nan) ** 2, axis=0))
+            x_all = x[0]
+    curves = {"x": x_all}
+    for key, c in errs.items():
+        label, mis, bias = key.split("|")
+        if label == "magnetic" or mis == "True":
+            curves[f"{label}{', bias ' + bias + ' deg' if bias else ''}{', misaligned' if mis == 'True' else ''}"] = c
+    return out, curves
+
+
+def _trial_summary(tracking):
+    """``field_trial``: per bias, the magnetic-only and fused figures with misaligned magnetometers (the
+    trial's condition), and the magnetic-only figures with aligned ones (what misalignment costs)."""
+    mag = tracking["magnetic|True|"]
+    per_bias = {f"{b:g}": {"magnetic_only": mag, "fused": tracking[f"fused|True|{b:g}"]} for b in TRIAL_BIASES_DEG}
+    return {"roads_m": list(TRIAL_ROADS_M), "speed_m_s": TRIAL_SPEED, "moment": list(TRIAL_MOMENT),
+            "misalignment_deg": TRIAL_MISALIGN_DEG, "near_cpa_m": TRIAL_NEAR_M, "bias_deg": per_bias,
+            "magnetic_only_aligned": tracking["magnetic|False|"],
+            "fused_aligned": {f"{b:g}": tracking[f"fused|False|{b:g}"] for b in TRIAL_BIASES_DEG}}
