@@ -95,18 +95,30 @@ def pcrlb(model, states, J0, *, per_run=False, Q=None):
         The bound ``J_k^-1`` on the error covariance at every step (step 0
         includes the first measurement, as the filters' first update does).
     """
+    info = measurement_information(model, states, per_run=per_run)
+    if not per_run:
+        info = info[None] / np.asarray(states).shape[0]
+    out = pcrlb_from_information(model, info, J0, Q=Q)
+    return out if per_run else out[0]
+
+
+def measurement_information(model, states, per_run=True):
+    """Measurement information ``H^T R^-1 H`` along trajectories ``states`` (R, K, n) (internal units): per
+    trajectory (R, K, n, n), or summed over them (K, n, n) -- a sum can be pooled across batches of
+    passages before :func:`pcrlb_from_information`."""
     states = np.asarray(states, dtype=float)
-    H = model.H(states)                                        # (R, K, m, n)
-    Hw = H / np.sqrt(model.R)[:, None]
-    if per_run:
-        info = np.einsum("rkcn,rkcp->rknp", Hw, Hw)
-    else:
-        info = np.einsum("rkcn,rkcp->knp", Hw, Hw)[None] / states.shape[0]
+    Hw = model.H(states) / np.sqrt(model.R)[:, None]          # (R, K, m, n)
+    return np.einsum("rkcn,rkcp->rknp" if per_run else "rkcn,rkcp->knp", Hw, Hw)
+
+
+def pcrlb_from_information(model, info, J0, Q=None):
+    """The (P)CRLB recursion of :func:`pcrlb` from measurement information ``info`` (R, K, n, n): bounds
+    (R, K, n, n)."""
     A = model.A
     Q = model.Q if Q is None else np.asarray(Q, dtype=float)
     deterministic = not np.any(Q)
     Ainv = np.linalg.inv(A)
-    K = states.shape[1]
+    K = info.shape[1]
     out = np.empty(info.shape)
     J = J0 + info[:, 0]
     out[:, 0] = np.linalg.inv(J)
@@ -116,7 +128,7 @@ def pcrlb(model, states, J0, *, per_run=False, Q=None):
         else:
             J = np.linalg.inv(Q + A @ out[:, k - 1] @ A.T) + info[:, k]
         out[:, k] = np.linalg.inv(J)
-    return out if per_run else out[0]
+    return out
 
 
 def bound_map(model, xs, ys, velocity, params, steps=21):

@@ -182,37 +182,52 @@ def _store(out: Path, task: Task, table: dict) -> float:
 
 
 def _execute(todo, out, client, progress):
-    """Run the tasks ``todo`` (in this process without a client) and store each result as it arrives;
-    returns (task seconds, workers used)."""
+    """Run the sweep's tasks ``todo`` and store each result as it arrives; returns (task seconds, workers)."""
     from shipsense.sweep.evaluate import run_task
 
-    if not todo:
-        return 0.0, 0
-    bar = _progress_bar(len(todo), progress)
-    spent = 0.0
+    spent = [0.0]
+
+    def store(task, table):
+        spent[0] += _store(out, task, table)
+
+    def describe(task):
+        return f"task {task.name} (layout {task.cell.layout!r}, condition {task.cell.condition})"
+
+    workers = execute(todo, run_task, store, client, progress, describe=describe, key="shipsense-sweep")
+    return spent[0], workers
+
+
+def execute(tasks, run, store, client=None, progress=None, *, describe=None, key="shipsense"):
+    """Run ``run(task)`` for every task -- in this process without a ``client``, else on its Dask cluster --
+    and call ``store(task, result)`` in this process as each result arrives (so workers need no shared
+    filesystem).  A task's own failure cancels the rest and raises :class:`SweepError` naming it
+    (``describe(task)``, default its ``name``); what was stored before stays.  Returns the number of
+    workers (0 when run here).  The sweep and ``shipsense reproduce wide`` run on it."""
+    if not tasks:
+        return 0
+    describe = describe or (lambda t: f"task {t.name}")
+    bar = _progress_bar(len(tasks), progress)
     try:
         if client is None:
-            for task in todo:
-                spent += _store(out, task, run_task(task))
+            for task in tasks:
+                store(task, run(task))
                 bar.update(1)
-            return spent, 0
+            return 0
         from distributed import as_completed
 
         n_workers = len(client.scheduler_info().get("workers", {}))
-        futures = {client.submit(run_task, t, key=f"shipsense-sweep-{t.name}", pure=False, retries=2): t
-                   for t in todo}
+        futures = {client.submit(run, t, key=f"{key}-{t.name}", pure=False, retries=2): t for t in tasks}
         for fut in as_completed(futures):
             task = futures[fut]
             try:
-                table = fut.result()
+                result = fut.result()
             except Exception as err:   # a task's own failure: name it, keep what finished
                 for f in futures:
                     f.cancel()
-                raise SweepError(f"task {task.name} (layout {task.cell.layout!r}, condition "
-                                 f"{task.cell.condition}) failed: {type(err).__name__}: {err}") from err
-            spent += _store(out, task, table)
+                raise SweepError(f"{describe(task)} failed: {type(err).__name__}: {err}") from err
+            store(task, result)
             bar.update(1)
-        return spent, n_workers
+        return n_workers
     finally:
         bar.close()
 
