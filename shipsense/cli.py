@@ -357,14 +357,26 @@ def cmd_train(args) -> int:
 
 def cmd_reproduce(args) -> int:
     from shipsense.reproduce import EXPERIMENTS, run
+    from shipsense.sweep import SweepError
 
     if args.runs is not None and args.runs < 2:
         raise _BadInput(f"--runs must be >= 2, got {args.runs}")
     key = args.name.upper()
     if key not in EXPERIMENTS:
         raise _BadInput(f"unknown experiment set {args.name!r}; choose one of {', '.join(EXPERIMENTS)}")
+    options = {}
+    if key == "WIDE":
+        if args.workers is not None and not 0 <= args.workers <= 1024:
+            raise _BadInput(f"--workers must be between 0 and 1024, got {args.workers}")
+        options = {"workers": args.workers, "scheduler": args.scheduler, "restart": args.restart}
+    elif args.workers is not None or args.scheduler is not None or args.restart:
+        raise _BadInput("--workers, --scheduler and --restart apply to `reproduce wide` (S0, S1 and S2 each run "
+                        "as one batch in this process, in minutes)")
     out = Path(args.out or f"results/{'wide' if key == 'WIDE' else key}")
-    summary = run(key, runs=args.runs, out=out, seed=args.seed)
+    try:
+        summary = run(key, runs=args.runs, out=out, seed=args.seed, **options)
+    except SweepError as err:
+        raise _BadInput(str(err)) from None
     print(f"{key}: {summary['runs']} runs in {summary['seconds']:.1f} s; wrote {out}/summary.json, CSV tables "
           f"and PNG figures")
     return EXIT_OK
@@ -485,6 +497,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="Monte Carlo runs (default: 200 for S0, 100 for S1 and S2, 500 passages per family for wide)")
     r.add_argument("--out", default=None, help="output directory (default: results/NAME)")
     r.add_argument("--seed", type=int, default=0)
+    r.add_argument("--workers", type=int, default=None,
+                   help="wide: run its chunks on a local Dask cluster of N processes (default: the cores; 0: in "
+                        "this process); finished chunks are kept in OUT/chunks and skipped when rerun")
+    r.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="wide: an existing Dask scheduler, tcp://host:8786")
+    r.add_argument("--restart", action="store_true", help="wide: discard another run's chunks found in OUT")
     r.set_defaults(func=cmd_reproduce)
     return p
 

@@ -145,11 +145,11 @@ def test_reproduce_writes_the_documented_summary_keys(tmp_path):
 def test_reproduce_wide_writes_the_documented_summary_keys(tmp_path):
     import json
 
-    assert main(["reproduce", "wide", "--runs", "4", "--out", str(tmp_path)]) == 0
+    assert main(["reproduce", "wide", "--runs", "4", "--workers", "0", "--out", str(tmp_path)]) == 0
     summary = json.loads((tmp_path / "summary.json").read_text())
     for family in ("one_magnetometer", "two_magnetometers", "envelope_p2"):
         for method in ("miv_bank", "global_init", "global_init_refit", "global_init_restarts"):
-            assert {"convergence_rate", "mrmse_r_m", "rmse_over_pcrlb", "nees_mean",
+            assert {"convergence_rate", "mrmse_r_m", "rmse_over_pcrlb", "rmse_over_crlb_tracking", "nees_mean",
                     "seconds_per_passage"} <= set(summary[family][method])
     parts = ("consistency", "consistency_dwna", "consistency_default_process_noise")
     for c in (summary[part][name] for part in parts for name in ("S0", "S1-P2", "S2")):
@@ -157,6 +157,33 @@ def test_reproduce_wide_writes_the_documented_summary_keys(tmp_path):
         assert 0 < lo < 2 < hi and c["consistent"] == (c["nees_mean"] is not None and lo <= c["nees_mean"] <= hi)
 
 
+def _figures(summary):
+    """A wide summary without its timings."""
+    if isinstance(summary, dict):
+        return {k: _figures(v) for k, v in summary.items() if "seconds" not in k and k != "tasks_resumed"}
+    return summary
+
+
+def test_reproduce_wide_runs_on_the_sweep_path_chunked_resumable_and_schedule_free(tmp_path, capsys):
+    """The wide study runs as the sweep does: chunks with their own seeds, so serial and two Dask workers give
+    the same figures; finished chunks are skipped when rerun (one deleted chunk is the only one run again);
+    another run's chunks are refused; the options belong to the wide study only."""
+    import json
+
+    from shipsense.reproduce import wide
+
+    serial = wide.run(runs=4, out=tmp_path / "serial", chunk=2, progress=False)
+    dask = wide.run(runs=4, out=tmp_path / "dask", chunk=2, progress=False, workers=2)
+    assert _figures(serial) == _figures(dask)
+    # pooling chunks is exact: the pooled bound from summed information equals the one from all passages
+    assert serial["two_magnetometers"]["miv_bank"]["rmse_over_pcrlb_pooled"] is not None
+    (tmp_path / "serial" / "chunks" / "envelope_p2-c0001.npz").unlink()
+    again = wide.run(runs=4, out=tmp_path / "serial", chunk=2, progress=False)
+    assert "14 already finished" in capsys.readouterr().out and _figures(again) == _figures(serial)
+    assert json.loads((tmp_path / "serial" / "summary.json").read_text())["tasks_resumed"] == 14
+    assert main(["reproduce", "wide", "--runs", "6", "--workers", "0", "--out", str(tmp_path / "serial")]) == 2
+    assert "another wide-study run" in capsys.readouterr().err
+    assert main(["reproduce", "S0", "--workers", "2"]) == 2
 def test_check_exit_codes_and_json(capsys):
     import json
 

@@ -11,8 +11,9 @@ EXPERIMENTS = {"S0": ("shipsense.reproduce.s0", 200), "S1": ("shipsense.reproduc
                "S2": ("shipsense.reproduce.s2", 100), "WIDE": ("shipsense.reproduce.wide", 500)}
 
 
-def run(name: str, runs: int | None = None, out=None, seed: int = 0, progress: bool = True):
-    """Run the experiment set ``name`` (S0, S1, S2 or wide)."""
+def run(name: str, runs: int | None = None, out=None, seed: int = 0, progress: bool = True, **options):
+    """Run the experiment set ``name`` (S0, S1, S2 or wide); ``options`` go to the wide study's ``run``
+    (``workers``, ``scheduler``, ``restart``: :func:`shipsense.reproduce.wide.run`)."""
     from importlib import import_module
 
     key = name.upper()
@@ -20,5 +21,7 @@ def run(name: str, runs: int | None = None, out=None, seed: int = 0, progress: b
         raise ValueError(f"unknown experiment set {name!r}; choose one of {', '.join(EXPERIMENTS)}")
     module, default_runs = EXPERIMENTS[key]
     folder = "wide" if key == "WIDE" else key
+    if options and key != "WIDE":
+        raise ValueError(f"{', '.join(options)}: only the wide study takes them")
     return import_module(module).run(runs=runs or default_runs, out=out or f"results/{folder}", seed=seed,
-                                     progress=progress)
+                                     progress=progress, **options)

@@ -48,6 +48,15 @@ over the second-half samples where the tracker reports a track (status
 (`initialising`, `inconsistent`; 0 for the studies' methods, which always
 report one).
 
+:func:`run` runs it on the sweep's path (:func:`shipsense.sweep.runner.execute`):
+each family's passages in chunks of :data:`CHUNK` with seeds derived from
+the run's seed and (family, chunk), and each consistency part per scenario,
+as tasks on a local Dask cluster, an existing one or this process; each
+finished task is written atomically to ``out/chunks`` and skipped when the
+same run is started again.  The figures are pooled over the chunks exactly
+(the pooled PCRLB from their summed measurement information), so they do not
+depend on how the tasks were scheduled.
+
 ``consistency``: NEES of the project's tracker (``ukf`` unit) on S0, S1-P2
 and S2, against the 95 % chi-square band (:func:`consistency`);
 ``consistency_dwna``: the ``ukf`` unit with DWNA 0.1 m/s² and one refit
@@ -58,12 +67,18 @@ white acceleration (1 m/s²).
 
 from __future__ import annotations
 
+import importlib.util
+import io
+import json
+import shutil
 import time
+from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from shipsense.config import BankConfig, load_scenario
-from shipsense.reproduce.common import Output, Stages, refit_stage, track_global, track_restarting
+from shipsense.reproduce.common import Output, refit_stage, track_global, track_restarting
 from shipsense.simulator import simulate
 from shipsense.trackers.bank import run_bank, study_bank
 from shipsense.trackers.metrics import converged_until, passage_ends
@@ -133,17 +148,32 @@ def position_bounds(model, truth, P0):
     for a population of weak and strong passages); ``crlb_deterministic``: each passage's
     CRLB without process noise, (R, K) (the passages are constant-velocity).
     """
-    from shipsense.design.fisher import pcrlb
+    parts = _bound_parts(model, truth, P0)
+    return {**parts, "pcrlb_pooled": _pooled_bound(model, parts["info_sum"] / len(truth), parts["J0"])}
+
+
+def _trace(model, b):
+    xs2 = model.x_scale[:2] ** 2
+    return b[..., 0, 0] * xs2[0] + b[..., 1, 1] * xs2[1]
+
+
+def _bound_parts(model, truth, P0):
+    """The per-passage bounds of :func:`position_bounds`, and what its pooled bound needs from these passages:
+    the sum of their measurement information (K, n, n) and the prior information ``J0`` (internal units)."""
+    from shipsense.design.fisher import measurement_information, pcrlb_from_information
 
     x = model.to_internal(truth)
     J0 = np.linalg.inv(P0 / np.outer(model.x_scale, model.x_scale))
-    xs2 = model.x_scale[:2] ** 2
+    info = measurement_information(model, x)
+    return {"pcrlb": _trace(model, pcrlb_from_information(model, info, J0)),
+            "crlb_deterministic": _trace(model, pcrlb_from_information(model, info, J0, Q=np.zeros_like(model.Q))),
+            "info_sum": info.sum(axis=0), "J0": J0}
 
-    def trace(b):
-        return b[..., 0, 0] * xs2[0] + b[..., 1, 1] * xs2[1]
 
-    return {"pcrlb": trace(pcrlb(model, x, J0, per_run=True)), "pcrlb_pooled": trace(pcrlb(model, x, J0)),
-            "crlb_deterministic": trace(pcrlb(model, x, J0, per_run=True, Q=np.zeros_like(model.Q)))}
+def _pooled_bound(model, info_mean, J0):
+    from shipsense.design.fisher import pcrlb_from_information
+
+    return _trace(model, pcrlb_from_information(model, info_mean[None], J0)[0])
 
 
 def family_passages(name, passages, seed):
@@ -164,13 +194,28 @@ def converged(est, truth, ends):
     return converged_until(est, truth, ends)
 
 
-def _metrics(est, covs_pos, truth, bounds, seconds, ends, status=None):
-    """A method's figures (see the module docstring); ``status`` (R, K): the Tracker's status codes, whose
-    `initialising` and `inconsistent` samples are left out of ``rmse_over_crlb_tracking``."""
+def passage_figures(est, covs_pos, truth, ends, status=None):
+    """A method's per-passage figures, from which :func:`aggregate` computes its row (so that chunks of
+    passages can be pooled): ``conv`` (R,), and (R, K) ``err`` (position error, NaN after each passage's
+    end), ``valid`` (its samples), ``q`` (position NEES, NaN where no covariance is given) and ``track``
+    (the method reports a track: for the Tracker, ``status`` `tracking` or `restarted`; the studies'
+    methods always do)."""
     from shipsense.trackers.tracker import RESTARTED, TRACKING
 
-    k = np.arange(truth.shape[1])[None, :]
     conv, err, valid = converged(est, truth, ends)
+    d = est[..., :2] - truth[..., :2]
+    a, b, c = covs_pos[..., 0, 0], covs_pos[..., 0, 1], covs_pos[..., 1, 1]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        q = (c * d[..., 0] ** 2 - 2 * b * d[..., 0] * d[..., 1] + a * d[..., 1] ** 2) / (a * c - b * b)
+    track = np.ones_like(valid) if status is None else np.isin(status, (TRACKING, RESTARTED))
+    return {"conv": conv, "err": err, "valid": valid, "q": np.where(np.isfinite(q), q, np.nan), "track": track}
+
+
+def aggregate(fig, ends, bounds, seconds):
+    """A method's row from its per-passage figures (:func:`passage_figures`, pooled over every passage) and
+    the position bounds (:func:`position_bounds`; None: no bound ratios)."""
+    conv, err, valid, q = fig["conv"], fig["err"], fig["valid"], fig["q"]
+    k = np.arange(err.shape[1])[None, :]
     second = valid & (k >= (ends // 2)[:, None])
     rmse = float(np.sqrt(np.nanmean(np.where(second[conv], err[conv], np.nan) ** 2))) if conv.any() else None
     used = second & conv[:, None]   # the (passage, sample) pairs of the RMSE
@@ -188,20 +233,16 @@ def _metrics(est, covs_pos, truth, bounds, seconds, ends, status=None):
         ratios[name] = rmse / bound if rmse is not None and bound else None
     # the same over the samples where the method reports a track (a causal tracker reports the passage prior
     # while its first window fills, and says when its fit fails; the studies' methods always report one)
-    track = np.ones_like(used) if status is None else np.isin(status, (TRACKING, RESTARTED))
     ratios["rmse_over_crlb_tracking"] = ratios["untracked_share"] = None
-    if bounds is not None and (used & track).any():
-        m = used & track
+    m = used & fig["track"]
+    if bounds is not None and m.any():
         bound = np.mean(bounds["crlb_deterministic"][m])
         ratios["rmse_over_crlb_tracking"] = float(np.sqrt(np.mean(err[m] ** 2) / bound))
         ratios["untracked_share"] = float(1.0 - m.sum() / used.sum())
     ne = ne_run = None
     # the share of the RMSE's (passage, sample) pairs where the method claims a covariance (NEES is over those)
-    covered = float(np.mean(np.isfinite(covs_pos[..., 0, 0])[used])) if used.any() else None
+    covered = float(np.mean(np.isfinite(q)[used])) if used.any() else None
     if conv.any():
-        d = (est[..., :2] - truth[..., :2])
-        a, b, c = covs_pos[..., 0, 0], covs_pos[..., 0, 1], covs_pos[..., 1, 1]
-        q = (c * d[..., 0] ** 2 - 2 * b * d[..., 0] * d[..., 1] + a * d[..., 1] ** 2) / (a * c - b * b)
         qs = np.where(second[conv], q[conv], np.nan)   # NaN also where a method gives no covariance
         n = np.isfinite(qs).sum(axis=1)
         if n.any():
@@ -212,6 +253,11 @@ def _metrics(est, covs_pos, truth, bounds, seconds, ends, status=None):
     rmse_k = np.sqrt(np.nanmean(err[:, running] ** 2, axis=0))
     return {"convergence_rate": float(conv.mean()), "mrmse_r_m": float(np.mean(rmse_k)), **ratios,
             "nees_mean": ne, "nees_median_run": ne_run, "nees_coverage": covered, "seconds_per_passage": seconds}
+
+
+def _metrics(est, covs_pos, truth, bounds, seconds, ends, status=None):
+    """A method's row on one batch of passages (:func:`passage_figures`, then :func:`aggregate`)."""
+    return aggregate(passage_figures(est, covs_pos, truth, ends, status), ends, bounds, seconds)
 
 
 CONSISTENCY_SCENARIOS = {"S0": (None, "one_magnetometer"), "S1-P2": (None, "envelope_p2"),
@@ -247,6 +293,11 @@ def consistency(runs=100, seed=0, tracker="restarts", sigma_a=TRACKER_SIGMA_A):
     time average: the typical run, where the mean is often set by a few
     overconfident runs.
     """
+    return {name: consistency_of(name, runs, seed, tracker, sigma_a) for name in CONSISTENCY_SCENARIOS}
+
+
+def consistency_of(name, runs=100, seed=0, tracker="restarts", sigma_a=TRACKER_SIGMA_A):
+    """:func:`consistency` on one of its scenarios (a task of :func:`run`)."""
     from scipy import stats
 
     from shipsense.config import ProcessNoiseConfig
@@ -256,100 +307,257 @@ def consistency(runs=100, seed=0, tracker="restarts", sigma_a=TRACKER_SIGMA_A):
     if tracker not in ("restarts", "dwna"):
         raise ValueError(f"tracker must be 'restarts' or 'dwna', got {tracker!r}")
     pn = ProcessNoiseConfig() if sigma_a is None else ProcessNoiseConfig(sigma_a=(sigma_a, sigma_a))
-    out = {}
-    for name, (sensors, family) in CONSISTENCY_SCENARIOS.items():
-        sc = load_scenario(name)
-        model = model_from_scenario(sc, sensors=sensors, process_noise=pn)
-        sim = simulate(sc, runs=runs, seed=seed, random=True)
-        cols = np.isin([c[0] for c in sim.channels], model.array.ids)
-        y = sim.measurements[..., cols]
-        truth = model.state_from_truth(sim.truth)
-        K = y.shape[1]
-        opts = init_options(family, sc)
-        status = None
-        if tracker == "restarts":
-            res, _, _, _ = track_restarting(None, model, y, sc, **opts)
-            est, pos_cov, status = res.estimates, res.position_cov, res.status
-            noise = "none (constant velocity)"
-        else:
-            est, pos_cov, _ = track_global(get_filter("ukf"), model, y, sc, refit_peak=REFIT_PEAK, **opts)
-            noise = f"dwna {pn.sigma_a[0]:g} m/s^2"
-        m = _metrics(est, pos_cov, truth, None, 0.0, np.full(runs, K - 1), status)
-        n_conv = int(round(m["convergence_rate"] * runs))
-        band = [float(stats.chi2.ppf(q, 2 * max(n_conv, 1)) / max(n_conv, 1)) for q in (0.025, 0.975)]
-        ne = m["nees_mean"]
-        out[name] = {"filter": "ukf", "tracker": tracker, "process_noise": noise, "runs": runs,
-                     "convergence_rate": m["convergence_rate"], "nees_mean": ne,
-                     "nees_median_run": m["nees_median_run"], "band": band,
-                     "consistent": bool(ne is not None and band[0] <= ne <= band[1])}
-    return out
+    sensors, family = CONSISTENCY_SCENARIOS[name]
+    sc = load_scenario(name)
+    model = model_from_scenario(sc, sensors=sensors, process_noise=pn)
+    sim = simulate(sc, runs=runs, seed=seed, random=True)
+    cols = np.isin([c[0] for c in sim.channels], model.array.ids)
+    y = sim.measurements[..., cols]
+    truth = model.state_from_truth(sim.truth)
+    K = y.shape[1]
+    opts = init_options(family, sc)
+    status = None
+    if tracker == "restarts":
+        res, _, _, _ = track_restarting(None, model, y, sc, **opts)
+        est, pos_cov, status = res.estimates, res.position_cov, res.status
+        noise = "none (constant velocity)"
+    else:
+        est, pos_cov, _ = track_global(get_filter("ukf"), model, y, sc, refit_peak=REFIT_PEAK, **opts)
+        noise = f"dwna {pn.sigma_a[0]:g} m/s^2"
+    m = _metrics(est, pos_cov, truth, None, 0.0, np.full(runs, K - 1), status)
+    n_conv = int(round(m["convergence_rate"] * runs))
+    band = [float(stats.chi2.ppf(q, 2 * max(n_conv, 1)) / max(n_conv, 1)) for q in (0.025, 0.975)]
+    ne = m["nees_mean"]
+    return {"filter": "ukf", "tracker": tracker, "process_noise": noise, "runs": runs,
+            "convergence_rate": m["convergence_rate"], "nees_mean": ne,
+            "nees_median_run": m["nees_median_run"], "band": band,
+            "consistent": bool(ne is not None and band[0] <= ne <= band[1])}
 
 
-def run_family(name, passages, seed):
+METHODS = ("miv_bank", "global_init", "global_init_refit", "global_init_restarts")
+CHUNK = 50
+"""Passages per task (the unit of scheduling and of resumption, each with its own seed)."""
+PARTS = {"consistency": {}, "consistency_dwna": {"tracker": "dwna"},
+         "consistency_default_process_noise": {"tracker": "dwna", "sigma_a": None}}
+"""The consistency parts: the project's tracker; DWNA 0.1 m/s² with one refit; the library's DWNA."""
+FORMAT = 1
+"""Version of the chunk files and of the seed derivation (part of the run's identity)."""
+
+
+def family_chunk(name, passages, seed):
+    """The four methods on ``passages`` passages of family ``name`` drawn with ``seed``: per-passage figures
+    (:func:`passage_figures`, keys ``<method>__<figure>``), bounds and their pooled parts, and seconds."""
     sc, model, unit, y, truth, ends = family_passages(name, passages, seed)
     opts = init_options(name, sc)
-    out = {}
+    out = {"ends": ends}
+
+    def keep(method, est, pos_cov, seconds, status=None, **extra):
+        for k, v in passage_figures(est, pos_cov, truth, ends, status).items():
+            out[f"{method}__{k}"] = v
+        out[f"{method}__seconds"] = np.float64(seconds)
+        for k, v in extra.items():
+            out[f"{method}__{k}"] = np.asarray(v, dtype=float)
+
     # the source studies' bank
     t0 = time.perf_counter()
     seeds, P0 = seed_hypotheses(model, y[:, 0], sc.tracker.bank)
     bank = run_bank(unit, model, y, seeds, P0)
-    t_bank = (time.perf_counter() - t0) / passages
-    bounds = position_bounds(model, truth, P0)
-    out["miv_bank"] = _metrics(bank.selected_means, bank.selected_pos_cov, truth, bounds, t_bank, ends)
+    keep("miv_bank", bank.selected_means, bank.selected_pos_cov, time.perf_counter() - t0)
+    out.update({f"bound__{k}": v for k, v in _bound_parts(model, truth, P0).items()})
     # the global initialiser, every passage's bank from its own window
     t0 = time.perf_counter()
     est, pos_cov, t_init, gi = track_global(unit, model, y, sc, return_init=True, **opts)
     t_global = time.perf_counter() - t0
-    out["global_init"] = _metrics(est, pos_cov, truth, bounds, t_global / passages, ends)
-    # the initialiser alone (grid + batch fits), against the 12-hypothesis bank over the whole passage
-    out["global_init"]["init_seconds_per_passage"] = t_init / passages
+    keep("global_init", est, pos_cov, t_global, init_seconds=t_init)
     # the same, continued by a refit after the closest approach and a bank without process noise
     t0 = time.perf_counter()
     est, pos_cov = refit_stage(unit, model, y, gi, est, pos_cov, REFIT_PEAK, opts.get("z_std"))
     t_refit = time.perf_counter() - t0
-    out["global_init_refit"] = _metrics(est, pos_cov, truth, bounds, (t_global + t_refit) / passages, ends)
-    out["global_init_refit"]["refit_seconds_per_passage"] = t_refit / passages
+    keep("global_init_refit", est, pos_cov, t_global + t_refit, refit_seconds=t_refit)
     # the project's tracker as users get it (its own filter unit): no process noise, restarts from batch refits
     t0 = time.perf_counter()
     res, t_init, restarts, _ = track_restarting(None, model, y, sc, **opts)
-    t_restart = time.perf_counter() - t0
-    out["global_init_restarts"] = _metrics(res.estimates, res.position_cov, truth, bounds, t_restart / passages,
-                                           ends, res.status)
-    out["global_init_restarts"]["init_seconds_per_passage"] = t_init / passages
-    out["global_init_restarts"]["restarts_per_passage"] = float(np.mean(restarts))
+    keep("global_init_restarts", res.estimates, res.position_cov, time.perf_counter() - t0, res.status,
+         init_seconds=t_init, restarts=restarts)
     return out
 
 
-def run(runs=500, out="results/wide", seed=0, progress=True):
-    """Run the wide-prior benchmark; returns the summary (also written to ``out/summary.json``)."""
+def family_rows(name, chunks):
+    """Family ``name``'s rows (per method) from its chunks' results (:func:`family_chunk`), pooled."""
+    sc, model = family_scenario(name)
+    cat = {k: np.concatenate([c[k] for c in chunks]) for k in chunks[0] if np.ndim(chunks[0][k]) >= 1
+           and k not in ("bound__info_sum", "bound__J0")}
+    total = sum(len(c["ends"]) for c in chunks)
+    info_mean = sum(c["bound__info_sum"] for c in chunks) / total
+    bounds = {"pcrlb": cat["bound__pcrlb"], "crlb_deterministic": cat["bound__crlb_deterministic"],
+              "pcrlb_pooled": _pooled_bound(model, info_mean, chunks[0]["bound__J0"])}
+    rows = {}
+    for m in METHODS:
+        fig = {k: cat[f"{m}__{k}"] for k in ("conv", "err", "valid", "q", "track")}
+        seconds = sum(float(c[f"{m}__seconds"]) for c in chunks)
+        rows[m] = aggregate(fig, cat["ends"], bounds, seconds / total)
+        for extra in ("init_seconds", "refit_seconds"):
+            if f"{m}__{extra}" in chunks[0]:
+                rows[m][f"{extra[:-8]}_seconds_per_passage"] = sum(float(c[f"{m}__{extra}"]) for c in chunks) / total
+    rows["global_init_restarts"]["restarts_per_passage"] = float(np.mean(cat["global_init_restarts__restarts"]))
+    return rows
+
+
+def run_family(name, passages, seed):
+    """Family ``name``'s rows on ``passages`` passages drawn with ``seed``, in this process (one chunk)."""
+    return family_rows(name, [family_chunk(name, passages, seed)])
+
+
+@dataclass(frozen=True)
+class WideTask:
+    """A task of :func:`run`: passages ``first ..`` of a family (``chunk`` >= 0) or a consistency part on one
+    scenario (``chunk`` = -1)."""
+
+    family: str
+    chunk: int
+    first: int
+    passages: int
+    seed: int
+
+    @property
+    def name(self) -> str:
+        return f"{self.family}-c{self.chunk:04d}" if self.chunk >= 0 else self.family
+
+
+def chunk_seed(seed, family, chunk):
+    """A chunk's seed: from the run's seed and (family, chunk), whatever else runs or how it is scheduled."""
+    return int(np.random.SeedSequence(seed, spawn_key=(list(FAMILIES).index(family), chunk)).generate_state(1)[0])
+
+
+def tasks(runs, seed, chunk=CHUNK):
+    """The study's tasks: each family's passages in chunks, then the consistency parts per scenario."""
+    out = []
+    for family in FAMILIES:
+        for c, first in enumerate(range(0, runs, chunk)):
+            out.append(WideTask(family, c, first, min(chunk, runs - first), chunk_seed(seed, family, c)))
+    for part in PARTS:
+        for scen in CONSISTENCY_SCENARIOS:
+            out.append(WideTask(f"{part}-{scen}", -1, 0, min(runs, 100), seed))
+    return out
+
+
+def run_task(task):
+    """Run one :class:`WideTask` (on a Dask worker or here): arrays of a family chunk, or a consistency dict."""
+    if task.chunk >= 0:
+        return family_chunk(task.family, task.passages, task.seed)
+    part, scen = next((p, task.family[len(p) + 1:]) for p in sorted(PARTS, key=len, reverse=True)
+                      if task.family.startswith(p + "-"))
+    return consistency_of(scen, task.passages, task.seed, **PARTS[part])
+
+
+def _identity(runs, seed, chunk):
+    from shipsense.sweep.spec import canonical_hash
+
+    return canonical_hash({"study": "wide", "format": FORMAT, "runs": runs, "seed": seed, "chunk": chunk})
+
+
+def _prepare(out: Path, digest, restart):
+    """The chunks already in ``out`` for this run (resumed), after refusing (or, with ``restart``, clearing)
+    another run's."""
+    from shipsense.sweep.spec import SweepError
+
+    meta = out / "run.json"
+    chunks = out / "chunks"
+    if meta.is_file():
+        try:
+            old = json.loads(meta.read_text()).get("hash")
+        except (OSError, ValueError):
+            old = None
+        if old != digest:
+            if not restart:
+                raise SweepError(f"--out {out}: holds the chunks of another wide-study run (other --runs, --seed or "
+                                 "version); pass --restart to discard them, or choose another --out")
+            shutil.rmtree(chunks, ignore_errors=True)
+    elif chunks.is_dir() and any(chunks.iterdir()):
+        if not restart:
+            raise SweepError(f"--out {out}: its chunks/ folder has no run.json; pass --restart to discard it")
+        shutil.rmtree(chunks)
+    chunks.mkdir(parents=True, exist_ok=True)
+    return {p.name.rsplit(".", 1)[0] for p in chunks.iterdir() if p.suffix in (".npz", ".json")}
+
+
+def _store(out: Path, task, result):
+    from shipsense.sweep.store import atomic_write_bytes
+
+    if task.chunk >= 0:
+        buf = io.BytesIO()
+        np.savez(buf, **result)
+        atomic_write_bytes(out / "chunks" / f"{task.name}.npz", buf.getvalue())
+    else:
+        atomic_write_bytes(out / "chunks" / f"{task.name}.json", (json.dumps(result) + "\n").encode())
+
+
+def _load(out: Path, task):
+    path = out / "chunks" / f"{task.name}.{'npz' if task.chunk >= 0 else 'json'}"
+    if task.chunk >= 0:
+        with np.load(path) as z:
+            return {k: z[k] for k in z.files}
+    return json.loads(path.read_text())
+
+
+def run(runs=500, out="results/wide", seed=0, progress=True, *, workers=0, scheduler=None, client=None,
+        restart=False, chunk=CHUNK, log=print):
+    """Run the wide-prior benchmark; returns the summary (also written to ``out/summary.json``).
+
+    The work runs as the sweep's does (:func:`shipsense.sweep.runner.execute`): tasks of ``chunk`` passages
+    per family, each with a seed derived from ``seed`` and (family, chunk) (:func:`chunk_seed`), so the
+    result does not depend on how the tasks are scheduled; each finished task is written atomically to
+    ``out/chunks``, and running the same command again skips the finished ones (another run's chunks are
+    refused unless ``restart``).  ``workers``: 0 runs here (default), N on a local Dask cluster of N
+    single-threaded processes, None on one per core; ``scheduler``: an existing Dask cluster's address.
+    """
+    from shipsense.sweep.runner import _close, connect, execute
+    from shipsense.sweep.store import atomic_write_bytes
+
     o = Output(out)
-    parts = {"consistency": {}, "consistency_dwna": {"tracker": "dwna"},
-             "consistency_default_process_noise": {"tracker": "dwna", "sigma_a": None}}
-    st = Stages([*FAMILIES, *parts], "wide", progress)
-    summary = {}
-    rows = []
+    t0 = time.perf_counter()
+    todo_all = tasks(runs, seed, chunk)
+    digest = _identity(runs, seed, chunk)
+    done = _prepare(o.dir, digest, restart)
+    atomic_write_bytes(o.dir / "run.json", (json.dumps({"study": "wide", "hash": digest, "runs": runs,
+                                                         "seed": seed, "chunk": chunk}) + "\n").encode())
+    todo = [t for t in todo_all if t.name not in done]
+    log(f"wide: {len(todo_all)} tasks ({chunk} passages per family chunk)"
+        + (f"; {len(todo_all) - len(todo)} already finished in {o.dir}, {len(todo)} to run" if done else ""))
+    if client is None and workers is None and scheduler is None and importlib.util.find_spec("distributed") is None:
+        log("wide: dask is not installed, running in this process (pip install 'shipsense[sweep]' for a local "
+            "cluster)")
+        workers = 0
+    own = client is None and todo and not (scheduler is None and workers == 0)
+    if own:
+        client = connect(workers, scheduler, log)
+    try:
+        execute(todo, run_task, lambda t, r: _store(o.dir, t, r), client, None if progress else False,
+                key="shipsense-wide")
+    finally:
+        if own:
+            _close(client)
+    summary, rows = {}, []
     for name in FAMILIES:
-        st.step(name)
-        summary[name] = run_family(name, runs, seed)
+        summary[name] = family_rows(name, [_load(o.dir, t) for t in todo_all if t.chunk >= 0 and t.family == name])
         for method, m in summary[name].items():
             rows.append([name, method, m["convergence_rate"], m["mrmse_r_m"], m["rmse_over_pcrlb"],
                          m["rmse_over_pcrlb_pooled"], m["rmse_over_crlb_deterministic"],
                          m["rmse_over_crlb_tracking"], m["untracked_share"], m["nees_mean"],
                          m["seconds_per_passage"]])
-        st.done()
-    for part, kw in parts.items():   # the project's tracker; DWNA 0.1 m/s² with one refit; the library's DWNA
-        st.step(part)
-        summary[part] = consistency(min(runs, 100), seed, **kw)
-        st.done()
-    elapsed = st.close()
+    for part in PARTS:
+        summary[part] = {scen: _load(o.dir, WideTask(f"{part}-{scen}", -1, 0, 0, seed))
+                         for scen in CONSISTENCY_SCENARIOS}
+    elapsed = time.perf_counter() - t0
     o.csv("consistency.csv", ["scenario", "tracker", "process_noise", "convergence_rate", "nees_mean",
                               "nees_median_run", "band_lo", "band_hi", "consistent"],
           [[k, v["tracker"], v["process_noise"], v["convergence_rate"], v["nees_mean"], v["nees_median_run"],
             *v["band"], v["consistent"]]
-           for part in parts for k, v in summary[part].items()])
+           for part in PARTS for k, v in summary[part].items()])
     o.csv("wide.csv", ["family", "method", "convergence_rate", "mrmse_r_m", "rmse_over_pcrlb",
                        "rmse_over_pcrlb_pooled", "rmse_over_crlb_deterministic", "rmse_over_crlb_tracking",
                        "untracked_share", "nees_mean", "seconds_per_passage"],
           rows)
-    o.summary({**summary, "runs": runs, "seed": seed, "seconds": elapsed})
+    o.summary({**summary, "runs": runs, "seed": seed, "seconds": elapsed, "chunk": chunk,
+               "tasks": len(todo_all), "tasks_resumed": len(todo_all) - len(todo)})
     return {**summary, "runs": runs, "seconds": elapsed}
