@@ -210,7 +210,7 @@ def check_array(model, thetas, steps, *, far=DEFAULT_FAR, chi2_threshold=DEFAULT
     if progress:
         from tqdm import tqdm
 
-        iterator = tqdm(iterator, desc="ambiguity search", unit="passage", leave=False)
+        iterator = tqdm(iterator, desc="ambiguity search", unit="passage", leave=False, disable=None)
     for i in iterator:
         found = ambiguity_search(model, thetas[i], steps, far=far, starts=starts, seed=seed + i)
         if found:

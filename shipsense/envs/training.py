@@ -35,7 +35,7 @@ def _progress_callback(total, desc):
 
     class Bar(BaseCallback):
         def _on_training_start(self):
-            self.bar = tqdm(total=total, desc=desc, unit="step", leave=False)
+            self.bar = tqdm(total=total, desc=desc, unit="step", leave=False, disable=None)
 
         def _on_step(self):
             self.bar.update(self.training_env.num_envs)

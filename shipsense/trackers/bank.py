@@ -338,7 +338,7 @@ def run_bank(unit, model, measurements, seeds, P0, *, prune_nats=None, progress=
     if progress:
         from tqdm import tqdm
 
-        steps = tqdm(steps, desc=f"bank {unit.name} {R}x{H}", unit="step", leave=False)
+        steps = tqdm(steps, desc=f"bank {unit.name} {R}x{H}", unit="step", leave=False, disable=None)
     for k in steps:
         inn = state.step(y[:, k], predict=k > 0)
         r, h = state.run_of, state.hyp_of

@@ -96,7 +96,7 @@ def run_filter(unit, model, measurements, x0, P0, mask=None, progress=False) -> 
     if progress:
         from tqdm import tqdm
 
-        iterator = tqdm(iterator, desc=f"{unit.name} x {int(np.prod(batch))}", unit="step", leave=False)
+        iterator = tqdm(iterator, desc=f"{unit.name} x {int(np.prod(batch))}", unit="step", leave=False, disable=None)
     for k in iterator:
         if k:
             belief = unit.predict(belief, model)

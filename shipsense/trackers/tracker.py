@@ -388,7 +388,7 @@ class Tracker:
         if progress:
             from tqdm import tqdm
 
-            steps = tqdm(steps, desc=f"tracking {P} passage(s)", unit="sample", leave=False)
+            steps = tqdm(steps, desc=f"tracking {P} passage(s)", unit="sample", leave=False, disable=None)
         for k in steps:
             s = self.update(times[:, k], y[:, k])
             est[:, k], cov[:, k], status[:, k] = s.estimate, s.cov, s.status
