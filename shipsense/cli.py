@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 EXIT_OK = 0
+EXIT_INTERNAL = 1
 EXIT_BAD_INPUT = 2
 EXIT_AMBIGUOUS = 3
 EXIT_DEGENERATE = 4
@@ -415,6 +416,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="shipsense", description="Track ships from their influence fields on seabed sensors, "
                 "and design the arrays.")
     p.add_argument("--version", action="version", version=f"shipsense {__version__}")
+    p.add_argument("--debug", action="store_true", help="show the traceback of an unexpected error")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     d = sub.add_parser("demo", help="simulate a passage past the default array and plot it")
@@ -522,6 +524,15 @@ def main(argv=None) -> int:
     except OSError as err:
         print(f"shipsense {args.command}: error: {err}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        print(f"shipsense {args.command}: interrupted", file=sys.stderr)
+        return 130
+    except Exception as err:   # a bug, not the input: one line, the traceback on request
+        if args.debug:
+            raise
+        print(f"shipsense {args.command}: internal error: {type(err).__name__}: {err} "
+              "(run with --debug for the traceback)", file=sys.stderr)
+        return EXIT_INTERNAL
 
 
 if __name__ == "__main__":
