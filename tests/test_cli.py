@@ -228,3 +228,28 @@ def test_train_scheduling_writes_a_model_and_an_evaluation(tmp_path):
     assert set(summary["results"]) == {"agent (PPO)", "read-all (trimmed to 1)", "round-robin"}
     assert all(r["reads_per_step"] <= 1.0 for r in summary["results"].values())
     assert (tmp_path / "scheduling_ppo.zip").is_file()
+
+
+def test_an_unexpected_error_is_one_line_and_debug_shows_the_traceback(monkeypatch, capsys):
+    import shipsense.cli as cli
+
+    def broken(args):
+        raise ZeroDivisionError("a bug")
+
+    monkeypatch.setattr(cli, "cmd_scenarios", broken)
+    assert main(["scenarios"]) == cli.EXIT_INTERNAL
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "internal error: ZeroDivisionError: a bug" in err and "--debug" in err
+    with pytest.raises(ZeroDivisionError):
+        main(["--debug", "scenarios"])
+
+
+def test_import_shipsense_is_light_and_its_names_arrive_on_use():
+    """``import shipsense`` registers the environments and imports neither the simulator nor scipy.signal; the
+    public names load on first use (benchmarks/import_time.py measures the time)."""
+    code = ("import sys, shipsense, gymnasium as gym; "
+            "assert 'shipsense/Passage-v0' in gym.registry; "
+            "assert 'scipy.signal' not in sys.modules and 'shipsense.simulator' not in sys.modules; "
+            "assert callable(shipsense.simulate) and shipsense.load_scenario('S2').name == 'S2'; "
+            "from shipsense import Scenario, STATE_LABELS")
+    subprocess.run([sys.executable, "-c", code], check=True)
