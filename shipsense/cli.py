@@ -25,6 +25,32 @@ class _Parser(argparse.ArgumentParser):
         self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message}\n")
 
 
+SEED_MAX = 2**63 - 1
+RUNS_MAX = 1_000_000
+PASSAGES_MAX = 10_000
+TIMESTEPS_MAX = 10**9
+MEMORY_LIMIT_BYTES = 8e9
+"""The largest simulation a command allocates without ``--max-memory`` (its arrays, estimated before any)."""
+
+
+def _whole(lo, hi, what="a whole number"):
+    """An argparse type: an integer in [lo, hi], else one line naming the range (exit 2)."""
+    def parse(text):
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {what} between {lo} and {hi}, got {text!r}") from None
+        if not lo <= value <= hi:
+            raise argparse.ArgumentTypeError(f"must be between {lo} and {hi}, got {value}")
+        return value
+
+    parse.__name__ = "integer"
+    return parse
+
+
+SEED = _whole(0, SEED_MAX, "a non-negative whole number")
+
+
 def _progress(total, desc):
     from tqdm import tqdm
 
@@ -43,17 +69,21 @@ def cmd_scenarios(args) -> int:
 
 def cmd_simulate(args) -> int:
     from shipsense.config import load_scenario
-    from shipsense.simulator import simulate
+    from shipsense.simulator import simulate, simulation_bytes
 
     sc = load_scenario(args.scenario)
     if args.out is not None and Path(args.out).suffix not in (".npz", ".csv"):
         raise _BadInput(f"--out must end in .npz or .csv, got {args.out!r}")
     if args.plot is not None and Path(args.plot).suffix != ".png":
         raise _BadInput(f"--plot must end in .png, got {args.plot!r}")
-    if args.runs is not None and args.runs < 1:
-        raise _BadInput(f"--runs must be >= 1, got {args.runs}")
     if args.random and sc.prior is None:
         raise _BadInput(f"scenario {sc.name!r} has no [prior] section; --random needs one")
+    need = simulation_bytes(sc, args.runs or sc.runs)
+    if not (np.isfinite(args.max_memory) and args.max_memory > 0):
+        raise _BadInput(f"--max-memory must be a positive number of GB, got {args.max_memory!r}")
+    if need > args.max_memory * 1e9:
+        raise _BadInput(f"{args.runs or sc.runs} runs of {sc.steps} steps would need about {need / 1e9:.3g} GB "
+                        f"(limit {args.max_memory:g} GB): use fewer --runs, or raise --max-memory")
     bar = _progress(3, f"simulate {sc.name}")
     sim = simulate(sc, runs=args.runs, seed=args.seed, random=args.random)
     bar.update(1)
@@ -360,15 +390,11 @@ def cmd_reproduce(args) -> int:
     from shipsense.reproduce import EXPERIMENTS, run
     from shipsense.sweep import SweepError
 
-    if args.runs is not None and args.runs < 2:
-        raise _BadInput(f"--runs must be >= 2, got {args.runs}")
     key = args.name.upper()
     if key not in EXPERIMENTS:
         raise _BadInput(f"unknown experiment set {args.name!r}; choose one of {', '.join(EXPERIMENTS)}")
     options = {}
     if key == "WIDE":
-        if args.workers is not None and not 0 <= args.workers <= 1024:
-            raise _BadInput(f"--workers must be between 0 and 1024, got {args.workers}")
         options = {"workers": args.workers, "scheduler": args.scheduler, "restart": args.restart}
     elif args.workers is not None or args.scheduler is not None or args.restart:
         raise _BadInput("--workers, --scheduler and --restart apply to `reproduce wide` (S0, S1 and S2 each run "
@@ -396,8 +422,6 @@ def cmd_sweep(args) -> int:
             return EXIT_OK
         if args.sweep is None or args.out is None:
             raise _BadInput("give SWEEP.toml and --out DIR (or --example, or --report DIR)")
-        if args.workers is not None and not 0 <= args.workers <= 1024:
-            raise _BadInput(f"--workers must be between 0 and 1024, got {args.workers}")
         spec, base = load_sweep(args.sweep)
         run = run_sweep(spec, base, args.out, workers=args.workers, scheduler=args.scheduler, restart=args.restart,
                         csv=args.csv, progress=False if args.quiet else None,
@@ -428,8 +452,11 @@ def build_parser() -> argparse.ArgumentParser:
 
     m = sub.add_parser("simulate", help="simulate passages of a scenario")
     m.add_argument("scenario", help="a shipped scenario name (see `shipsense scenarios`) or a TOML file")
-    m.add_argument("--runs", type=int, default=None, help="Monte Carlo runs (default: the scenario's)")
-    m.add_argument("--seed", type=int, default=None, help="random seed (default: the scenario's)")
+    m.add_argument("--runs", type=_whole(1, RUNS_MAX), default=None,
+                   help="Monte Carlo runs (default: the scenario's)")
+    m.add_argument("--seed", type=SEED, default=None, help="random seed (default: the scenario's)")
+    m.add_argument("--max-memory", type=float, default=MEMORY_LIMIT_BYTES / 1e9, metavar="GB",
+                   help="refuse a simulation whose arrays would exceed this (default: %(default)g GB)")
     m.add_argument("--random", action="store_true", help="draw passages from the scenario's [prior]")
     m.add_argument("--out", default=None, help="write measurements to FILE.npz or a tidy FILE.csv")
     m.add_argument("--plot", default=None, help="write a picture of the array, passages and traces to FILE.png")
@@ -443,7 +470,7 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--filter", default=None,
                    help="filter unit (default: ukf for the tracker, huber_ukf when robust; the bank: the scenario's)")
     t.add_argument("--out", default="shipsense-track", help="output directory (default: %(default)s)")
-    t.add_argument("--seed", type=int, default=None, help="seed of the simulated passage")
+    t.add_argument("--seed", type=SEED, default=None, help="seed of the simulated passage")
     t.add_argument("--random", action="store_true", help="simulate a random passage from the [prior]")
     t.set_defaults(func=cmd_track)
 
@@ -451,19 +478,21 @@ def build_parser() -> argparse.ArgumentParser:
                        description="Exit codes: 0 observable, 3 ambiguous, 4 degenerate, 2 bad input.")
     c.add_argument("layout", metavar="SCENARIO_OR_LAYOUT", help="a shipped scenario name or a TOML file")
     c.add_argument("--json", action="store_true", help="print {verdict, min_chi2, pairs, fim_rank, fim_condition}")
-    c.add_argument("--passages", type=int, default=8, help="passages drawn from the [prior] (default 8)")
-    c.add_argument("--seed", type=int, default=0)
+    c.add_argument("--passages", type=_whole(1, PASSAGES_MAX), default=8,
+                   help="passages drawn from the [prior] (default 8)")
+    c.add_argument("--seed", type=SEED, default=0)
     c.set_defaults(func=cmd_check)
 
     g = sub.add_parser("design", help="place k sensors (convex relaxation, rounding, ambiguity cuts)")
     g.add_argument("scenario", help="a shipped scenario name or a TOML file (its first sensor is the template)")
-    g.add_argument("--k", type=int, required=True, help="number of sensors to place")
+    g.add_argument("--k", type=_whole(1, 1000), required=True, help="number of sensors to place")
     g.add_argument("--criterion", default="D", help="D, A or E (default D)")
     g.add_argument("--candidates", default=None, help="candidate positions: CSV x,y[,z] or TOML [candidates] "
                    "polygon, spacing, z, exclusions, min_spacing (default: a grid around the array)")
     g.add_argument("--out", default="layout.toml", help="layout file to write (default: %(default)s)")
-    g.add_argument("--passages", type=int, default=8, help="prior passages to average over (default 8)")
-    g.add_argument("--seed", type=int, default=0)
+    g.add_argument("--passages", type=_whole(1, PASSAGES_MAX), default=8,
+                   help="prior passages to average over (default 8)")
+    g.add_argument("--seed", type=SEED, default=0)
     g.add_argument("--budget", type=float, default=None,
                    help="total cost allowed, with a 'cost' column in the candidate CSV")
     g.add_argument("--no-cuts", action="store_true", help="skip the ambiguity cuts")
@@ -471,10 +500,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     tr = sub.add_parser("train", help="train a sensor-scheduling or placement agent (needs the rl extra)")
     tr.add_argument("task", choices=["placement", "scheduling"])
-    tr.add_argument("--timesteps", type=int, default=None,
+    tr.add_argument("--timesteps", type=_whole(1, TIMESTEPS_MAX), default=None,
                     help="environment steps (default: 20000 scheduling, 600 placement)")
     tr.add_argument("--out", default=None, help="output directory (default: results/train-TASK)")
-    tr.add_argument("--seed", type=int, default=0)
+    tr.add_argument("--seed", type=SEED, default=0)
     tr.set_defaults(func=cmd_train)
 
     w = sub.add_parser("sweep", help="a layout study: layouts x site conditions x passages, on Dask, resumable",
@@ -483,7 +512,7 @@ def build_parser() -> argparse.ArgumentParser:
                        "skips finished chunks.  `shipsense sweep --example` prints an example sweep file.")
     w.add_argument("sweep", nargs="?", metavar="SWEEP.toml", help="the sweep file")
     w.add_argument("--out", metavar="DIR", help="results folder (resumed if it holds this sweep's results)")
-    w.add_argument("--workers", type=int, default=None,
+    w.add_argument("--workers", type=_whole(0, 1024), default=None,
                    help="local Dask workers, one thread each (default: the cores; 0 runs serially in-process)")
     w.add_argument("--scheduler", default=None, metavar="ADDRESS", help="an existing Dask scheduler, tcp://host:8786")
     w.add_argument("--restart", action="store_true", help="discard another sweep's results found in DIR")
@@ -495,11 +524,11 @@ def build_parser() -> argparse.ArgumentParser:
 
     r = sub.add_parser("reproduce", help="reproduce the reference experiments of S0, S1, S2, or the wide-prior study")
     r.add_argument("name", metavar="S0|S1|S2|wide")
-    r.add_argument("--runs", type=int, default=None,
+    r.add_argument("--runs", type=_whole(2, RUNS_MAX), default=None,
                    help="Monte Carlo runs (default: 200 for S0, 100 for S1 and S2, 500 passages per family for wide)")
     r.add_argument("--out", default=None, help="output directory (default: results/NAME)")
-    r.add_argument("--seed", type=int, default=0)
-    r.add_argument("--workers", type=int, default=None,
+    r.add_argument("--seed", type=SEED, default=0)
+    r.add_argument("--workers", type=_whole(0, 1024), default=None,
                    help="wide: run its chunks on a local Dask cluster of N processes (default: the cores; 0: in "
                         "this process); finished chunks are kept in OUT/chunks and skipped when rerun")
     r.add_argument("--scheduler", default=None, metavar="ADDRESS",
@@ -514,7 +543,10 @@ def main(argv=None) -> int:
     from shipsense.config import ScenarioError
 
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exit_:   # a bad argument (exit 2, its message printed), --help or --version (0)
+        return exit_.code if isinstance(exit_.code, int) else (0 if exit_.code is None else EXIT_BAD_INPUT)
     tune_allocator()   # the command is its own process: reuse freed heap (see shipsense.allocator)
     try:
         return args.func(args)

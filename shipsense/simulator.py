@@ -165,6 +165,13 @@ def keel_dipole(velocity, p):
     return np.concatenate([d, np.zeros(d.shape[:-1] + (1,))], axis=-1)
 
 
+def simulation_bytes(sc: Scenario, runs: int) -> float:
+    """Memory a :func:`simulate` of ``runs`` runs allocates, roughly (bytes): truth, clean field, noise,
+    measurements and mask, float64, per run and step (the commands refuse work above a limit before any of
+    it is allocated)."""
+    return float(runs) * sc.steps * (5 * sc.array().n_channels + len(STATE_LABELS)) * 8.0
+
+
 def simulate(scenario, runs: int | None = None, seed: int | None = None, *, random: bool = False) -> Simulation:
     """Simulate passages past a scenario's array.
 

@@ -253,3 +253,21 @@ def test_import_shipsense_is_light_and_its_names_arrive_on_use():
             "assert callable(shipsense.simulate) and shipsense.load_scenario('S2').name == 'S2'; "
             "from shipsense import Scenario, STATE_LABELS")
     subprocess.run([sys.executable, "-c", code], check=True)
+
+
+@pytest.mark.parametrize("argv,field", [
+    (["simulate", "S2", "--runs", "1e9"], "--runs"), (["simulate", "S2", "--runs", "0"], "--runs"),
+    (["simulate", "S2", "--seed", "-1"], "--seed"), (["track", "S2", "--seed", "-5"], "--seed"),
+    (["design", "S1-P2", "--k", "3", "--passages", "0"], "--passages"),
+    (["check", "S1-P2", "--passages", "-2"], "--passages"),
+    (["train", "scheduling", "--timesteps", "0"], "--timesteps"), (["reproduce", "S0", "--runs", "1"], "--runs"),
+    (["sweep", "x.toml", "--out", "d", "--workers", "-1"], "--workers"),
+    (["simulate", "S2", "--runs", "900000"], "--max-memory"),
+    (["simulate", "S2", "--max-memory", "nan"], "--max-memory"),
+])
+def test_bad_counts_and_too_much_work_are_one_line_and_exit_2(argv, field, capsys):
+    """Counts and seeds are checked before any work (a negative seed was a numpy error, --passages 0 a division
+    by zero, --runs 1e9 a 67 GB allocation); a simulation above the memory limit is refused, naming the flag."""
+    code = main(argv)
+    err = capsys.readouterr().err
+    assert code == 2 and field in err and "Traceback" not in err and "internal error" not in err

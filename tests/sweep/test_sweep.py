@@ -195,7 +195,7 @@ def test_command_line(tmp_path, capsys):
         (["sweep", str(tmp_path / "missing.toml"), "--out", str(tmp_path / "x")], "cannot read the sweep file"),
         (["sweep", str(path)], "give SWEEP.toml and --out DIR"),
         (["sweep", "--report", str(tmp_path)], "no finished sweep here"),
-        (["sweep", str(path), "--out", str(tmp_path / "out2"), "--workers", "-1"], "--workers must be"),
+        (["sweep", str(path), "--out", str(tmp_path / "out2"), "--workers", "-1"], "--workers: must be"),
     ]:
         assert main(argv) == 2
         err = capsys.readouterr().err
