@@ -13,6 +13,7 @@ README.md ("Scenario files").
 
 from __future__ import annotations
 
+import json
 import math
 import tomllib
 from importlib import resources
@@ -60,6 +61,25 @@ Finite = Annotated[float, AfterValidator(_finite)]
 Positive = Annotated[float, AfterValidator(_finite), AfterValidator(_positive)]
 Vec2 = tuple[Finite, Finite]
 Vec3 = tuple[Finite, Finite, Finite]
+
+
+def _within(limit, unit):
+    """A validator: every component's magnitude at most ``limit`` (a physical range, stated in the message)."""
+    def check(v):
+        values = v if isinstance(v, (tuple, list)) else (v,)
+        if any(abs(x) > limit for x in values):
+            raise ValueError(f"outside the physical range: at most {limit:g} {unit} in magnitude, got {v!r}")
+        return v
+    return AfterValidator(check)
+
+
+Coord2 = Annotated[Vec2, _within(1e6, "m")]
+Coord3 = Annotated[Vec3, _within(1e6, "m")]
+Speed2 = Annotated[Vec2, _within(100.0, "m/s")]
+Moment3 = Annotated[Vec3, _within(1e12, "A·m²")]
+Std = Annotated[Positive, _within(1e3, "(SI)")]
+Var = Annotated[Positive, _within(1e6, "(SI²)")]
+Conductivity = Annotated[Positive, _within(100.0, "S/m")]
 Range = Annotated[tuple[Finite, Finite], AfterValidator(_range)]
 PositiveRange = Annotated[tuple[Positive, Positive], AfterValidator(_range)]
 
@@ -74,10 +94,10 @@ class SensorConfig(_Model):
     id: str = Field(min_length=1, description="Unique sensor name.")
     type: Literal["magnetometer", "electrode", "accelerometer"]
     kind: str = Field(description="Measurement kind; see shipsense.physics.array.KINDS.")
-    position: Vec3 = Field(description="World position (x east, y north, z up; z = 0 at the surface), m.")
-    noise_std: Positive | list[Positive] | None = Field(
+    position: Coord3 = Field(description="World position (x east, y north, z up; z = 0 at the surface), m.")
+    noise_std: Std | list[Std] | None = Field(
         default=None, description="Per-component noise std, SI units (T, V/m, rad); scalar or one per component.")
-    noise_var: Positive | list[Positive] | None = Field(
+    noise_var: Var | list[Var] | None = Field(
         default=None, description="Per-component noise variance, SI units squared (alternative to noise_std).")
     orientation: tuple[Vec3, Vec3, Vec3] | None = Field(
         default=None, description="Rotation matrix whose columns are the sensor axes in world coordinates.")
@@ -114,9 +134,9 @@ class SensorConfig(_Model):
 class MediumConfig(_Model):
     """Sea water over a seabed half-space (physics.md §2)."""
 
-    sigma_water: Positive = 4.0
-    sigma_seabed: Positive = 0.04
-    water_depth: Positive = 15.0
+    sigma_water: Conductivity = 4.0
+    sigma_seabed: Conductivity = 0.04
+    water_depth: Annotated[Positive, _within(11_000.0, "m")] = 15.0
 
     def physics(self) -> Medium:
         return Medium(self.sigma_water, self.sigma_seabed, self.water_depth)
@@ -132,11 +152,13 @@ class EarthConfig(_Model):
 class PassageConfig(_Model):
     """The nominal passage: a straight, constant-velocity track."""
 
-    start: Vec2 = Field(description="Source (x, y) at t = 0, m.")
-    velocity: Vec2 = Field(description="(v_x, v_y), m/s.")
-    z: Annotated[Finite, Field(le=0)] = Field(0.0, description="Source height (world z, <= 0), m.")
-    moment: Vec3 | None = Field(None, description="Magnetic moment, A·m² (needed by magnetometers).")
-    p: Positive | None = Field(None, description="Electric dipole moment along the keel, A·m (needed by electrodes).")
+    start: Coord2 = Field(description="Source (x, y) at t = 0, m.")
+    velocity: Speed2 = Field(description="(v_x, v_y), m/s.")
+    z: Annotated[Finite, Field(le=0), _within(11_000.0, "m")] = Field(
+        0.0, description="Source height (world z, <= 0), m.")
+    moment: Moment3 | None = Field(None, description="Magnetic moment, A·m² (needed by magnetometers).")
+    p: Annotated[Positive, _within(1e9, "A·m")] | None = Field(
+        None, description="Electric dipole moment along the keel, A·m (needed by electrodes).")
 
 
 class PriorConfig(_Model):
@@ -278,10 +300,10 @@ class Scenario(_Model):
 
     name: str = "scenario"
     description: str = ""
-    period: Positive = Field(description="Tracker period T, s.")
-    steps: Annotated[int, Field(ge=2)]
-    runs: Annotated[int, Field(ge=1)] = 1
-    seed: Annotated[int, Field(ge=0)] = 0
+    period: Annotated[Positive, _within(3600.0, "s")] = Field(description="Tracker period T, s.")
+    steps: Annotated[int, Field(ge=2, le=1_000_000)]
+    runs: Annotated[int, Field(ge=1, le=1_000_000)] = 1
+    seed: Annotated[int, Field(ge=0, le=2**63 - 1)] = 0
     sensors: list[SensorConfig] = Field(min_length=1)
     medium: MediumConfig | None = None
     earth: EarthConfig = EarthConfig()
@@ -441,25 +463,54 @@ def to_toml(scenario: Scenario) -> str:
     return "\n".join(lines) + "\n"
 
 
+_TYPE_WORDS = {"int_type": "a whole number", "int_from_float": "a whole number", "int_parsing": "a whole number",
+               "float_type": "a number", "float_parsing": "a number", "string_type": "text",
+               "bool_type": "true or false", "list_type": "a list", "tuple_type": "a list",
+               "dict_type": "a table", "model_type": "a table", "literal_error": None}
+
+
 def _format_error(err: ValidationError, source: str) -> str:
-    lines = []
+    """One line naming the file, each field path and what is wrong, in the project's words (pydantic's union
+    branch names and type jargon removed; of a union's failed branches, the value's own complaint is kept)."""
+    by_loc = {}
     for e in err.errors():
         loc = ""
         for part in e["loc"]:
+            if isinstance(part, str) and ("[" in part or part in ("list", "tuple")):
+                continue   # a union branch's name, not a field
             loc += f"[{part}]" if isinstance(part, int) else (f".{part}" if loc else str(part))
         msg = e["msg"]
         msg = msg[len("Value error, "):] if msg.startswith("Value error, ") else msg
-        if e["type"] == "missing":
+        kind = e["type"]
+        if kind == "missing":
             msg = "required field is missing"
-        elif e["type"] == "extra_forbidden":
+        elif kind == "extra_forbidden":
             msg = "unknown field (check the spelling)"
-        lines.append(f"{loc}: {msg}" if loc else msg)
-    lines = list(dict.fromkeys(lines))
+        elif _TYPE_WORDS.get(kind):
+            got = e.get("input")
+            msg = f"expected {_TYPE_WORDS[kind]}, got {type(got).__name__} {got!r}"
+        elif msg.startswith("Input should be "):   # a range or a choice: "must be ..., got ..."
+            got = e.get("input")
+            msg = f"must be {msg[len('Input should be '):]}, got {got!r}"
+        by_loc.setdefault(loc, []).append((kind.endswith("_type") or kind.endswith("_parsing"), msg))
+    lines = []
+    for loc, msgs in by_loc.items():
+        own = [m for is_type, m in msgs if not is_type] or [m for _, m in msgs]
+        for m in dict.fromkeys(own):
+            lines.append(f"{loc}: {m}" if loc else m)
     return f"{source}: " + "; ".join(lines)
 
 
-def _validate(data: dict, source: str) -> Scenario:
+def _validate(data: dict, source: str, strict: bool = False) -> Scenario:
+    """A validated scenario from ``data``; ``strict`` (a TOML file, whose values carry their own types): no
+    coercion -- a string is not a number, a boolean not a count, a float not an integer."""
     try:
+        if strict:
+            try:
+                text = json.dumps(data, allow_nan=True)
+            except TypeError as err:   # a TOML date or time: no scenario value is one
+                raise ScenarioError(f"{source}: a value of an unsupported type ({err})") from None
+            return Scenario.model_validate_json(text, strict=True)
         return Scenario.model_validate(data)
     except ValidationError as err:
         raise ScenarioError(_format_error(err, source)) from None
@@ -509,4 +560,4 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
         raise ScenarioError(f"{source}: not valid TOML ({err})") from None
-    return _validate(data, source)
+    return _validate(data, source, strict=True)
