@@ -17,9 +17,11 @@ or ``step`` are ignored)::
 * ``value`` in SI units (T, V/m, rad); empty or ``nan`` is a missing sample.
 
 Missing rows and missing values are masked (NaN), never treated as zero.
-Anything else that is wrong (unknown ids or channels, the same sample twice,
-a non-numeric or infinite value, a time that is not a finite number) raises
-:class:`RecordingError` naming the row or rows.  This is also the format
+Anything else that is wrong (unknown ids or channels, the same sample twice
+or two samples of one channel less than a microsecond apart, a non-numeric
+or infinite value, a time that is not a finite number or beyond 1e10 s, text
+that is not UTF-8 -- a byte-order mark is fine --, a field the CSV reader
+cannot take) raises :class:`RecordingError` naming the row or rows.  This is also the format
 ``shipsense simulate --out FILE.csv`` writes (with one run).
 """
 
@@ -32,6 +34,10 @@ from pathlib import Path
 import numpy as np
 
 REQUIRED = ("time", "sensor", "channel", "value")
+TIME_MAX_S = 1e10
+"""Largest time magnitude accepted (s): Unix times fit; 1e308 is a corrupted value."""
+NEAR_S = 1e-6
+"""Two samples of one channel closer than this (s) are the same sample twice (a clock jitter or a duplicate)."""
 
 
 class RecordingError(ValueError):
@@ -54,15 +60,21 @@ def read_recording(path, scenario, array=None):
     column = {ch: i for i, ch in enumerate(array.channels)}
     ids = set(array.ids)
     try:
-        fh = open(path, newline="")
+        fh = open(path, newline="", encoding="utf-8-sig")   # UTF-8, with or without a byte-order mark
     except OSError as err:
         raise RecordingError(f"{path}: cannot open ({err.strerror})") from None
     with fh:
         reader = csv.DictReader(fh)
-        if reader.fieldnames is None or any(c not in reader.fieldnames for c in REQUIRED):
-            raise RecordingError(f"{path}: the header must contain the columns {', '.join(REQUIRED)} "
-                                 f"(got {', '.join(reader.fieldnames or [])})")
-        times, cols, values, lines = _rows(reader, path, ids, column, array)
+        try:
+            if reader.fieldnames is None or any(c not in reader.fieldnames for c in REQUIRED):
+                raise RecordingError(f"{path}: the header must contain the columns {', '.join(REQUIRED)} "
+                                     f"(got {', '.join(reader.fieldnames or [])})")
+            times, cols, values, lines = _rows(reader, path, ids, column, array)
+        except UnicodeDecodeError as err:
+            raise RecordingError(f"{path}: not UTF-8 text (byte {err.start} of a block cannot be decoded); save the "
+                                 "file as UTF-8") from None
+        except csv.Error as err:
+            raise RecordingError(f"{path}, line {reader.line_num}: not a CSV row ({err})") from None
     if not times:
         raise RecordingError(f"{path}: no samples")
     return _assemble(path, np.array(times), np.array(cols), np.array(values), np.array(lines), array.n_channels)
@@ -84,6 +96,9 @@ def _rows(reader, path, ids, column, array):
             raise RecordingError(f"{where}: time {row['time']!r} is not a number") from None
         if not math.isfinite(t):
             raise RecordingError(f"{where}: time must be finite, got {row['time']!r}")
+        if abs(t) > TIME_MAX_S:
+            raise RecordingError(f"{where}: time {t:.6g} s is beyond +-{TIME_MAX_S:g} s (seconds, e.g. since the "
+                                 "recording's start or the Unix epoch)")
         sid, ch = row["sensor"], row["channel"]
         if sid not in ids:
             raise RecordingError(f"{where}: unknown sensor id {sid!r} (the scenario has: {', '.join(array.ids)})")
@@ -107,14 +122,15 @@ def _rows(reader, path, ids, column, array):
 def _assemble(path, times, cols, values, lines, m):
     """Samples (one per distinct time, in time order) from rows in any order; a repeated (time, channel) is
     refused naming both lines."""
-    order = np.lexsort((cols, times))
+    order = np.lexsort((times, cols))     # by channel, then time: a channel's samples side by side
     t, c = times[order], cols[order]
-    same = (t[1:] == t[:-1]) & (c[1:] == c[:-1])
+    same = (c[1:] == c[:-1]) & (t[1:] - t[:-1] < NEAR_S)
     if same.any():
         i = int(np.argmax(same))
         first, second = sorted((int(lines[order[i]]), int(lines[order[i + 1]])))
-        raise RecordingError(f"{path}, lines {first} and {second}: the same sample twice (channel column {int(c[i])}"
-                             f" at {t[i]:.9g} s)")
+        what = "the same sample twice" if t[i + 1] == t[i] else f"two samples {t[i + 1] - t[i]:.3g} s apart"
+        raise RecordingError(f"{path}, lines {first} and {second}: {what} (channel column {int(c[i])} at "
+                             f"{t[i]:.9g} s)")
     grid, k = np.unique(t, return_inverse=True)
     y = np.full((grid.size, m), np.nan)
     y[k, c] = values[order]

@@ -60,3 +60,32 @@ def test_bad_recordings_give_one_clear_message(tmp_path, rows, header, message):
     with pytest.raises(RecordingError, match=message) as info:
         read_recording(path, sc)
     assert str(path) in str(info.value)
+
+
+@pytest.mark.parametrize("rows, message", [
+    (["0.5,M1,bx,1e-9", "0.500000001,M1,bx,2e-9"], "lines 2 and 3: two samples 1e-09 s apart"),
+    (["1e308,M1,bx,1e-9"], "beyond"),
+    (["0.0,M1,bx," + "1" * 200_000], "not a CSV row"),
+])
+def test_near_duplicates_absurd_times_and_huge_fields_are_refused(tmp_path, rows, message):
+    with pytest.raises(RecordingError, match=message):
+        read_recording(_write(tmp_path, rows), load_scenario("S2"))
+
+
+@pytest.mark.parametrize("encoding, ok", [("utf-8", True), ("utf-8-sig", True), ("utf-16", False),
+                                          ("latin-1", None)])
+def test_utf8_with_or_without_a_bom_reads_and_other_encodings_are_named(tmp_path, encoding, ok):
+    """UTF-8 with a byte-order mark reads like UTF-8 (its header was not recognised); UTF-16 is refused as not
+    UTF-8; Latin-1 reads when it is plain ASCII and is refused as not UTF-8 when it is not."""
+    sc = load_scenario("S2")
+    path = tmp_path / "r.csv"
+    text = "time,sensor,channel,value\n0.0,M1,bx,1e-9\n"
+    if ok is None:   # Latin-1 with a non-ASCII byte (a comment column)
+        text = "time,sensor,channel,value,note\n0.0,M1,bx,1e-9,caf\u00e9\n"
+    path.write_bytes(text.encode(encoding))
+    if ok:
+        times, y = read_recording(path, sc)
+        assert times.tolist() == [0.0] and y[0, 0] == 1e-9
+    else:
+        with pytest.raises(RecordingError, match="not UTF-8"):
+            read_recording(path, sc)
