@@ -24,6 +24,13 @@ class _Parser(argparse.ArgumentParser):
         self.print_usage(sys.stderr)
         self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message}\n")
 
+    def parse_known_args(self, args=None, namespace=None):
+        # argparse reads "--flag=--" as an empty list, bypassing the flag's type (a crash further on)
+        for a in (sys.argv[1:] if args is None else args):
+            if isinstance(a, str) and a.startswith("--") and a.endswith("=--"):
+                self.error(f"argument {a[:-3]}: expected a value, got '--'")
+        return super().parse_known_args(args, namespace)
+
 
 SEED_MAX = 2**63 - 1
 RUNS_MAX = 1_000_000
