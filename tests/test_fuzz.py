@@ -63,3 +63,39 @@ def _valid(command, flag, text):
         return False
     lo = {"--runs": 2 if command == "reproduce" else 1, "--workers": 0, "--seed": 0}.get(flag, 1)
     return lo <= v <= (2**63 - 1 if flag == "--seed" else 10**6)
+
+
+ENV_ARGS = {"PassageEnv": {"max_reads": (1, 3, True), "energy_cost": (0.0, 1e6, False),
+                           "error_scale": (1e-300, 1e6, False)},
+            "ArrayDesignEnv": {"k": (1, 81, True), "half_width": (1e-300, 1e5, False),
+                               "passages": (1, 10_000, True), "shaping": (0.0, 1e6, False)}}
+BAD_ARG = st.one_of(st.sampled_from(["x", "", "3", None, True, [], math.nan, math.inf, -math.inf, -1, 0, 0.0, 2.5,
+                                     1e308, -1e308, 10**30]), st.floats(allow_nan=True), st.integers())
+
+
+def _accepted(value, lo, hi, integer):
+    if isinstance(value, bool) or value is None or isinstance(value, (str, list)):
+        return False
+    if integer and not isinstance(value, int):
+        return False
+    return math.isfinite(value) and lo <= value <= hi
+
+
+@settings(max_examples=200, deadline=5000)
+@given(env=st.sampled_from(sorted(ENV_ARGS)), data=st.data())
+def test_a_bad_environment_argument_is_one_error_naming_it(env, data):
+    """The environments' constructor arguments: a bad one (a string, NaN, a float count, out of range) is one
+    ValueError naming the argument, before any passage is simulated."""
+    from shipsense.envs.array_design import ArrayDesignEnv
+    from shipsense.envs.passage import PassageEnv
+
+    name = data.draw(st.sampled_from(sorted(ENV_ARGS[env])))
+    lo, hi, integer = ENV_ARGS[env][name]
+    value = data.draw(BAD_ARG.filter(lambda v: not _accepted(v, lo, hi, integer) and v is not None))
+    cls = {"PassageEnv": PassageEnv, "ArrayDesignEnv": ArrayDesignEnv}[env]
+    try:
+        cls(**{name: value})
+    except ValueError as err:
+        assert name in str(err), str(err)
+    else:
+        raise AssertionError(f"{env}({name}={value!r}) was accepted")

@@ -58,6 +58,7 @@ from shipsense.config import load_scenario
 from shipsense.design.fisher import passage_fim
 from shipsense.design.observability import check_array
 from shipsense.design.placement import grid_candidates
+from shipsense.envs.arguments import number
 from shipsense.simulator import keel_dipole, sample_passages, simulate
 from shipsense.trackers import Tracker
 from shipsense.trackers.metrics import convergence_rate, trmse
@@ -79,7 +80,12 @@ class ArrayDesignEnv(gym.Env):
             raise ValueError(f"observer must be 'tracker' or 'bank', got {observer!r}")
         self.observer = observer
         self.scenario = sc
-        self.k = int(k)
+        self.k = number("k", k, 1, 1000, integer=True)
+        half_width = number("half_width", half_width, 0.0, 1e5, lo_open=True)
+        spacing = number("spacing", spacing, half_width / 200.0, 2.0 * half_width)   # at most 401 x 401 candidates
+        passages = number("passages", passages, 1, 10_000, integer=True)
+        seed_passages = number("seed_passages", seed_passages, 0, 2**63 - 1, integer=True)
+        shaping = number("shaping", shaping, 0.0, 1e6)
         z = sc.sensors[0].position[2]
         box = [(-half_width, -half_width), (half_width, -half_width), (half_width, half_width),
                (-half_width, half_width)]
@@ -91,12 +97,12 @@ class ArrayDesignEnv(gym.Env):
         self.half_width = float(half_width)
         self.centre = centre
         self.model = candidate_model(sc, self.candidates)
-        sim = simulate(sc, runs=int(passages), seed=int(seed_passages), random=True)
+        sim = simulate(sc, runs=passages, seed=seed_passages, random=True)
         self._sim = sim
         self._truth = self.model.state_from_truth(sim.truth)
-        self.shaping = float(shaping)
+        self.shaping = shaping
         if self.shaping:
-            truth = sample_passages(sc, 4, seed=int(seed_passages))
+            truth = sample_passages(sc, 4, seed=seed_passages)
             thetas = self.model.to_internal(self.model.state_from_truth(truth))
             self._fim = passage_fim(self.model, thetas, sc.steps, per_sensor=True, stride=4)   # (S, N, n, n)
         self.check_ambiguity = bool(check_ambiguity)

@@ -72,6 +72,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from shipsense.config import load_scenario
+from shipsense.envs.arguments import number
 from shipsense.simulator import simulate
 from shipsense.trackers import Tracker
 
@@ -93,17 +94,18 @@ class PassageCore:
         if observer not in ("tracker", "bank"):
             raise ValueError(f"observer must be 'tracker' or 'bank', got {observer!r}")
         self.scenario = sc
-        self.tracker = Tracker(sc, passages=int(num_envs), method=observer, unit=filter)
+        num_envs = number("num_envs", num_envs, 1, 100_000, integer=True)
+        energy_cost = number("energy_cost", energy_cost, 0.0, 1e6)
+        error_scale = number("error_scale", error_scale, 0.0, 1e6, lo_open=True)
+        self.tracker = Tracker(sc, passages=num_envs, method=observer, unit=filter)
         self.model = self.tracker.model
         arr = self.model.array
         self.S = len(arr.ids)
         self.H = self.tracker._H
-        self.max_reads = self.S if max_reads is None else int(max_reads)
-        if not 1 <= self.max_reads <= self.S:
-            raise ValueError(f"max_reads must be between 1 and {self.S}, got {max_reads}")
-        self.energy_cost = float(energy_cost)
-        self.error_scale = float(error_scale)
-        self.E = int(num_envs)
+        self.max_reads = self.S if max_reads is None else number("max_reads", max_reads, 1, self.S, integer=True)
+        self.energy_cost = energy_cost
+        self.error_scale = error_scale
+        self.E = num_envs
         self.K = sc.steps
         self.centre = arr.positions[:, :2].mean(axis=0)
         self.position_scale = 1.5 * sc.prior.range[1]
