@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -394,20 +395,24 @@ def cmd_train(args) -> int:
 
 
 def cmd_reproduce(args) -> int:
-    from shipsense.reproduce import EXPERIMENTS, run
+    from shipsense.reproduce import EXPERIMENTS, run, run_all
     from shipsense.sweep import SweepError
 
     key = args.name.upper()
-    if key not in EXPERIMENTS:
-        raise _BadInput(f"unknown experiment set {args.name!r}; choose one of {', '.join(EXPERIMENTS)}")
-    options = {}
-    if key == "WIDE":
-        options = {"workers": args.workers, "scheduler": args.scheduler, "restart": args.restart}
-    elif args.workers is not None or args.scheduler is not None or args.restart:
-        raise _BadInput("--workers, --scheduler and --restart apply to `reproduce wide` (S0, S1 and S2 each run "
-                        "as one batch in this process, in minutes)")
-    out = Path(args.out or f"results/{'wide' if key == 'WIDE' else key}")
+    if key not in (*EXPERIMENTS, "ALL"):
+        raise _BadInput(f"unknown experiment set {args.name!r}; choose one of {', '.join(EXPERIMENTS)}, all")
+    workers = args.workers
+    if workers is None and args.scheduler is None and key in ("S0", "S1", "S2"):
+        workers = 0   # one study is one task: in this process unless a cluster is asked for
+    options = {"workers": workers, "scheduler": args.scheduler, "restart": args.restart}
     try:
+        if key == "ALL":
+            out = Path(args.out or "results")
+            t0 = time.perf_counter()
+            summaries = run_all(runs=args.runs, out=out, seed=args.seed, **options)
+            print(f"ALL: {', '.join(summaries)} in {time.perf_counter() - t0:.1f} s; wrote {out}/<study>/")
+            return EXIT_OK
+        out = Path(args.out or f"results/{'wide' if key == 'WIDE' else key}")
         summary = run(key, runs=args.runs, out=out, seed=args.seed, **options)
     except SweepError as err:
         raise _BadInput(str(err)) from None
@@ -529,18 +534,20 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("--report", default=None, metavar="DIR", help="re-draw the plots of a finished sweep in DIR")
     w.set_defaults(func=cmd_sweep)
 
-    r = sub.add_parser("reproduce", help="reproduce the reference experiments of S0, S1, S2, or the wide-prior study")
-    r.add_argument("name", metavar="S0|S1|S2|wide")
+    r = sub.add_parser("reproduce", help="reproduce the reference experiments of S0, S1, S2, the wide-prior study, "
+                       "or all of them")
+    r.add_argument("name", metavar="S0|S1|S2|wide|all")
     r.add_argument("--runs", type=_whole(2, RUNS_MAX), default=None,
                    help="Monte Carlo runs (default: 200 for S0, 100 for S1 and S2, 500 passages per family for wide)")
-    r.add_argument("--out", default=None, help="output directory (default: results/NAME)")
+    r.add_argument("--out", default=None, help="output directory (default: results/NAME; all: results)")
     r.add_argument("--seed", type=SEED, default=0)
     r.add_argument("--workers", type=_whole(0, 1024), default=None,
-                   help="wide: run its chunks on a local Dask cluster of N processes (default: the cores; 0: in "
-                        "this process); finished chunks are kept in OUT/chunks and skipped when rerun")
-    r.add_argument("--scheduler", default=None, metavar="ADDRESS",
-                   help="wide: an existing Dask scheduler, tcp://host:8786")
-    r.add_argument("--restart", action="store_true", help="wide: discard another run's chunks found in OUT")
+                   help="run on a local Dask cluster of N processes (default: the cores for wide and all, this "
+                        "process for one of S0, S1, S2; 0: this process); finished studies and wide's chunks are "
+                        "skipped when rerun")
+    r.add_argument("--scheduler", default=None, metavar="ADDRESS", help="an existing Dask scheduler, tcp://host:8786")
+    r.add_argument("--restart", action="store_true",
+                   help="run finished studies again; wide: discard another run's chunks found in OUT")
     r.set_defaults(func=cmd_reproduce)
     return p
 

@@ -86,7 +86,7 @@ def test_track_bad_input_exits_2(tmp_path, capsys):
     assert main(["track", "S2", "--filter", "kalman"]) == 2
 
 
-def test_reproduce_writes_the_documented_summary_keys(tmp_path):
+def test_reproduce_writes_the_documented_summary_keys(tmp_path, capsys):
     import json
 
     keys = {
@@ -139,6 +139,12 @@ def test_reproduce_writes_the_documented_summary_keys(tmp_path):
     assert mag["error_near_cpa_m"] < 5.0
     assert mag["error_near_cpa_m"] > 2.0 * trial["magnetic_only_aligned"]["error_near_cpa_m"]
     assert trial["bias_deg"]["20"]["fused"]["error_near_cpa_m"] > 2.0 * mag["error_near_cpa_m"]
+    # each study is a task on the sweep's path: a finished one is skipped when the same command runs again
+    assert json.loads((tmp_path / "S2" / "run.json").read_text()) == {"study": "S2", "runs": 3, "seed": 0}
+    capsys.readouterr()
+    assert main(["reproduce", "S2", "--runs", "3", "--out", str(tmp_path / "S2")]) == 0
+    assert "1 of 1 studies already finished" in capsys.readouterr().out
+    assert json.loads((tmp_path / "S2" / "summary.json").read_text()) == s2
     assert main(["reproduce", "S9"]) == 2
 
 
@@ -183,7 +189,6 @@ def test_reproduce_wide_runs_on_the_sweep_path_chunked_resumable_and_schedule_fr
     assert json.loads((tmp_path / "serial" / "summary.json").read_text())["tasks_resumed"] == 14
     assert main(["reproduce", "wide", "--runs", "6", "--workers", "0", "--out", str(tmp_path / "serial")]) == 2
     assert "another wide-study run" in capsys.readouterr().err
-    assert main(["reproduce", "S0", "--workers", "2"]) == 2
 def test_check_exit_codes_and_json(capsys):
     import json
 

@@ -1,19 +1,38 @@
-"""The reference experiments (scenarios.md): ``shipsense reproduce S0|S1|S2``, and ``wide`` (issue 7).
+"""The reference experiments (scenarios.md): ``shipsense reproduce S0|S1|S2``, ``wide`` (issue 7), and ``all``.
 
-Each ``run(runs, out, seed, progress)`` writes ``summary.json``, CSV tables
-and PNG figures into ``out`` and returns the summary.  The keys of
+Each study's ``run(runs, out, seed, progress)`` writes ``summary.json``, CSV
+tables and PNG figures into ``out`` and returns the summary.  The keys of
 ``summary.json`` are stable (see EXPERIMENTS.md).
+
+They run on the sweep's path (:func:`shipsense.sweep.runner.execute`):
+S0, S1 and S2 are one task each -- run in a scratch folder on a worker, their
+files returned and written atomically into ``OUT/<study>`` by this process,
+with a ``run.json`` marker last, so a finished study is skipped when the
+same command runs again -- and the wide study is its chunks
+(:func:`shipsense.reproduce.wide.run`).  ``all`` runs the three studies side
+by side on one Dask cluster, then the wide study's chunks on it.
 """
 
 from __future__ import annotations
 
+import json
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
 EXPERIMENTS = {"S0": ("shipsense.reproduce.s0", 200), "S1": ("shipsense.reproduce.s1", 100),
                "S2": ("shipsense.reproduce.s2", 100), "WIDE": ("shipsense.reproduce.wide", 500)}
+STUDIES = ("S0", "S1", "S2")
 
 
 def run(name: str, runs: int | None = None, out=None, seed: int = 0, progress: bool = True, **options):
-    """Run the experiment set ``name`` (S0, S1, S2 or wide); ``options`` go to the wide study's ``run``
-    (``workers``, ``scheduler``, ``restart``: :func:`shipsense.reproduce.wide.run`)."""
+    """Run the experiment set ``name`` (S0, S1, S2 or wide) into ``out`` (default ``results/NAME``).
+
+    ``options``: ``workers`` (0: in this process, the default for one study; N: a local Dask cluster of N
+    processes; None: one per core), ``scheduler`` (an existing cluster), ``restart`` (run a finished study
+    again; for wide, discard another run's chunks) -- see :func:`run_studies` and
+    :func:`shipsense.reproduce.wide.run`."""
     from importlib import import_module
 
     key = name.upper()
@@ -21,7 +40,101 @@ def run(name: str, runs: int | None = None, out=None, seed: int = 0, progress: b
         raise ValueError(f"unknown experiment set {name!r}; choose one of {', '.join(EXPERIMENTS)}")
     module, default_runs = EXPERIMENTS[key]
     folder = "wide" if key == "WIDE" else key
-    if options and key != "WIDE":
-        raise ValueError(f"{', '.join(options)}: only the wide study takes them")
-    return import_module(module).run(runs=runs or default_runs, out=out or f"results/{folder}", seed=seed,
-                                     progress=progress, **options)
+    if key == "WIDE":
+        return import_module(module).run(runs=runs or default_runs, out=out or f"results/{folder}", seed=seed,
+                                         progress=progress, **options)
+    return run_studies([key], runs, Path(out or f"results/{folder}").parent, seed, progress,
+                       folders={key: Path(out or f"results/{folder}")}, **options)[key]
+
+
+@dataclass(frozen=True)
+class StudyTask:
+    """One reference study (S0, S1 or S2) as a task."""
+
+    study: str
+    runs: int
+    seed: int
+
+    @property
+    def name(self) -> str:
+        return self.study
+
+    def identity(self) -> dict:
+        return {"study": self.study, "runs": self.runs, "seed": self.seed}
+
+
+def run_study(task: StudyTask) -> dict:
+    """Run a study in a scratch folder (on a worker or here); returns its summary and its files' bytes."""
+    from importlib import import_module
+
+    module, _ = EXPERIMENTS[task.study]
+    with tempfile.TemporaryDirectory(prefix=f"shipsense-{task.study}-") as tmp:
+        summary = import_module(module).run(runs=task.runs, out=tmp, seed=task.seed, progress=False)
+        files = {str(p.relative_to(tmp)): p.read_bytes() for p in sorted(Path(tmp).rglob("*")) if p.is_file()}
+    return {"summary": summary, "files": files}
+
+
+def _finished(folder: Path, task: StudyTask) -> bool:
+    try:
+        return json.loads((folder / "run.json").read_text()) == task.identity()
+    except (OSError, ValueError):
+        return False
+
+
+def run_studies(names, runs=None, out="results", seed=0, progress=True, *, workers=0, scheduler=None, client=None,
+                restart=False, folders=None, log=print):
+    """Run studies ``names`` (of S0, S1, S2) as tasks, each into ``out/<name>`` (or ``folders[name]``); a study
+    whose folder holds a finished run with the same runs and seed is skipped (unless ``restart``) and its
+    summary read back.  Returns {name: summary}."""
+    from shipsense.sweep.runner import _close, connect, execute
+    from shipsense.sweep.store import atomic_write_bytes
+
+    folders = {n: Path((folders or {}).get(n, Path(out) / n)) for n in names}
+    tasks = [StudyTask(n, runs or EXPERIMENTS[n][1], seed) for n in names]
+    todo = [t for t in tasks if restart or not _finished(folders[t.study], t)]
+    if len(todo) < len(tasks):
+        log(f"reproduce: {len(tasks) - len(todo)} of {len(tasks)} studies already finished, {len(todo)} to run")
+    summaries = {}
+
+    def store(task, result):
+        folder = folders[task.study]
+        folder.mkdir(parents=True, exist_ok=True)
+        (folder / "run.json").unlink(missing_ok=True)   # not finished until every file is written
+        for rel, data in result["files"].items():
+            (folder / rel).parent.mkdir(parents=True, exist_ok=True)
+            atomic_write_bytes(folder / rel, data)
+        atomic_write_bytes(folder / "run.json", (json.dumps(task.identity()) + "\n").encode())
+        summaries[task.study] = result["summary"]
+
+    own = client is None and todo and not (scheduler is None and workers == 0)
+    if own:
+        client = connect(workers, scheduler, log)
+    t0 = time.perf_counter()
+    try:
+        execute(todo, run_study, store, client, None if progress else False, key="shipsense-reproduce")
+    finally:
+        if own:
+            _close(client)
+    for t in tasks:
+        if t.study not in summaries:   # finished before: read back
+            summaries[t.study] = json.loads((folders[t.study] / "summary.json").read_text())
+    log(f"reproduce: {', '.join(names)} in {time.perf_counter() - t0:.1f} s")
+    return summaries
+
+
+def run_all(runs=None, out="results", seed=0, progress=True, *, workers=None, scheduler=None, restart=False,
+            log=print):
+    """S0, S1 and S2 side by side, then the wide study's chunks, on one Dask cluster (``workers``: None = one
+    per core, 0 = this process); returns {name: summary}."""
+    from shipsense.reproduce import wide
+    from shipsense.sweep.runner import _close, connect
+
+    client = None if (scheduler is None and workers == 0) else connect(workers, scheduler, log)
+    try:
+        out_all = run_studies(STUDIES, runs, out, seed, progress, client=client, workers=0, restart=restart, log=log)
+        out_all["WIDE"] = wide.run(runs=runs or EXPERIMENTS["WIDE"][1], out=Path(out) / "wide", seed=seed,
+                                   progress=progress, client=client, workers=0, restart=restart, log=log)
+    finally:
+        if client is not None:
+            _close(client)
+    return out_all
