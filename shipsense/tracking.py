@@ -16,6 +16,7 @@ thinned copy (at most :data:`PLOT_POINTS` samples) is kept for the picture.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -84,7 +85,6 @@ def track_to_files(scenario, times, measurements, out, *, truth=None, method="tr
     keys = ("estimate", "cov", "status", "selected", "hypotheses", "gap_nats", "ambiguous")
     thin = max(1, -(-K // PLOT_POINTS))
     keep = {k: [] for k in (*keys, "k")}
-    err_sum, err_n = 0.0, 0
     header = ["time", *labels, "std_x", "std_y", "selected"]
     header += ["true_x", "true_y", "error_m"] if truth is not None else []
     header += ["cov_xx", "cov_xy", "cov_yy", "status"]
@@ -93,7 +93,31 @@ def track_to_files(scenario, times, measurements, out, *, truth=None, method="tr
         from tqdm import tqdm
 
         steps = tqdm(steps, desc="tracking", unit="block", leave=False, disable=None)
-    with open(out / "estimates.csv", "w") as est_fh, open(out / "selection_log.csv", "w") as log_fh:
+    # written to partial files and renamed at the end: an interrupted or failed run leaves no half table
+    parts = {name: out / f".{name}.part" for name in ("estimates.csv", "selection_log.csv")}
+    stats = [0.0, 0]   # sum and count of the errors once tracking (with the truth)
+    try:
+        _track_blocks(tracker, t, y, truth, steps, parts, header, labels, keys, keep, thin, stats)
+    except BaseException:
+        for p in parts.values():
+            p.unlink(missing_ok=True)
+        raise
+    for name, p in parts.items():
+        os.replace(p, out / name)
+    err_sum, err_n = stats
+    s = keep.pop("_last")
+    plot = {k: np.concatenate(v) for k, v in keep.items()}
+    final_error = None
+    if truth is not None:
+        final_error = float(np.hypot(*(s.estimate[0, :2] - np.asarray(truth)[-1, :2])))
+    return TrackSummary(tracker, K, s.estimate[0], s.cov[0, :2, :2], STATUSES[s.status[0]], bool(s.ambiguous[0]),
+                        final_error, err_sum / err_n if err_n else None, list(tracker.gaps), plot)
+
+
+def _track_blocks(tracker, t, y, truth, steps, parts, header, labels, keys, keep, thin, stats):
+    """The samples in blocks: each block tracked, written to the partial tables and thinned for the plot."""
+    K = len(t)
+    with open(parts["estimates.csv"], "w") as est_fh, open(parts["selection_log.csv"], "w") as log_fh:
         est_fh.write(",".join(header) + "\n")
         log_fh.write("time,status,selected,hypotheses,gap_to_second_nats,ambiguous\n")
         for lo in steps:
@@ -109,17 +133,12 @@ def track_to_files(scenario, times, measurements, out, *, truth=None, method="tr
             if tb is not None:
                 tracked = block["status"] > INITIALISING
                 e = np.hypot(*(block["estimate"][tracked, :2] - tb[tracked, :2]).T)
-                err_sum, err_n = err_sum + e.sum(), err_n + e.size
+                stats[0], stats[1] = stats[0] + e.sum(), stats[1] + e.size
             pick = (ks % thin == 0) | (ks == K - 1)
             for name in keys:
                 keep[name].append(block[name][pick])
             keep["k"].append(ks[pick])
-    plot = {k: np.concatenate(v) for k, v in keep.items()}
-    final_error = None
-    if truth is not None:
-        final_error = float(np.hypot(*(s.estimate[0, :2] - np.asarray(truth)[-1, :2])))
-    return TrackSummary(tracker, K, s.estimate[0], s.cov[0, :2, :2], STATUSES[s.status[0]], bool(s.ambiguous[0]),
-                        final_error, err_sum / err_n if err_n else None, list(tracker.gaps), plot)
+    keep["_last"] = s
 
 
 def describe(summary: TrackSummary, source: str) -> list[str]:

@@ -276,3 +276,23 @@ def test_bad_counts_and_too_much_work_are_one_line_and_exit_2(argv, field, capsy
     code = main(argv)
     err = capsys.readouterr().err
     assert code == 2 and field in err and "Traceback" not in err and "internal error" not in err
+
+
+def test_an_interrupted_track_leaves_no_half_table(tmp_path, monkeypatch):
+    """track writes estimates.csv and selection_log.csv in blocks to partial files and renames them at the end:
+    a failure half-way leaves neither the tables nor the partial files."""
+    from shipsense.trackers import Tracker
+
+    calls = {"n": 0}
+    update = Tracker.update
+
+    def failing(self, *a, **k):
+        calls["n"] += 1
+        if calls["n"] > 50:
+            raise KeyboardInterrupt
+        return update(self, *a, **k)
+
+    monkeypatch.setattr(Tracker, "update", failing)
+    out = tmp_path / "run"
+    assert main(["track", "S2", "--out", str(out)]) == 130
+    assert not any(p.name.endswith((".csv", ".part")) for p in out.glob("*")) if out.exists() else True
