@@ -107,6 +107,7 @@ def test_reproduce_writes_the_documented_summary_keys(tmp_path, capsys):
     # #11, #12, #7 on top by likelihood (its Figure 7); read from +x, no seed is within 90 m
     assert s0["bearing_convention"] == "north" and s0["loglik_top3"] == [11, 12, 7]
     assert 15.0 < s0["seed_nearest_m"] < 17.0 and s0["bearing_conventions"]["east"]["seed_nearest_m"] > 90.0
+    assert s0["seed_nearest_m"] < s0["basin_radius_m"] and s0["seed_inside_basin_rate"] == 1.0   # inside the basin
     assert s0["top3_mrmse_m"][0]["hypothesis"] == 11 and s0["top3_mrmse_m"][0]["r"] < 10.0
     s1 = json.loads((tmp_path / "S1" / "summary.json").read_text())
     assert {"hypotheses", "selection_accuracy", "ambiguous_pairs"} <= set(s1["P1"])
