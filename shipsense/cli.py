@@ -210,27 +210,48 @@ def cmd_track(args) -> int:
 def cmd_check(args) -> int:
     import json
 
-    from shipsense.config import load_scenario
-    from shipsense.design.observability import check_scenario
+    from shipsense.config import ScenarioError
+    from shipsense.design.gate import check_layouts, junit_xml, worst
+    from shipsense.sweep.store import atomic_write_bytes
 
-    if args.passages < 1:
-        raise _BadInput(f"--passages must be >= 1, got {args.passages}")
-    sc = load_scenario(args.layout)
-    verdict = check_scenario(sc, passages=args.passages, seed=args.seed, progress=not args.json)
+    if args.junit is not None and Path(args.junit).suffix != ".xml":
+        raise _BadInput(f"--junit must end in .xml, got {args.junit!r}")
+    results = check_layouts(args.layout, passages=args.passages, seed=args.seed,
+                            progress=not args.json, errors=(ScenarioError, OSError))
+    if args.junit is not None:
+        atomic_write_bytes(Path(args.junit), junit_xml(results))
     if args.json:
-        print(json.dumps(verdict.to_json(), indent=2))
+        docs = [{"layout": r.layout, "verdict": "error", "error": r.detail} if r.verdict == "error"
+                else {"layout": r.layout, **r.detail.to_json()} for r in results]
+        print(json.dumps(docs[0] if len(docs) == 1 else docs, indent=2))
     else:
-        print(f"{sc.name}: {verdict.verdict.upper()}  ({len(sc.sensors)} sensors, {verdict.passages} passage(s) "
-              f"{'from the prior' if sc.prior is not None else '(the nominal one)'})")
-        print(f"  Fisher information: rank {verdict.fim_rank} of {len(verdict.labels)}, "
-              f"condition number {verdict.fim_condition:.3g} (internal units)")
-        print(f"  closest far-apart passage: chi-square {verdict.min_chi2:.3g} (ambiguous below 25)")
-        for p in verdict.pairs[:5]:
-            a, b = p.passage, p.alternative
-            print(f"  ambiguous pair ({p.source}): start ({a[0]:.0f}, {a[1]:.0f}) m heading "
-                  f"{np.degrees(np.arctan2(a[3], a[2])):.0f} deg  vs  ({b[0]:.0f}, {b[1]:.0f}) m heading "
-                  f"{np.degrees(np.arctan2(b[3], b[2])):.0f} deg; chi-square {p.chi2:.3g}, {p.distance_m:.0f} m apart")
-    return VERDICT_EXIT[verdict.verdict]
+        for r in results:
+            _print_verdict(r)
+    outcome = worst(results)
+    if outcome == "error":
+        for r in results:
+            if r.verdict == "error":
+                print(f"shipsense check: error: {r.detail}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    return VERDICT_EXIT[outcome]
+
+
+def _print_verdict(result):
+    if result.verdict == "error":
+        return
+    from shipsense.config import load_scenario
+
+    sc, verdict = load_scenario(result.layout), result.detail
+    print(f"{sc.name}: {verdict.verdict.upper()}  ({len(sc.sensors)} sensors, {verdict.passages} passage(s) "
+          f"{'from the prior' if sc.prior is not None else '(the nominal one)'}; {result.seconds:.1f} s)")
+    print(f"  Fisher information: rank {verdict.fim_rank} of {len(verdict.labels)}, "
+          f"condition number {verdict.fim_condition:.3g} (internal units)")
+    print(f"  closest far-apart passage: chi-square {verdict.min_chi2:.3g} (ambiguous below 25)")
+    for p in verdict.pairs[:5]:
+        a, b = p.passage, p.alternative
+        print(f"  ambiguous pair ({p.source}): start ({a[0]:.0f}, {a[1]:.0f}) m heading "
+              f"{np.degrees(np.arctan2(a[3], a[2])):.0f} deg  vs  ({b[0]:.0f}, {b[1]:.0f}) m heading "
+              f"{np.degrees(np.arctan2(b[3], b[2])):.0f} deg; chi-square {p.chi2:.3g}, {p.distance_m:.0f} m apart")
 
 
 def _read_candidates(path, z_default):
@@ -486,10 +507,15 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--random", action="store_true", help="simulate a random passage from the [prior]")
     t.set_defaults(func=cmd_track)
 
-    c = sub.add_parser("check", help="observability and ambiguity verdict of an array (exit 0/3/4)",
-                       description="Exit codes: 0 observable, 3 ambiguous, 4 degenerate, 2 bad input.")
-    c.add_argument("layout", metavar="SCENARIO_OR_LAYOUT", help="a shipped scenario name or a TOML file")
-    c.add_argument("--json", action="store_true", help="print {verdict, min_chi2, pairs, fim_rank, fim_condition}")
+    c = sub.add_parser("check", help="observability and ambiguity verdict of arrays (exit 0/3/4; a CI gate)",
+                       description="Exit codes (the worst over the files): 0 observable, 3 ambiguous, 4 degenerate, "
+                       "2 bad input.")
+    c.add_argument("layout", metavar="SCENARIO_OR_LAYOUT", nargs="+",
+                   help="shipped scenario names or TOML files (several: one verdict each)")
+    c.add_argument("--json", action="store_true", help="print {verdict, min_chi2, pairs, fim_rank, fim_condition} "
+                   "(a list of them, with 'layout', for several files)")
+    c.add_argument("--junit", default=None, metavar="FILE.xml",
+                   help="also write a JUnit XML report: one test case per layout")
     c.add_argument("--passages", type=_whole(1, PASSAGES_MAX), default=8,
                    help="passages drawn from the [prior] (default 8)")
     c.add_argument("--seed", type=SEED, default=0)

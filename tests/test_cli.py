@@ -1,6 +1,7 @@
 """Command line: the documented commands, outputs and exit codes."""
 
 import csv
+import json
 import subprocess
 import sys
 
@@ -297,3 +298,30 @@ def test_an_interrupted_track_leaves_no_half_table(tmp_path, monkeypatch):
     out = tmp_path / "run"
     assert main(["track", "S2", "--out", str(out)]) == 130
     assert not any(p.name.endswith((".csv", ".part")) for p in out.glob("*")) if out.exists() else True
+
+
+def test_check_gates_several_layouts_with_junit_and_the_worst_exit_code(tmp_path, capsys):
+    """The CI gate: several files, one verdict each, the worst outcome as the exit code (ambiguous 3; a file
+    that cannot be read 2, reported as an error without hiding the others) and a JUnit XML report."""
+    from xml.etree import ElementTree as ET
+
+    junit = tmp_path / "check.xml"
+    assert main(["check", "S1-P2", "S1-P1", "--passages", "2", "--junit", str(junit)]) == 3
+    suite = ET.parse(junit).getroot()
+    assert suite.get("tests") == "2" and suite.get("failures") == "1" and suite.get("errors") == "0"
+    cases = {c.get("name"): c for c in suite.iter("testcase")}
+    assert cases["S1-P2"].find("failure") is None and cases["S1-P1"].find("failure").get("type") == "ambiguous"
+    capsys.readouterr()
+    assert main(["check", "S1-P2", str(tmp_path / "missing.toml"), "--passages", "2", "--json",
+                 "--junit", str(junit)]) == 2
+    docs = json.loads(capsys.readouterr().out)
+    assert [d["verdict"] for d in docs] == ["observable", "error"] and "no such file" in docs[1]["error"]
+    assert ET.parse(junit).getroot().get("errors") == "1"
+    assert main(["check", "S1-P2", "--junit", str(tmp_path / "check.txt")]) == 2
+
+
+def test_the_pre_commit_hook_runs_the_check():
+    from pathlib import Path
+
+    hooks = (Path(__file__).resolve().parents[1] / ".pre-commit-hooks.yaml").read_text()
+    assert "id: shipsense-check" in hooks and "entry: shipsense check" in hooks and "language: python" in hooks
