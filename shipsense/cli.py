@@ -59,10 +59,14 @@ def _whole(lo, hi, what="a whole number"):
 SEED = _whole(0, SEED_MAX, "a non-negative whole number")
 
 
+_QUIET = {"on": False}   # `shipsense --quiet ...`: no progress bars (they show only on a terminal anyway)
+
+
 def _progress(total, desc):
     from tqdm import tqdm
 
-    return tqdm(total=total, desc=desc, unit="step", leave=False, disable=None, file=sys.stderr)
+    return tqdm(total=total, desc=desc, unit="step", leave=False, disable=True if _QUIET["on"] else None,
+                file=sys.stderr)
 
 
 def cmd_scenarios(args) -> int:
@@ -197,7 +201,7 @@ def cmd_track(args) -> int:
     out.mkdir(parents=True, exist_ok=True)   # only once the input is known to be good
     try:
         summary = track_to_files(sc, times, y, out, truth=truth, method=args.method, unit=args.filter,
-                                 progress=True)
+                                 progress=not _QUIET["on"])
     except ValueError as err:
         raise _BadInput(str(err)) from None
     plot_track(summary, times, out / "track.png", truth=truth, title=f"{sc.name}: {args.method} (2-sigma ellipses)")
@@ -217,7 +221,7 @@ def cmd_check(args) -> int:
     if args.junit is not None and Path(args.junit).suffix != ".xml":
         raise _BadInput(f"--junit must end in .xml, got {args.junit!r}")
     results = check_layouts(args.layout, passages=args.passages, seed=args.seed,
-                            progress=not args.json, errors=(ScenarioError, OSError))
+                            progress=not (args.json or _QUIET["on"]), errors=(ScenarioError, OSError))
     if args.junit is not None:
         atomic_write_bytes(Path(args.junit), junit_xml(results))
     if args.json:
@@ -430,11 +434,11 @@ def cmd_reproduce(args) -> int:
         if key == "ALL":
             out = Path(args.out or "results")
             t0 = time.perf_counter()
-            summaries = run_all(runs=args.runs, out=out, seed=args.seed, **options)
+            summaries = run_all(runs=args.runs, out=out, seed=args.seed, progress=not _QUIET["on"], **options)
             print(f"ALL: {', '.join(summaries)} in {time.perf_counter() - t0:.1f} s; wrote {out}/<study>/")
             return EXIT_OK
         out = Path(args.out or f"results/{'wide' if key == 'WIDE' else key}")
-        summary = run(key, runs=args.runs, out=out, seed=args.seed, **options)
+        summary = run(key, runs=args.runs, out=out, seed=args.seed, progress=not _QUIET["on"], **options)
     except SweepError as err:
         raise _BadInput(str(err)) from None
     print(f"{key}: {summary['runs']} runs in {summary['seconds']:.1f} s; wrote {out}/summary.json, CSV tables "
@@ -474,6 +478,8 @@ def build_parser() -> argparse.ArgumentParser:
                 "and design the arrays.")
     p.add_argument("--version", action="version", version=f"shipsense {__version__}")
     p.add_argument("--debug", action="store_true", help="show the traceback of an unexpected error")
+    p.add_argument("--quiet", dest="no_progress", action="store_true",
+                   help="no progress bars (they are shown only on a terminal in any case)")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     d = sub.add_parser("demo", help="simulate a passage past the default array and plot it")
@@ -588,6 +594,7 @@ def main(argv=None) -> int:
     except SystemExit as exit_:   # a bad argument (exit 2, its message printed), --help or --version (0)
         return exit_.code if isinstance(exit_.code, int) else (0 if exit_.code is None else EXIT_BAD_INPUT)
     tune_allocator()   # the command is its own process: reuse freed heap (see shipsense.allocator)
+    _QUIET["on"] = bool(args.no_progress)
     try:
         return args.func(args)
     except (ScenarioError, _BadInput) as err:

@@ -325,3 +325,12 @@ def test_the_pre_commit_hook_runs_the_check():
 
     hooks = (Path(__file__).resolve().parents[1] / ".pre-commit-hooks.yaml").read_text()
     assert "id: shipsense-check" in hooks and "entry: shipsense check" in hooks and "language: python" in hooks
+
+
+def test_quiet_turns_the_progress_bars_off(tmp_path):
+    import shipsense.cli as cli
+
+    assert main(["--quiet", "simulate", "S2", "--runs", "1", "--out", str(tmp_path / "s.npz")]) == 0
+    assert cli._progress(3, "x").disable is True
+    assert main(["simulate", "S2", "--runs", "1", "--out", str(tmp_path / "s.npz")]) == 0
+    assert cli._QUIET["on"] is False
