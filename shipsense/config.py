@@ -333,15 +333,17 @@ class Scenario(_Model):
         for i, s in enumerate(self.sensors):
             z = s.position[2]
             if z > 0 or z < -depth:
-                where = "above the sea surface (z > 0)" if z > 0 else f"below the seabed (z < -{depth:g})"
+                where = ("above the sea surface (z > 0)" if z > 0 else
+                         f"below the seabed (z < -{depth:g}, the medium's water_depth)")
                 raise ValueError(f"sensors[{i}].position: sensor {s.id!r} is outside the water: {where}")
         if "electrode" in types and self.medium is None:
             raise ValueError("medium: electrode sensors need a [medium] section")
         zt = self.passage.z
         if zt < -depth:
-            raise ValueError(f"passage.z: the source is below the seabed (z < -{depth:g})")
+            raise ValueError(f"passage.z: the source is below the seabed (z < -{depth:g}, the medium's water_depth)")
         if "electrode" in types and not -depth < zt < 0:
-            raise ValueError(f"passage.z: an electric source must be strictly inside the water (-{depth:g} < z < 0)")
+            raise ValueError(f"passage.z: an electric source must be strictly inside the water (-{depth:g} < z < 0; "
+                             "the medium's water_depth)")
         if "magnetometer" in types and self.passage.moment is None:
             raise ValueError("passage.moment: magnetometers need the source's magnetic moment [mx, my, mz]")
         if "electrode" in types and self.passage.p is None:

@@ -43,7 +43,7 @@ def _set(data, path, value):
     return data
 
 
-@settings(max_examples=1000, deadline=2000, suppress_health_check=[HealthCheck.too_slow])
+@settings(derandomize=True, max_examples=1000, deadline=2000, suppress_health_check=[HealthCheck.too_slow])
 @given(leaf=st.sampled_from(LEAVES), value=BAD)
 def test_a_mutated_scenario_loads_or_names_the_field(leaf, value):
     name, path = leaf

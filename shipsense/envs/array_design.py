@@ -81,7 +81,7 @@ class ArrayDesignEnv(gym.Env):
         self.observer = observer
         self.scenario = sc
         self.k = number("k", k, 1, 1000, integer=True)
-        half_width = number("half_width", half_width, 0.0, 1e5, lo_open=True)
+        half_width = number("half_width", half_width, 0.5, 1e5)
         spacing = number("spacing", spacing, half_width / 200.0, 2.0 * half_width)   # at most 401 x 401 candidates
         passages = number("passages", passages, 1, 10_000, integer=True)
         seed_passages = number("seed_passages", seed_passages, 0, 2**63 - 1, integer=True)

@@ -96,7 +96,7 @@ class PassageCore:
         self.scenario = sc
         num_envs = number("num_envs", num_envs, 1, 100_000, integer=True)
         energy_cost = number("energy_cost", energy_cost, 0.0, 1e6)
-        error_scale = number("error_scale", error_scale, 0.0, 1e6, lo_open=True)
+        error_scale = number("error_scale", error_scale, 1e-3, 1e6)
         self.tracker = Tracker(sc, passages=num_envs, method=observer, unit=filter)
         self.model = self.tracker.model
         arr = self.model.array
