@@ -25,7 +25,7 @@ import numpy as np
 from shipsense import load_scenario, simulate
 from shipsense.design.fisher import pcrlb
 from shipsense.trackers import Tracker
-from shipsense.trackers.metrics import converged_until, passage_ends
+from shipsense.trackers.metrics import converged_until, nees, passage_ends
 
 FAULTY = {"model": "contaminated", "eps": 0.2, "outlier_scale": 10.0, "dropout": 0.3}
 
@@ -56,8 +56,7 @@ def main(argv=None):
         above = np.where(valid, err >= 10.0, False)
         settled = np.where(above.any(axis=1), K - np.argmax(above[:, ::-1], axis=1), 0)
         post = valid & conv[:, None] & (k >= settled[:, None]) & (res.status >= 2)
-        d = res.estimates[..., :2] - truth[..., :2]
-        q = np.einsum("pki,pkij,pkj->pk", d, np.linalg.inv(res.position_cov), d)
+        q = nees(res.estimates, res.covs, truth)
         print(f"snr_start {snr:g}: converged {conv.mean():.3f} (approaching {conv[approach].mean():.3f} of "
               f"{approach.sum()}, the others {conv[~approach].mean():.3f}); inside the 95 % ellipse after "
               f"convergence {np.mean(q[post] <= 5.991):.3f}", flush=True)

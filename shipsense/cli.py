@@ -243,9 +243,7 @@ def cmd_check(args) -> int:
 def _print_verdict(result):
     if result.verdict == "error":
         return
-    from shipsense.config import load_scenario
-
-    sc, verdict = load_scenario(result.layout), result.detail
+    sc, verdict = result.scenario, result.detail
     print(f"{sc.name}: {verdict.verdict.upper()}  ({len(sc.sensors)} sensors, {verdict.passages} passage(s) "
           f"{'from the prior' if sc.prior is not None else '(the nominal one)'}; {result.seconds:.1f} s)")
     print(f"  Fisher information: rank {verdict.fim_rank} of {len(verdict.labels)}, "

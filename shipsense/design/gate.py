@@ -25,6 +25,7 @@ class GateResult:
     verdict: str
     seconds: float
     detail: object = None   # the Verdict, or the error message
+    scenario: object = None   # the validated Scenario (None for an error)
 
     @property
     def failed(self) -> bool:
@@ -34,14 +35,16 @@ class GateResult:
 def check_layouts(layouts, passages=8, seed=0, progress=False, errors=(ValueError, OSError)):
     """Check each layout file; a file that cannot be loaded or validated is an ``"error"`` result (its
     message kept), not an exception, so one bad file does not hide the others' verdicts."""
+    from shipsense.config import load_scenario
     from shipsense.design.observability import check_scenario
 
     out = []
     for layout in layouts:
         t0 = time.perf_counter()
         try:
-            v = check_scenario(layout, passages=passages, seed=seed, progress=progress)
-            out.append(GateResult(str(layout), v.verdict, time.perf_counter() - t0, v))
+            sc = load_scenario(layout)
+            v = check_scenario(sc, passages=passages, seed=seed, progress=progress)
+            out.append(GateResult(str(layout), v.verdict, time.perf_counter() - t0, v, sc))
         except errors as err:
             out.append(GateResult(str(layout), "error", time.perf_counter() - t0, str(err)))
     return out

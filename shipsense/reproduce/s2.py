@@ -10,7 +10,7 @@ from shipsense.config import load_scenario
 from shipsense.reproduce.common import Output, Stages, rmse_plot
 from shipsense.simulator import simulate
 from shipsense.trackers.driver import run_filter
-from shipsense.trackers.metrics import convergence_rate, mrmse, rmse_k
+from shipsense.trackers.metrics import convergence_rate, mrmse, nees, rmse_k
 from shipsense.trackers.models import model_from_scenario
 
 OFFSETS = (5.0, 10.0, 20.0, 40.0)
@@ -259,7 +259,7 @@ def field_trial_tracking(trial, runs, seed):
                                                                             sim.measurements[..., _columns(sim, use)])
                     truth = sim.truth[..., :2]
                     d = res.estimates[..., :2] - truth
-                    q = np.einsum("pki,pkij,pkj->pk", d, np.linalg.inv(res.position_cov), d)
+                    q = nees(res.estimates, res.covs, truth)
                     key = f"{label}|{misaligned}|{bias:g}" if label == "fused" else f"{label}|{misaligned}|"
                     parts.setdefault(key, []).append((np.hypot(*d.transpose(2, 0, 1)), res.status, q,
                                                       truth[..., 0]))

@@ -410,18 +410,18 @@ def run_family(name, passages, seed):
 
 @dataclass(frozen=True)
 class WideTask:
-    """A task of :func:`run`: passages ``first ..`` of a family (``chunk`` >= 0) or a consistency part on one
-    scenario (``chunk`` = -1)."""
+    """A task of :func:`run`: ``passages`` passages of family ``family`` (chunk number ``chunk``), or -- with
+    ``part`` -- a consistency part (:data:`PARTS`) on scenario ``family``."""
 
     family: str
     chunk: int
-    first: int
     passages: int
     seed: int
+    part: str | None = None
 
     @property
     def name(self) -> str:
-        return f"{self.family}-c{self.chunk:04d}" if self.chunk >= 0 else self.family
+        return f"{self.part}-{self.family}" if self.part else f"{self.family}-c{self.chunk:04d}"
 
 
 def chunk_seed(seed, family, chunk):
@@ -434,20 +434,18 @@ def tasks(runs, seed, chunk=CHUNK):
     out = []
     for family in FAMILIES:
         for c, first in enumerate(range(0, runs, chunk)):
-            out.append(WideTask(family, c, first, min(chunk, runs - first), chunk_seed(seed, family, c)))
+            out.append(WideTask(family, c, min(chunk, runs - first), chunk_seed(seed, family, c)))
     for part in PARTS:
         for scen in CONSISTENCY_SCENARIOS:
-            out.append(WideTask(f"{part}-{scen}", -1, 0, min(runs, 100), seed))
+            out.append(WideTask(scen, -1, min(runs, 100), seed, part))
     return out
 
 
 def run_task(task):
     """Run one :class:`WideTask` (on a Dask worker or here): arrays of a family chunk, or a consistency dict."""
-    if task.chunk >= 0:
+    if task.part is None:
         return family_chunk(task.family, task.passages, task.seed)
-    part, scen = next((p, task.family[len(p) + 1:]) for p in sorted(PARTS, key=len, reverse=True)
-                      if task.family.startswith(p + "-"))
-    return consistency_of(scen, task.passages, task.seed, **PARTS[part])
+    return consistency_of(task.family, task.passages, task.seed, **PARTS[task.part])
 
 
 def _identity(runs, seed, chunk):
@@ -484,7 +482,7 @@ def _prepare(out: Path, digest, restart):
 def _store(out: Path, task, result):
     from shipsense.sweep.store import atomic_write_bytes
 
-    if task.chunk >= 0:
+    if task.part is None:
         buf = io.BytesIO()
         np.savez(buf, **result)
         atomic_write_bytes(out / "chunks" / f"{task.name}.npz", buf.getvalue())
@@ -493,8 +491,8 @@ def _store(out: Path, task, result):
 
 
 def _load(out: Path, task):
-    path = out / "chunks" / f"{task.name}.{'npz' if task.chunk >= 0 else 'json'}"
-    if task.chunk >= 0:
+    path = out / "chunks" / f"{task.name}.{'npz' if task.part is None else 'json'}"
+    if task.part is None:
         with np.load(path) as z:
             return {k: z[k] for k in z.files}
     return json.loads(path.read_text())
@@ -539,14 +537,14 @@ def run(runs=500, out="results/wide", seed=0, progress=True, *, workers=0, sched
             _close(client)
     summary, rows = {}, []
     for name in FAMILIES:
-        summary[name] = family_rows(name, [_load(o.dir, t) for t in todo_all if t.chunk >= 0 and t.family == name])
+        summary[name] = family_rows(name, [_load(o.dir, t) for t in todo_all if t.part is None and t.family == name])
         for method, m in summary[name].items():
             rows.append([name, method, m["convergence_rate"], m["mrmse_r_m"], m["rmse_over_pcrlb"],
                          m["rmse_over_pcrlb_pooled"], m["rmse_over_crlb_deterministic"],
                          m["rmse_over_crlb_tracking"], m["untracked_share"], m["nees_mean"],
                          m["seconds_per_passage"]])
     for part in PARTS:
-        summary[part] = {scen: _load(o.dir, WideTask(f"{part}-{scen}", -1, 0, 0, seed))
+        summary[part] = {scen: _load(o.dir, WideTask(scen, -1, 0, seed, part))
                          for scen in CONSISTENCY_SCENARIOS}
     elapsed = time.perf_counter() - t0
     o.csv("consistency.csv", ["scenario", "tracker", "process_noise", "convergence_rate", "nees_mean",
