@@ -95,11 +95,13 @@ def test_vector_env_equals_single_envs_step_by_step_across_autoreset():
             else:
                 obs, r, t, _, info = s.step(acts[i])
                 # equal to rounding: an autoreset re-seeds some rows of the vector env's bank, after which
-                # its next predict re-forms the covariance from the factor instead of reusing the update's
-                assert info["error"] == pytest.approx(vinfo["error"][i], rel=1e-9)
+                # its next predict re-forms the covariance from the factor instead of reusing the update's;
+                # how far that rounding carries depends on the BLAS kernel (5 nm on an AVX-512 machine), so
+                # errors are compared in metres at the observations' tolerance
+                assert info["error"] == pytest.approx(vinfo["error"][i], rel=0, abs=1e-6)
                 pending[i] = t
             np.testing.assert_allclose(vo[i], obs, rtol=0, atol=1e-6)
-            assert vr[i] == pytest.approx(r, rel=1e-9, abs=1e-12) and vt[i] == t
+            assert vr[i] == pytest.approx(r, rel=0, abs=1e-6) and vt[i] == t     # error / 10 m, energy exact
         assert not vtr.any()
 
 

@@ -5,6 +5,8 @@ import pytest
 
 from shipsense import load_scenario, simulate
 from shipsense.trackers import Tracker
+from scaled import close as _close
+
 from shipsense.trackers.tracker import INCONSISTENT, INITIALISING, NO_DATA, RESTARTED, TRACKING
 
 
@@ -15,14 +17,6 @@ def s2():
     tr = Tracker(sc, passages=4, sensors=["M1", "M2"])
     return sc, sim.times, sim.measurements[..., :6], tr.model.state_from_truth(sim.truth), tr.track(
         sim.times, sim.measurements[..., :6])
-
-
-def _close(a, b, tol):
-    """Arrays equal to ``tol`` of their own scale (covariances: each entry against sqrt(P_ii P_jj))."""
-    if a.ndim >= 2 and a.shape[-1] == a.shape[-2]:
-        sd = np.sqrt(np.einsum("...ii->...i", np.abs(b)))
-        return np.all(np.abs(a - b) <= tol * sd[..., :, None] * sd[..., None, :] + 1e-300)
-    return np.all(np.abs(a - b) <= tol * np.maximum(np.abs(b), 1.0))
 
 
 def test_it_tracks_every_passage_with_honest_finite_covariances(s2):
