@@ -12,6 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
+from shipsense.errors import ShipsenseError
+
 EXIT_OK = 0
 EXIT_INTERNAL = 1
 EXIT_BAD_INPUT = 2
@@ -37,8 +39,6 @@ SEED_MAX = 2**63 - 1
 RUNS_MAX = 1_000_000
 PASSAGES_MAX = 10_000
 TIMESTEPS_MAX = 10**9
-MEMORY_LIMIT_BYTES = 8e9
-"""The largest simulation a command allocates without ``--max-memory`` (its arrays, estimated before any)."""
 
 
 def _whole(lo, hi, what="a whole number"):
@@ -69,6 +69,13 @@ def _progress(total, desc):
                 file=sys.stderr)
 
 
+def _within_budget(args, work):
+    """Refuse work estimated above ``--max-memory`` / ``--max-minutes`` before any of it is allocated."""
+    from shipsense.budget import enforce
+
+    return enforce(work, args.max_memory, args.max_minutes)
+
+
 def cmd_scenarios(args) -> int:
     from shipsense.config import shipped_scenarios
 
@@ -80,8 +87,9 @@ def cmd_scenarios(args) -> int:
 
 
 def cmd_simulate(args) -> int:
+    from shipsense import budget
     from shipsense.config import load_scenario
-    from shipsense.simulator import simulate, simulation_bytes
+    from shipsense.simulator import simulate
 
     sc = load_scenario(args.scenario)
     if args.out is not None and Path(args.out).suffix not in (".npz", ".csv"):
@@ -90,12 +98,7 @@ def cmd_simulate(args) -> int:
         raise _BadInput(f"--plot must end in .png, got {args.plot!r}")
     if args.random and sc.prior is None:
         raise _BadInput(f"scenario {sc.name!r} has no [prior] section; --random needs one")
-    need = simulation_bytes(sc, args.runs or sc.runs)
-    if not (np.isfinite(args.max_memory) and args.max_memory > 0):
-        raise _BadInput(f"--max-memory must be a positive number of GB, got {args.max_memory!r}")
-    if need > args.max_memory * 1e9:
-        raise _BadInput(f"{args.runs or sc.runs} runs of {sc.steps} steps would need about {need / 1e9:.3g} GB "
-                        f"(limit {args.max_memory:g} GB): use fewer --runs, or raise --max-memory")
+    _within_budget(args, budget.simulation(sc, args.runs or sc.runs))
     bar = _progress(3, f"simulate {sc.name}")
     sim = simulate(sc, runs=args.runs, seed=args.seed, random=args.random)
     bar.update(1)
@@ -140,26 +143,27 @@ def _print_summary(sim):
 
 
 def cmd_demo(args) -> int:
+    from shipsense.atomic import staged_directory
     from shipsense.config import load_scenario
     from shipsense.plotting import plot_simulation, plot_track
     from shipsense.simulator import simulate
     from shipsense.tracking import describe, track_to_files
 
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     sc = load_scenario("demo")
     bar = _progress(3, "demo: simulate")
-    sim = simulate(sc, runs=1)
-    bar.update(1)
-    bar.set_description("demo: track")
-    summary = track_to_files(sc, sim.times, sim.measurements[0], out, truth=sim.truth[0])
-    bar.update(1)
-    bar.set_description("demo: save and plot")
-    sim.save_npz(out / "passage.npz")
-    plot_simulation(sim, out / "measurements.png")
-    plot_track(summary, sim.times, out / "demo.png", truth=sim.truth[0],
-               title="demo: the project's tracker, fused magnetic + electric + bearing (2-sigma ellipses)")
-    bar.update(1)
+    with staged_directory(out) as stage:   # all of the demo's files, or none
+        sim = simulate(sc, runs=1)
+        bar.update(1)
+        bar.set_description("demo: track")
+        summary = track_to_files(sc, sim.times, sim.measurements[0], stage, truth=sim.truth[0])
+        bar.update(1)
+        bar.set_description("demo: save and plot")
+        sim.save_npz(stage / "passage.npz")
+        plot_simulation(sim, stage / "measurements.png")
+        plot_track(summary, sim.times, stage / "demo.png", truth=sim.truth[0],
+                   title="demo: the project's tracker, fused magnetic + electric + bearing (2-sigma ellipses)")
+        bar.update(1)
     bar.close()
     _print_summary(sim)
     for line in describe(summary, "the simulated passage"):
@@ -169,11 +173,13 @@ def cmd_demo(args) -> int:
     return EXIT_OK
 
 
-class _BadInput(Exception):
-    pass
+class _BadInput(ShipsenseError):
+    """A command-line argument the user can fix (one line, exit 2)."""
 
 
 def cmd_track(args) -> int:
+    from shipsense import budget
+    from shipsense.atomic import staged_directory
     from shipsense.config import load_scenario
     from shipsense.plotting import plot_track
     from shipsense.recording import RecordingError, read_recording
@@ -187,6 +193,7 @@ def cmd_track(args) -> int:
     out = Path(args.out)
     truth = None
     if args.data:
+        _within_budget(args, budget.recording(args.data, sc))
         try:
             times, y = read_recording(args.data, sc)
         except RecordingError as err:
@@ -194,17 +201,19 @@ def cmd_track(args) -> int:
         missing = np.isnan(y).mean()
         source = f"recording {args.data} ({y.shape[0]} samples, {100 * missing:.1f} % of values missing)"
     else:
+        _within_budget(args, budget.tracking(sc, sc.steps, what=f"a simulated passage of {sc.name} ({sc.steps} steps)"))
         sim = simulate(sc, runs=1, seed=args.seed, random=args.random)
         times, y, truth = sim.times, sim.measurements[0], sim.truth[0]
         used_seed = sc.seed if args.seed is None else args.seed
         source = f"simulated {'random' if args.random else 'nominal'} passage of {sc.name} (seed {used_seed})"
-    out.mkdir(parents=True, exist_ok=True)   # only once the input is known to be good
-    try:
-        summary = track_to_files(sc, times, y, out, truth=truth, method=args.method, unit=args.filter,
-                                 progress=not _QUIET["on"])
-    except ValueError as err:
-        raise _BadInput(str(err)) from None
-    plot_track(summary, times, out / "track.png", truth=truth, title=f"{sc.name}: {args.method} (2-sigma ellipses)")
+    with staged_directory(out) as stage:   # the tables and the plot, or nothing
+        try:
+            summary = track_to_files(sc, times, y, stage, truth=truth, method=args.method, unit=args.filter,
+                                     progress=not _QUIET["on"])
+        except ValueError as err:
+            raise _BadInput(str(err)) from None
+        plot_track(summary, times, stage / "track.png", truth=truth,
+                   title=f"{sc.name}: {args.method} (2-sigma ellipses)")
     for line in describe(summary, source):
         print(line)
     print(f"wrote {out / 'estimates.csv'}, {out / 'selection_log.csv'} and {out / 'track.png'}")
@@ -214,14 +223,16 @@ def cmd_track(args) -> int:
 def cmd_check(args) -> int:
     import json
 
-    from shipsense.config import ScenarioError
+    from shipsense import budget
+    from shipsense.atomic import atomic_write_bytes
     from shipsense.design.gate import check_layouts, junit_xml, worst
-    from shipsense.sweep.store import atomic_write_bytes
 
     if args.junit is not None and Path(args.junit).suffix != ".xml":
         raise _BadInput(f"--junit must end in .xml, got {args.junit!r}")
+    budget.check_limits(args.max_memory, args.max_minutes)
     results = check_layouts(args.layout, passages=args.passages, seed=args.seed,
-                            progress=not (args.json or _QUIET["on"]), errors=(ScenarioError, OSError))
+                            progress=not (args.json or _QUIET["on"]), errors=(ShipsenseError, OSError),
+                            admit=lambda sc: _within_budget(args, budget.check(sc, args.passages)))
     if args.junit is not None:
         atomic_write_bytes(Path(args.junit), junit_xml(results))
     if args.json:
@@ -391,21 +402,24 @@ def cmd_design(args) -> int:
 
 
 def cmd_train(args) -> int:
+    from shipsense import budget
     from shipsense.envs import training
 
     if args.timesteps is not None and args.timesteps < 64:
         raise _BadInput(f"--timesteps must be >= 64, got {args.timesteps}")
+    timesteps = args.timesteps or training.DEFAULT_TIMESTEPS[args.task]
+    _within_budget(args, budget.training(args.task, timesteps))
     out = args.out or f"results/train-{args.task}"
     try:
         if args.task == "scheduling":
-            summary = training.train_scheduling(args.timesteps or 20_000, out, args.seed)
+            summary = training.train_scheduling(timesteps, out, args.seed, progress=not _QUIET["on"])
             print(f"scheduling (Passage-v0, S2, one read per step): PPO {summary['timesteps']} steps at "
                   f"{summary['ppo_fps']:.0f} frames/s; held-out episodes: {summary['held_out_episodes']}")
             for name, r in summary["results"].items():
                 print(f"  {name:<26} mean error {r['mean_error_m']:8.2f} m  median {r['median_error_m']:7.2f} m  "
                       f"reads/step {r['reads_per_step']:.2f}")
         else:
-            summary = training.train_placement(args.timesteps or 600, out, args.seed)
+            summary = training.train_placement(timesteps, out, args.seed, progress=not _QUIET["on"])
             print(f"placement (ArrayDesign-v0, S1-P2, k = 3): MaskablePPO {summary['timesteps']} steps at "
                   f"{summary['ppo_fps']:.1f} frames/s; held-out passages: {summary['held_out_passages']}")
             for name, r in summary["results"].items():
@@ -418,6 +432,7 @@ def cmd_train(args) -> int:
 
 
 def cmd_reproduce(args) -> int:
+    from shipsense import budget
     from shipsense.reproduce import EXPERIMENTS, run, run_all
     from shipsense.sweep import SweepError
 
@@ -428,6 +443,7 @@ def cmd_reproduce(args) -> int:
     if workers is None and args.scheduler is None and key in ("S0", "S1", "S2"):
         workers = 0   # one study is one task: in this process unless a cluster is asked for
     options = {"workers": workers, "scheduler": args.scheduler, "restart": args.restart}
+    _within_budget(args, budget.study(key, args.runs))
     try:
         if key == "ALL":
             out = Path(args.out or "results")
@@ -479,6 +495,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", dest="no_progress", action="store_true",
                    help="no progress bars (they are shown only on a terminal in any case)")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    from shipsense.budget import MEMORY_LIMIT_GB, TIME_LIMIT_MINUTES
+
+    limits = argparse.ArgumentParser(add_help=False)   # the work budget, on every command that can be large
+    limits.add_argument("--max-memory", type=float, default=MEMORY_LIMIT_GB, metavar="GB",
+                        help="refuse work whose memory is estimated above this (default: %(default)g GB)")
+    limits.add_argument("--max-minutes", type=float, default=TIME_LIMIT_MINUTES, metavar="MIN",
+                        help="refuse work whose run time is estimated above this (default: %(default)g minutes)")
 
     d = sub.add_parser("demo", help="simulate a passage past the default array and plot it")
     d.add_argument("--out", default="shipsense-demo", help="output directory (default: %(default)s)")
@@ -487,19 +510,17 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("scenarios", help="list the shipped scenarios")
     s.set_defaults(func=cmd_scenarios)
 
-    m = sub.add_parser("simulate", help="simulate passages of a scenario")
+    m = sub.add_parser("simulate", parents=[limits], help="simulate passages of a scenario")
     m.add_argument("scenario", help="a shipped scenario name (see `shipsense scenarios`) or a TOML file")
     m.add_argument("--runs", type=_whole(1, RUNS_MAX), default=None,
                    help="Monte Carlo runs (default: the scenario's)")
     m.add_argument("--seed", type=SEED, default=None, help="random seed (default: the scenario's)")
-    m.add_argument("--max-memory", type=float, default=MEMORY_LIMIT_BYTES / 1e9, metavar="GB",
-                   help="refuse a simulation whose arrays would exceed this (default: %(default)g GB)")
     m.add_argument("--random", action="store_true", help="draw passages from the scenario's [prior]")
     m.add_argument("--out", default=None, help="write measurements to FILE.npz or a tidy FILE.csv")
     m.add_argument("--plot", default=None, help="write a picture of the array, passages and traces to FILE.png")
     m.set_defaults(func=cmd_simulate)
 
-    t = sub.add_parser("track", help="track a simulated passage, or a recorded one (--data)")
+    t = sub.add_parser("track", parents=[limits], help="track a simulated passage, or a recorded one (--data)")
     t.add_argument("scenario", help="a shipped scenario name or a TOML file (the array, medium and tracker)")
     t.add_argument("--data", default=None, help="recorded long-format CSV: time,sensor,channel,value (SI units)")
     t.add_argument("--method", choices=["tracker", "bank"], default="tracker",
@@ -511,7 +532,8 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--random", action="store_true", help="simulate a random passage from the [prior]")
     t.set_defaults(func=cmd_track)
 
-    c = sub.add_parser("check", help="observability and ambiguity verdict of arrays (exit 0/3/4; a CI gate)",
+    c = sub.add_parser("check", parents=[limits],
+                       help="observability and ambiguity verdict of arrays (exit 0/3/4; a CI gate)",
                        description="Exit codes (the worst over the files): 0 observable, 3 ambiguous, 4 degenerate, "
                        "2 bad input.")
     c.add_argument("layout", metavar="SCENARIO_OR_LAYOUT", nargs="+",
@@ -525,7 +547,7 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--seed", type=SEED, default=0)
     c.set_defaults(func=cmd_check)
 
-    g = sub.add_parser("design", help="place k sensors (convex relaxation, rounding, ambiguity cuts)")
+    g = sub.add_parser("design", parents=[limits], help="place k sensors (convex relaxation, rounding, ambiguity cuts)")
     g.add_argument("scenario", help="a shipped scenario name or a TOML file (its first sensor is the template)")
     g.add_argument("--k", type=_whole(1, 1000), required=True, help="number of sensors to place")
     g.add_argument("--criterion", default="D", help="D, A or E (default D)")
@@ -540,7 +562,8 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--no-cuts", action="store_true", help="skip the ambiguity cuts")
     g.set_defaults(func=cmd_design)
 
-    tr = sub.add_parser("train", help="train a sensor-scheduling or placement agent (needs the rl extra)")
+    tr = sub.add_parser("train", parents=[limits],
+                        help="train a sensor-scheduling or placement agent (needs the rl extra)")
     tr.add_argument("task", choices=["placement", "scheduling"])
     tr.add_argument("--timesteps", type=_whole(1, TIMESTEPS_MAX), default=None,
                     help="environment steps (default: 20000 scheduling, 600 placement)")
@@ -564,7 +587,8 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("--report", default=None, metavar="DIR", help="re-draw the plots of a finished sweep in DIR")
     w.set_defaults(func=cmd_sweep)
 
-    r = sub.add_parser("reproduce", help="reproduce the reference experiments of S0, S1, S2, the wide-prior study, "
+    r = sub.add_parser("reproduce", parents=[limits],
+                       help="reproduce the reference experiments of S0, S1, S2, the wide-prior study, "
                        "or all of them")
     r.add_argument("name", metavar="S0|S1|S2|wide|all")
     r.add_argument("--runs", type=_whole(2, RUNS_MAX), default=None,
@@ -584,7 +608,6 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv=None) -> int:
     from shipsense.allocator import tune_allocator
-    from shipsense.config import ScenarioError
 
     parser = build_parser()
     try:
@@ -595,10 +618,7 @@ def main(argv=None) -> int:
     _QUIET["on"] = bool(args.no_progress)
     try:
         return args.func(args)
-    except (ScenarioError, _BadInput) as err:
-        print(f"shipsense {args.command}: error: {err}", file=sys.stderr)
-        return EXIT_BAD_INPUT
-    except OSError as err:
+    except (ShipsenseError, OSError) as err:   # input the user can fix: one line naming it
         print(f"shipsense {args.command}: error: {err}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:

@@ -23,6 +23,7 @@ from typing import Annotated, Literal
 import numpy as np
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, model_validator
 
+from shipsense.errors import ShipsenseError
 from shipsense.physics.array import CHANNELS, KINDS, SensorArray
 from shipsense.physics.electric import Medium
 from shipsense.physics.magnetic import earth_field_direction
@@ -35,7 +36,7 @@ MIN_SOURCE_DISTANCE = 1.0
 """A passage may not come closer than this (m) to a sensor: the point-dipole fields are singular there."""
 
 
-class ScenarioError(ValueError):
+class ScenarioError(ShipsenseError):
     """A scenario file or value is invalid; the message names the field and the reason."""
 
 

@@ -33,6 +33,8 @@ from pathlib import Path
 
 import numpy as np
 
+from shipsense.errors import ShipsenseError
+
 REQUIRED = ("time", "sensor", "channel", "value")
 TIME_MAX_S = 1e10
 """Largest time magnitude accepted (s): Unix times fit; 1e308 is a corrupted value."""
@@ -40,7 +42,7 @@ NEAR_S = 1e-6
 """Two samples of one channel closer than this (s) are the same sample twice (a clock jitter or a duplicate)."""
 
 
-class RecordingError(ValueError):
+class RecordingError(ShipsenseError):
     """A recording is malformed; the message names the file, the row and the problem."""
 
 

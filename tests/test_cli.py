@@ -271,10 +271,18 @@ def test_import_shipsense_is_light_and_its_names_arrive_on_use():
     (["sweep", "x.toml", "--out", "d", "--workers", "-1"], "--workers"),
     (["simulate", "S2", "--runs", "900000"], "--max-memory"),
     (["simulate", "S2", "--max-memory", "nan"], "--max-memory"),
+    (["simulate", "S2", "--max-minutes", "-1"], "--max-minutes"),
+    (["reproduce", "S0", "--runs", "1000000"], "--max-memory"),
+    (["reproduce", "wide", "--runs", "40000"], "--max-minutes"),
+    (["reproduce", "all", "--runs", "100000"], "--max-memory"),
+    (["train", "scheduling", "--timesteps", "1000000000"], "--max-minutes"),
+    (["check", "S1-P2", "--passages", "10000", "--max-minutes", "30"], "--max-minutes"),
+    (["track", "S2", "--max-minutes", "1e-6"], "--max-minutes"),
 ])
 def test_bad_counts_and_too_much_work_are_one_line_and_exit_2(argv, field, capsys):
     """Counts and seeds are checked before any work (a negative seed was a numpy error, --passages 0 a division
-    by zero, --runs 1e9 a 67 GB allocation); a simulation above the memory limit is refused, naming the flag."""
+    by zero, --runs 1e9 a 67 GB allocation); work estimated above the memory or time limit is refused before
+    anything is allocated, naming the flag that raises the limit (these cases would run for hours or days)."""
     code = main(argv)
     err = capsys.readouterr().err
     assert code == 2 and field in err and "Traceback" not in err and "internal error" not in err
@@ -334,3 +342,28 @@ def test_quiet_turns_the_progress_bars_off(tmp_path):
     assert cli._progress(3, "x").disable is True
     assert main(["simulate", "S2", "--runs", "1", "--out", str(tmp_path / "s.npz")]) == 0
     assert cli._QUIET["on"] is False
+
+
+def test_the_memory_estimate_of_a_simulation_covers_what_it_allocates():
+    """The budget's simulation estimate is an estimate of the arrays a simulation really holds."""
+    from shipsense import budget, load_scenario, simulate
+
+    sc = load_scenario("S2")
+    sim = simulate(sc, runs=3)
+    held = sum(a.nbytes for a in (sim.truth, sim.clean, sim.measurements))
+    est = budget.simulation(sc, 3).bytes
+    assert held <= est <= 3 * held, (held, est)
+
+
+def test_a_failing_demo_leaves_nothing_behind(tmp_path, monkeypatch):
+    """demo stages its files and moves them in only when all are written: a failure in the last plot leaves
+    neither the output folder's tables nor a staging folder."""
+    import shipsense.plotting
+
+    def broken(*a, **k):
+        raise RuntimeError("plot failed")
+
+    monkeypatch.setattr(shipsense.plotting, "plot_track", broken)
+    out = tmp_path / "demo"
+    assert main(["--quiet", "demo", "--out", str(out)]) == 1
+    assert not out.exists() and list(tmp_path.iterdir()) == []

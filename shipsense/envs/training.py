@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 HELD_OUT = 10_000
+DEFAULT_TIMESTEPS = {"scheduling": 20_000, "placement": 600}
 
 
 def _require_rl():
@@ -29,13 +30,14 @@ def _require_rl():
     torch.set_num_threads(1)
 
 
-def _progress_callback(total, desc):
+def _progress_callback(total, desc, progress=True):
     from stable_baselines3.common.callbacks import BaseCallback
     from tqdm import tqdm
 
     class Bar(BaseCallback):
         def _on_training_start(self):
-            self.bar = tqdm(total=total, desc=desc, unit="step", leave=False, disable=None)
+            self.bar = tqdm(total=total, desc=desc, unit="step", leave=False,
+                            disable=None if progress else True)   # None: a bar only on a terminal
 
         def _on_step(self):
             self.bar.update(self.training_env.num_envs)
@@ -64,7 +66,8 @@ def _run_policy(env, policy, episodes, seed):
             "reads_per_step": float(np.mean(reads))}
 
 
-def train_scheduling(timesteps=20_000, out="results/train-scheduling", seed=0, episodes=20):
+def train_scheduling(timesteps=DEFAULT_TIMESTEPS["scheduling"], out="results/train-scheduling", seed=0, episodes=20,
+                     progress=True):
     _require_rl()
     from stable_baselines3 import PPO
 
@@ -76,7 +79,8 @@ def train_scheduling(timesteps=20_000, out="results/train-scheduling", seed=0, e
     env = PassageEnv(**kwargs)
     t0 = time.perf_counter()
     model = PPO("MlpPolicy", env, n_steps=1024, batch_size=128, seed=seed, device="cpu", verbose=0)
-    model.learn(total_timesteps=int(timesteps), callback=_progress_callback(int(timesteps), "train scheduling"))
+    model.learn(total_timesteps=int(timesteps),
+                callback=_progress_callback(int(timesteps), "train scheduling", progress))
     fps = timesteps / (time.perf_counter() - t0)
     model.save(out / "scheduling_ppo")
     S = env.action_space.n
@@ -92,7 +96,8 @@ def train_scheduling(timesteps=20_000, out="results/train-scheduling", seed=0, e
     return summary
 
 
-def train_placement(timesteps=600, out="results/train-placement", seed=0, passages=20):
+def train_placement(timesteps=DEFAULT_TIMESTEPS["placement"], out="results/train-placement", seed=0, passages=20,
+                    progress=True):
     _require_rl()
     from sb3_contrib import MaskablePPO
 
@@ -110,7 +115,8 @@ def train_placement(timesteps=600, out="results/train-placement", seed=0, passag
     env = ArrayDesignEnv(**kwargs)
     t0 = time.perf_counter()
     model = MaskablePPO("MlpPolicy", env, n_steps=96, batch_size=32, seed=seed, device="cpu", verbose=0)
-    model.learn(total_timesteps=int(timesteps), callback=_progress_callback(int(timesteps), "train placement"))
+    model.learn(total_timesteps=int(timesteps),
+                callback=_progress_callback(int(timesteps), "train placement", progress))
     fps = timesteps / (time.perf_counter() - t0)
     model.save(out / "placement_maskableppo")
     obs, _ = env.reset(seed=0)

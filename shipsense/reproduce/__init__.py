@@ -86,8 +86,8 @@ def run_studies(names, runs=None, out="results", seed=0, progress=True, *, worke
     """Run studies ``names`` (of S0, S1, S2) as tasks, each into ``out/<name>`` (or ``folders[name]``); a study
     whose folder holds a finished run with the same runs and seed is skipped (unless ``restart``) and its
     summary read back.  Returns {name: summary}."""
+    from shipsense.atomic import atomic_write_bytes
     from shipsense.sweep.runner import _close, connect, execute
-    from shipsense.sweep.store import atomic_write_bytes
 
     folders = {n: Path((folders or {}).get(n, Path(out) / n)) for n in names}
     tasks = [StudyTask(n, runs or EXPERIMENTS[n][1], seed) for n in names]

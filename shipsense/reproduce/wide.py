@@ -480,7 +480,7 @@ def _prepare(out: Path, digest, restart):
 
 
 def _store(out: Path, task, result):
-    from shipsense.sweep.store import atomic_write_bytes
+    from shipsense.atomic import atomic_write_bytes
 
     if task.part is None:
         buf = io.BytesIO()
@@ -509,8 +509,8 @@ def run(runs=500, out="results/wide", seed=0, progress=True, *, workers=0, sched
     refused unless ``restart``).  ``workers``: 0 runs here (default), N on a local Dask cluster of N
     single-threaded processes, None on one per core; ``scheduler``: an existing Dask cluster's address.
     """
+    from shipsense.atomic import atomic_write_bytes
     from shipsense.sweep.runner import _close, connect, execute
-    from shipsense.sweep.store import atomic_write_bytes
 
     o = Output(out)
     t0 = time.perf_counter()

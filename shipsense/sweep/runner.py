@@ -26,9 +26,10 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from shipsense.atomic import atomic_write_bytes
 from shipsense.sweep.cells import Task, build_cells, make_tasks
 from shipsense.sweep.spec import SweepError, SweepSpec, canonical_hash
-from shipsense.sweep.store import atomic_write_bytes, write_table
+from shipsense.sweep.store import write_table
 
 SCHEDULER_TIMEOUT_S = 5.0
 """How long to wait for a ``--scheduler`` address to answer."""

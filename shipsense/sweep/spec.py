@@ -39,6 +39,8 @@ from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
+from shipsense.errors import ShipsenseError
+
 __all__ = ["CONDITION_KEYS", "METRICS", "LayoutSpec", "SweepError", "SweepSpec", "load_sweep", "parse_sweep"]
 
 METRICS = ("convergence", "rmse", "rmse_over_crlb", "nees_coverage", "ambiguity", "time")
@@ -62,7 +64,7 @@ MAX_CELLS = 100_000
 MAX_TASKS = 1_000_000
 
 
-class SweepError(ValueError):
+class SweepError(ShipsenseError):
     """A sweep file, its output folder or its scheduler is unusable; the message names the field or path."""
 
 

@@ -1,0 +1,43 @@
+"""Atomic outputs: a command leaves either all of its files or none of them.
+
+A file is written to a temporary name in its own folder and renamed (a rename within one file system is
+atomic); a command that writes several files stages them in a hidden folder beside its output folder and moves
+them in only when everything succeeded, so an error or Ctrl-C half-way leaves no half table and no plot of a
+run that failed.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import tempfile
+import uuid
+from pathlib import Path
+
+
+def atomic_write_bytes(path: Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` through a temporary file in the same folder and an atomic rename."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")
+    try:
+        tmp.write_bytes(data)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+@contextlib.contextmanager
+def staged_directory(out):
+    """Yield a hidden folder beside ``out`` to write into; on success its files replace their namesakes in
+    ``out`` (created if needed), on any error the folder is removed and ``out`` is left as it was."""
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".partial", dir=out.parent))
+    try:
+        yield stage
+        out.mkdir(parents=True, exist_ok=True)
+        for f in sorted(stage.iterdir()):
+            os.replace(f, out / f.name)
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)

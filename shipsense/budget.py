@@ -1,0 +1,149 @@
+"""The work budget: a command's memory and time, estimated from its inputs before any of it is allocated.
+
+A command multiplies its inputs (runs x steps x hypotheses x channels, candidates x passages, rows of a
+recording) into a :class:`Work` estimate and calls :func:`enforce`, which refuses work above the limits with
+one line naming the flag that raises them (``--max-memory GB``, ``--max-minutes MIN``), before anything is
+allocated: ``--runs 1e9`` is a message, not a 67 GB allocation or a run that never ends.
+
+The rates are measured on this project's reference machine (2 cores; ``shipsense reproduce S0|S1|S2 --runs N``
+at two N, ``benchmarks/track_rows.py``, ``shipsense check`` of S0, S2 and S1-P2), rounded towards the fast
+side, so that the estimate refuses only work that is certainly beyond the limit and never a run that would
+have fitted. They are an order-of-magnitude guard, not a prediction: a faster machine finishes sooner.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from shipsense.errors import ShipsenseError
+
+MEMORY_LIMIT_GB = 8.0
+"""Largest estimated memory a command allocates unless ``--max-memory`` says otherwise (GB)."""
+TIME_LIMIT_MINUTES = 180.0
+"""Longest estimated run a command starts unless ``--max-minutes`` says otherwise (minutes)."""
+
+# measured rates (reference machine), on the fast side
+SIMULATE_S_PER_VALUE = 2e-8           # per run x step x channel: kernels, noise, envelope chain
+TRACK_S_PER_ROW = 1e-4                # the project's tracker on one passage (benchmarks/track_rows.py: ~2e-4)
+TRACK_BYTES_PER_ROW = 3_000.0         # estimates, covariances, status and the recording's own arrays
+RECORDING_BYTES_PER_LINE = 20.0       # a CSV line "time,sensor,channel,value" is at least this long
+STUDY_S_PER_RUN = {"S0": 0.15, "S1": 0.3, "S2": 0.5}
+STUDY_BYTES_PER_RUN = {"S0": 3e6, "S1": 1e6, "S2": 2e7}
+WIDE_S_PER_PASSAGE = 0.3              # three families, one process (1009 s for 500 passages per family)
+WIDE_BYTES_PER_CHUNK = 5e8            # one chunk of passages in one worker
+CHECK_S_PER_VALUE = 4e-4              # ambiguity search per passage x step x channel (S0 4e-4 .. S1-P2 2e-3)
+PPO_S_PER_STEP = {"scheduling": 2e-4, "placement": 0.05}
+
+
+class WorkTooLarge(ShipsenseError):
+    """A command's estimated memory or time is above the limit; the message names the flag that raises it."""
+
+
+@dataclass(frozen=True)
+class Work:
+    """An estimate of a command's work.
+
+    Attributes
+    ----------
+    what : str
+        The work in the user's words, e.g. ``"2000 runs of S0 (300 steps)"``.
+    bytes : float
+        Peak memory it allocates, roughly (bytes).
+    seconds : float
+        Wall time on the reference machine, roughly (s).
+    fewer : str
+        What to reduce to make it smaller, e.g. ``"--runs"``.
+    """
+
+    what: str
+    bytes: float
+    seconds: float
+    fewer: str
+
+    def __add__(self, other: Work) -> Work:
+        return Work(f"{self.what} and {other.what}", max(self.bytes, other.bytes), self.seconds + other.seconds,
+                    self.fewer if self.fewer == other.fewer else f"{self.fewer} or {other.fewer}")
+
+
+def _duration(seconds: float) -> str:
+    if seconds < 120:
+        return f"{seconds:.0f} s"
+    if seconds < 7200:
+        return f"{seconds / 60:.0f} minutes"
+    if seconds < 2 * 86400:
+        return f"{seconds / 3600:.1f} hours"
+    return f"{seconds / 86400:.3g} days"
+
+
+def check_limits(max_memory_gb: float, max_minutes: float) -> None:
+    """Refuse limits that are not positive finite numbers (the flags' own values)."""
+    for flag, value in (("--max-memory", max_memory_gb), ("--max-minutes", max_minutes)):
+        if not (isinstance(value, (int, float)) and value == value and 0 < value < float("inf")):
+            raise WorkTooLarge(f"{flag} must be a positive number, got {value!r}")
+
+
+def enforce(work: Work, max_memory_gb: float = MEMORY_LIMIT_GB, max_minutes: float = TIME_LIMIT_MINUTES) -> Work:
+    """Raise :class:`WorkTooLarge` when ``work`` is estimated above either limit; return it otherwise."""
+    check_limits(max_memory_gb, max_minutes)
+    if work.bytes > max_memory_gb * 1e9:
+        raise WorkTooLarge(f"{work.what} would need about {work.bytes / 1e9:.3g} GB of memory (limit "
+                           f"{max_memory_gb:g} GB): use fewer {work.fewer}, or raise --max-memory")
+    if work.seconds > max_minutes * 60:
+        raise WorkTooLarge(f"{work.what} would take about {_duration(work.seconds)} on a 2-core machine (limit "
+                           f"{max_minutes:g} minutes): use fewer {work.fewer}, or raise --max-minutes")
+    return work
+
+
+def simulation(scenario, runs: int) -> Work:
+    """A :func:`shipsense.simulate` of ``runs`` runs of the scenario."""
+    from shipsense.simulator import simulation_bytes
+
+    values = float(runs) * scenario.steps * scenario.array().n_channels
+    return Work(f"{runs} runs of {scenario.steps} steps of {scenario.name}", simulation_bytes(scenario, runs),
+                values * SIMULATE_S_PER_VALUE, "--runs (or the scenario's steps)")
+
+
+def tracking(scenario, rows: int, what: str | None = None) -> Work:
+    """Tracking one passage of ``rows`` samples (a simulated passage, or a recording's distinct times)."""
+    return Work(what or f"tracking {rows} samples of {scenario.name}", rows * TRACK_BYTES_PER_ROW,
+                rows * TRACK_S_PER_ROW, "samples (the scenario's steps, or a shorter recording)")
+
+
+def recording(path, scenario) -> Work:
+    """Reading and tracking a recorded CSV, from its size alone (before it is parsed)."""
+    from pathlib import Path
+
+    size = Path(path).stat().st_size
+    lines = size / RECORDING_BYTES_PER_LINE
+    rows = lines / max(1, scenario.array().n_channels)    # every channel of a sample is one line
+    return tracking(scenario, int(rows), what=f"the recording {path} ({size / 1e6:.3g} MB)")
+
+
+def study(key: str, runs: int | None) -> Work:
+    """``shipsense reproduce KEY --runs N`` (one study, or all of them)."""
+    from shipsense.reproduce import EXPERIMENTS
+
+    key = key.upper()
+    if key == "ALL":
+        works = [study(k, runs) for k in ("S0", "S1", "S2", "WIDE")]
+        total = works[0]
+        for w in works[1:]:
+            total = total + w
+        return Work(f"reproduce all with {runs or 'the default'} runs", total.bytes, total.seconds, "--runs")
+    n = runs or EXPERIMENTS[key][1]
+    if key == "WIDE":
+        return Work(f"the wide study with {n} passages per family", WIDE_BYTES_PER_CHUNK,
+                    3 * n * WIDE_S_PER_PASSAGE, "--runs")
+    return Work(f"{n} runs of {key}", 3e8 + n * STUDY_BYTES_PER_RUN[key], n * STUDY_S_PER_RUN[key], "--runs")
+
+
+def check(scenario, passages: int) -> Work:
+    """``shipsense check`` of one layout: the ambiguity search over ``passages`` prior passages."""
+    values = passages * scenario.steps * scenario.array().n_channels
+    return Work(f"checking {scenario.name} on {passages} passages of {scenario.steps} steps", values * 64 * 8.0,
+                values * CHECK_S_PER_VALUE, "--passages (or the scenario's steps)")
+
+
+def training(task: str, timesteps: int) -> Work:
+    """``shipsense train TASK --timesteps N``."""
+    return Work(f"training {task} for {timesteps} steps", 2e9, timesteps * PPO_S_PER_STEP[task], "--timesteps")
