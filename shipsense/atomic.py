@@ -28,6 +28,20 @@ def atomic_write_bytes(path: Path, data: bytes) -> None:
 
 
 @contextlib.contextmanager
+def atomic_path(path):
+    """Yield a temporary path beside ``path`` with its suffix (for writers that take a file name: NumPy,
+    matplotlib, csv); on success it is renamed to ``path``, on any error removed."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.stem}.{uuid.uuid4().hex}.tmp{path.suffix}")
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+@contextlib.contextmanager
 def staged_directory(out):
     """Yield a hidden folder beside ``out`` to write into; on success its files replace their namesakes in
     ``out`` (created if needed), on any error the folder is removed and ``out`` is left as it was."""

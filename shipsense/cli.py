@@ -87,7 +87,10 @@ def cmd_scenarios(args) -> int:
 
 
 def cmd_simulate(args) -> int:
+    from contextlib import nullcontext
+
     from shipsense import budget
+    from shipsense.atomic import atomic_path
     from shipsense.config import load_scenario
     from shipsense.simulator import simulate
 
@@ -102,16 +105,19 @@ def cmd_simulate(args) -> int:
     bar = _progress(3, f"simulate {sc.name}")
     sim = simulate(sc, runs=args.runs, seed=args.seed, random=args.random)
     bar.update(1)
-    if args.out:
-        bar.set_description(f"write {args.out}")
-        sim.save(args.out)
-    bar.update(1)
-    if args.plot:
-        from shipsense.plotting import plot_simulation
+    # both files or neither: each is written to a temporary name and renamed once both are written
+    with (atomic_path(args.out) if args.out else nullcontext()) as out_tmp, \
+            (atomic_path(args.plot) if args.plot else nullcontext()) as plot_tmp:
+        if args.out:
+            bar.set_description(f"write {args.out}")
+            sim.save(out_tmp)
+        bar.update(1)
+        if args.plot:
+            from shipsense.plotting import plot_simulation
 
-        bar.set_description(f"plot {args.plot}")
-        plot_simulation(sim, args.plot)
-    bar.update(1)
+            bar.set_description(f"plot {args.plot}")
+            plot_simulation(sim, plot_tmp)
+        bar.update(1)
     bar.close()
     _print_summary(sim)
     for what, path in (("measurements", args.out), ("plot", args.plot)):

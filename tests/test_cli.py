@@ -367,3 +367,18 @@ def test_a_failing_demo_leaves_nothing_behind(tmp_path, monkeypatch):
     out = tmp_path / "demo"
     assert main(["--quiet", "demo", "--out", str(out)]) == 1
     assert not out.exists() and list(tmp_path.iterdir()) == []
+
+
+def test_a_failing_simulate_plot_leaves_neither_file(tmp_path, monkeypatch):
+    """simulate --out and --plot are both written or neither: a failing plot removes the measurements too."""
+    import shipsense.plotting
+
+    def broken(*a, **k):
+        raise RuntimeError("plot failed")
+
+    monkeypatch.setattr(shipsense.plotting, "plot_simulation", broken)
+    assert main(["simulate", "S2", "--runs", "2", "--out", str(tmp_path / "m.npz"),
+                 "--plot", str(tmp_path / "m.png")]) == 1
+    assert list(tmp_path.iterdir()) == []
+    assert main(["simulate", "S2", "--runs", "2", "--out", str(tmp_path / "m.npz")]) == 0
+    assert [p.name for p in tmp_path.iterdir()] == ["m.npz"]

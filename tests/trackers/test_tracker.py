@@ -2,11 +2,10 @@
 
 import numpy as np
 import pytest
+from scaled import close as _close
 
 from shipsense import load_scenario, simulate
 from shipsense.trackers import Tracker
-from scaled import close as _close
-
 from shipsense.trackers.tracker import INCONSISTENT, INITIALISING, NO_DATA, RESTARTED, TRACKING
 
 
