@@ -59,7 +59,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Medium", "FastHED", "fast_hed", "hed_field", "hed_potential", "envelope_reading"]
+__all__ = ["Medium", "FastHED", "fast_hed", "hed_field", "hed_potential", "envelope_reading",
+           "magnitude_reading", "magnitude_jacobian"]
 
 
 @dataclass(frozen=True)
@@ -253,6 +254,30 @@ def hed_field(sensors, sources, moments, medium: Medium, *, method="series", rto
 def envelope_reading(E):
     """Shaft-rate envelope of each channel, ``(|E_x|, |E_y|, |E_z|)``."""
     return np.abs(E)
+
+
+def magnitude_reading(E):
+    r"""Shaft-rate envelope of the field's magnitude, ``|E| = sqrt(E_x^2 + E_y^2 + E_z^2)``, shape (...,).
+
+    The three channels share the shaft-rate carrier, :math:`E(t) = A \cos(2\pi f_s t + \varphi)`, so
+    :math:`|E(t)| = |A| |\cos(\cdot)|` and the envelope of the magnitude is the magnitude of the
+    amplitude vector :math:`|A|` -- one channel, independent of the sensor's orientation (the electric
+    counterpart of a total-field magnetometer's ``magnitude``).
+    """
+    E = np.asarray(E)
+    return np.sqrt(np.sum(E * E, axis=-1))
+
+
+def magnitude_jacobian(E, dE):
+    r"""``|E|`` and its derivative ``d|E| = \hat E^T dE`` from the field ``E`` (..., 3) and ``dE`` (..., 3, k).
+
+    Returns ``(|E| (...,), d|E| (..., k))``.  At a zero field the magnitude has a cone (its directional
+    derivatives are ``|dE u|``, not linear in ``u``); the derivative returned there is zero (the
+    minimum-norm subgradient), explicitly, so a sensor at a null of the field gives no NaN.
+    """
+    norm = magnitude_reading(E)
+    unit = np.asarray(E) / np.where(norm > 0, norm, 1.0)[..., None]     # zero vector where |E| = 0
+    return norm, np.einsum("...j,...jk->...k", unit, dE)
 
 
 class FastHED:

@@ -48,6 +48,33 @@ def test_electric_jacobian_chain_rule_matches_finite_differences():
         np.testing.assert_allclose(H, fd, rtol=1e-4, atol=1e-5 * np.abs(H).max())
 
 
+@pytest.mark.parametrize("kinds", [("magnitude",) * 3, ("magnitude", "vector", "envelope")])
+def test_electric_magnitude_jacobian_matches_finite_differences(kinds):
+    sc = load_scenario("S1-P2")
+    R = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])   # a rotated first sensor: |E| ignores it
+    sensors = [s.model_copy(update={"kind": k, "orientation": tuple(map(tuple, R)) if i == 0 else None})
+               for i, (s, k) in enumerate(zip(sc.sensors, kinds))]
+    model = model_from_scenario(sc.model_copy(update={"sensors": sensors}))
+    assert model.m == sum(1 if k == "magnitude" else 3 for k in kinds)
+    rng = np.random.default_rng(2)
+    for _ in range(4):
+        x = np.array([*rng.uniform(-80, 80, 2), *rng.uniform(-8, 8, 2), rng.uniform(-10, -3), rng.uniform(50, 200)])
+        H = model.H(x)
+        np.testing.assert_allclose(H, central(model.h, x, 1e-4), rtol=1e-4, atol=1e-5 * np.abs(H).max())
+        e = np.linalg.norm(model_from_scenario("S1-P2").h(x)[:3])   # the first sensor's envelope triad
+        assert model.h(x)[0] == pytest.approx(e, rel=1e-12)
+
+
+def test_electric_magnitude_at_a_null_field_has_a_finite_jacobian():
+    sc = load_scenario("S1-P2")
+    sensors = [s.model_copy(update={"kind": "magnitude"}) for s in sc.sensors]
+    model = model_from_scenario(sc.model_copy(update={"sensors": sensors}))
+    x = np.array([30.0, -20.0, 5.0, 2.0, -6.8, 0.0])   # no dipole: |E| = 0 at every sensor
+    assert np.all(model.h(x) == 0)
+    H = model.H(x)
+    assert np.all(np.isfinite(H)) and np.all(H == 0)   # the zero subgradient of the cone, explicitly
+
+
 def test_bearing_jacobian_and_residual_wrap():
     model = model_from_scenario("S2", sensors=["A1"])
     x = np.array([30.0, 40.0, -2.0, 1.0])
