@@ -30,6 +30,22 @@ def test_magnetometers_on_a_line_depend_on_the_measurement_kind(kind, verdict):
     assert v.verdict == verdict, (v.verdict, v.min_chi2)
 
 
+@pytest.mark.parametrize("kind, verdict", [("vector", "observable"), ("magnitude", "ambiguous")])
+def test_electrodes_on_a_line_depend_on_the_measurement_kind(kind, verdict):
+    """|E| is unchanged by the mirror across the sensor line (x = 0), the signed field is not (E_x flips)."""
+    sc = load_scenario("S1-P1")
+    assert {s.position[0] for s in sc.sensors} == {0.0}
+    sensors = [s.model_copy(update={"kind": kind}) for s in sc.sensors]
+    v = check_scenario(sc.model_copy(update={"sensors": sensors}), passages=2)
+    assert v.verdict == verdict, (v.verdict, v.min_chi2)
+    if kind == "magnitude":
+        assert v.min_chi2 < 1e-6 and v.fim_rank == 6
+        for p in v.pairs:
+            assert p.alternative[0] == pytest.approx(-p.passage[0], abs=1e-6)
+    else:
+        assert v.min_chi2 > 25 and not v.pairs
+
+
 def test_mirror_transform_is_exact_for_envelopes_and_axial_for_moments():
     model = model_from_scenario("S1-P1")
     theta = model.to_internal(np.array([-150.0, -80.0, 8.0, 4.0, -6.8, 100.0]))

@@ -75,6 +75,20 @@ def test_electric_magnitude_at_a_null_field_has_a_finite_jacobian():
     assert np.all(np.isfinite(H)) and np.all(H == 0)   # the zero subgradient of the cone, explicitly
 
 
+def test_candidate_model_copies_an_electric_magnitude_template():
+    from shipsense.trackers.models import candidate_model
+
+    sc = load_scenario("S1-P2")
+    sc = sc.model_copy(update={"sensors": [s.model_copy(update={"kind": "magnitude"}) for s in sc.sensors]})
+    pos = np.array([[10.0, 0.0, -15.0], [0.0, 30.0, -15.0]])
+    cand = candidate_model(sc, pos)
+    assert cand.m == 2 and cand.array.kinds == ("magnitude",) * 2 and cand.R.shape == (2,)
+    moved = [s.model_copy(update={"position": tuple(p)}) for s, p in zip(sc.sensors, pos)]
+    x = np.array([-40.0, 25.0, 6.0, -2.0, -6.8, 120.0])
+    np.testing.assert_allclose(cand.h(x), model_from_scenario(sc.model_copy(update={"sensors": moved})).h(x),
+                               rtol=1e-12)
+
+
 def test_bearing_jacobian_and_residual_wrap():
     model = model_from_scenario("S2", sensors=["A1"])
     x = np.array([30.0, 40.0, -2.0, 1.0])
