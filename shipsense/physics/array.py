@@ -161,7 +161,7 @@ class SensorArray:
         idx = self.group("electrode")
         E = hed_field(self.positions[idx], np.asarray(sources, float)[..., None, :],
                       np.asarray(dipoles, float)[..., None, :], self.medium, method=self.electric_method)
-        return np.einsum("sji,...sj->...si", self.orientations[idx], E)
+        return E if self._index["identity"] else np.einsum("sji,...sj->...si", self.orientations[idx], E)
 
     def measure(self, sources, moments=None, dipoles=None):
         """Noise-free measurements of every channel.
@@ -286,10 +286,11 @@ class SensorArray:
                 raise ValueError("this array has electrodes: dipoles are required")
             E, dEq, G = fast_hed(self.medium).field_jacobian(
                 self.positions[idx], sources[..., None, :], np.asarray(dipoles, float)[..., None, :])
-            R = self.orientations[idx]
-            E = np.einsum("sji,...sj->...si", R, E)
-            dEq = np.einsum("sji,...sjk->...sik", R, dEq)
-            G = np.einsum("sji,...sjk->...sik", R, G)
+            if not self._index["identity"]:   # sensor axes other than the world's
+                R = self.orientations[idx]
+                E = np.einsum("sji,...sj->...si", R, E)
+                dEq = np.einsum("sji,...sjk->...sik", R, dEq)
+                G = np.einsum("sji,...sjk->...sik", R, G)
             env = self._index["envelope"][:, None]
             sign = np.where(env, np.sign(E), 1.0)
             val[..., idx, :] = np.where(env, np.abs(E), E)

@@ -89,6 +89,19 @@ def test_candidate_model_copies_an_electric_magnitude_template():
                                rtol=1e-12)
 
 
+@pytest.mark.parametrize("name", ["demo", "S1-P1"])
+def test_h_and_H_in_one_pass_equal_h_and_H(name):
+    """The fits' fused pass (readings from the Jacobian's kernels) gives the readings of the measurement path."""
+    model = model_from_scenario(name)
+    rng = np.random.default_rng(4)
+    x = model.to_internal(model.state_from_truth(np.column_stack([
+        rng.uniform(-150, 150, (6, 2)), rng.uniform(-8, 8, (6, 2)), np.full(6, -6.0),
+        rng.uniform(-1e6, 1e6, (6, 3)), rng.uniform(50, 200, 6)])))
+    y, H = model.h_and_H(x)
+    np.testing.assert_allclose(y, model.h(x), rtol=1e-10, atol=1e-12 * np.abs(y).max())
+    np.testing.assert_array_equal(H, model.H(x))
+
+
 def test_bearing_jacobian_and_residual_wrap():
     model = model_from_scenario("S2", sensors=["A1"])
     x = np.array([30.0, 40.0, -2.0, 1.0])
