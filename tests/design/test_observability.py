@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from shipsense import load_scenario
-from shipsense.design.observability import check_scenario, discrepancy, mirror
+from shipsense.design.observability import check_scenario, discrepancy, mirror, mirror_lines
 from shipsense.trackers.models import model_from_scenario
 
 
@@ -56,3 +56,19 @@ def test_mirror_transform_is_exact_for_envelopes_and_axial_for_moments():
     m = mirror(mag, th, [0.0, 0.0], [1.0, 0.0])       # across y = 0: (x, -y), m -> (-mx, my, -mz)
     np.testing.assert_allclose(m[:4], [-140.0, 70.0, 6.0, -6.0])
     np.testing.assert_allclose(m[4:], [-80.0, 20.0, -40.0])
+
+
+def test_mirror_lines_are_each_line_once():
+    """S1-P1's three sensors share the line x = 0: as the pair line of each pair and as each sensor's 90 degree
+    line it is one line; each sensor's other five angles are lines of their own (16 in all)."""
+    model = model_from_scenario("S1-P1")
+    lines = mirror_lines(model)
+    assert len(lines) == 16
+    theta = model.to_internal(np.array([-150.0, -80.0, 8.0, 4.0, -6.8, 100.0]))
+    kept = np.stack([mirror(model, theta, c, d) for c, d in lines])
+    pos = model.array.positions[:, :2]
+    every = [(pos[i], pos[j] - pos[i]) for i in range(3) for j in range(i + 1, 3)]
+    every += [(p, [np.cos(a), np.sin(a)]) for p in pos for a in np.arange(6) * np.pi / 6]
+    for c, d in every:   # the candidate of every line, duplicates included, is among the kept ones
+        m = mirror(model, theta, c, d)
+        assert np.min(np.abs(kept - m).max(axis=-1)) < 1e-9
