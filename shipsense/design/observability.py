@@ -104,6 +104,8 @@ def track_distance(model, theta, theta_alt, steps):
 LM_STRIDE = 2
 """Every LM_STRIDE-th sample enters the refinement fits (their chi-square is then taken on every sample)."""
 LM_ITERATIONS = 40
+MIRROR_REFINE = 24
+"""Mirror candidates refined per passage (the closest as they stand; :func:`_search`)."""
 
 
 def lm_fit(model, theta_ref, theta_init, steps, stride=LM_STRIDE, iterations=LM_ITERATIONS):
@@ -196,43 +198,53 @@ def ambiguity_search(model, theta, steps, *, far=DEFAULT_FAR, starts=24, seed=0,
                    refine=refine)[0]
 
 
-def _search(model, thetas, steps, *, far, starts, seeds, refine=True, progress=False):
+def _search(model, thetas, steps, *, far, starts, seeds, refine=True, progress=False, mirrors=None):
     """:func:`ambiguity_search` of each passage ``thetas`` (P, n) (``seeds[i]`` for passage i's random starts):
     every candidate of every passage refined in one batched least-squares fit (in chunks that bound memory).
-    Returns one list per passage."""
+
+    Of each passage's mirror candidates only the ``mirrors`` (default :data:`MIRROR_REFINE`) with the smallest
+    discrepancy as they stand are refined; the others keep their exact discrepancy.  A symmetry of the layout,
+    exact or nearly so -- what the mirror seeds are for -- is among the closest mirrors; the rest are far
+    passages like the random starts, and a large array's O(S^2) of them would otherwise dominate the cost.
+    Returns one list per passage.
+    """
+    mirrors = MIRROR_REFINE if mirrors is None else mirrors
     lines = mirror_lines(model)
-    inits, ref, source = [], [], []
+    inits, ref, source, directs, fitted = [], [], [], [], []
     for i, theta in enumerate(thetas):
         cands = [("mirror", mirror_candidates(model, theta, lines=lines))]
         if starts:
             cands.append(("search", _random_starts(model, theta, starts, far, np.random.default_rng(seeds[i]))))
         for name, init in cands:
+            direct = discrepancy(model, theta, init, steps)
+            fit = np.full(len(init), refine)
+            if name == "mirror" and len(init) > mirrors:
+                fit[np.argsort(direct, kind="stable")[mirrors:]] = False
             inits.append(init)
+            directs.append(direct)
+            fitted.append(fit)
             ref += [i] * len(init)
             source += [name] * len(init)
-    init = np.concatenate(inits)
+    init, chi2, fitted = np.concatenate(inits), np.concatenate(directs), np.concatenate(fitted)
     ref = np.array(ref)
-    alt, chi2 = init.copy(), np.empty(len(init))
+    alt = init.copy()
     Ak = _powers(model.A, steps)[::LM_STRIDE]
     y_ref = model.h(np.einsum("kij,pj->pki", Ak, thetas))                   # (P, K', m)
     # rows per chunk: the fit's Jacobian (rows, K', m, n) kept to about 4e6 numbers
     chunk = max(8, int(4e6 // (len(Ak) * model.m * model.n)))
-    bounds = range(0, len(init), chunk)
+    todo = np.flatnonzero(fitted)
+    bounds = range(0, len(todo), chunk)
     if progress:
         from tqdm import tqdm
 
         bounds = tqdm(bounds, desc="ambiguity search", unit="chunk", leave=False, disable=None)
     for b in bounds:
-        rows = slice(b, b + chunk)
-        direct = discrepancy(model, thetas[ref[rows]], init[rows], steps)
-        if refine:   # the exact mirror may beat the refinement
-            fit, _ = fit_passages(model, y_ref[ref[rows]], init[rows], steps, LM_STRIDE, LM_ITERATIONS)
-            c = discrepancy(model, thetas[ref[rows]], fit, steps)
-            use_init = direct <= c
-            alt[rows] = np.where(use_init[:, None], init[rows], fit)
-            chi2[rows] = np.minimum(direct, c)
-        else:
-            chi2[rows] = direct
+        rows = todo[b:b + chunk]
+        fit, _ = fit_passages(model, y_ref[ref[rows]], init[rows], steps, LM_STRIDE, LM_ITERATIONS)
+        c = discrepancy(model, thetas[ref[rows]], fit, steps)
+        better = c < chi2[rows]                             # the exact mirror may beat the refinement
+        alt[rows] = np.where(better[:, None], fit, init[rows])
+        chi2[rows] = np.where(better, c, chi2[rows])
     dist = track_distance(model, thetas[ref], alt, steps)
     found = [[] for _ in thetas]
     for a, c, d, i, src in zip(alt, chi2, dist, ref, source):

@@ -4,7 +4,14 @@ import numpy as np
 import pytest
 
 from shipsense import load_scenario
-from shipsense.design.observability import check_scenario, discrepancy, mirror, mirror_lines
+from shipsense.design.observability import (
+    MIRROR_REFINE,
+    ambiguity_search,
+    check_scenario,
+    discrepancy,
+    mirror,
+    mirror_lines,
+)
 from shipsense.trackers.models import model_from_scenario
 
 
@@ -72,3 +79,19 @@ def test_mirror_lines_are_each_line_once():
     for c, d in every:   # the candidate of every line, duplicates included, is among the kept ones
         m = mirror(model, theta, c, d)
         assert np.min(np.abs(kept - m).max(axis=-1)) < 1e-9
+
+
+def test_a_large_line_array_keeps_its_exact_mirror_among_the_refined_candidates():
+    """Eight magnitude electrodes on x = 0 have more mirror lines than are refined; the line they share is the
+    closest mirror as it stands (discrepancy 0), so the search still returns it."""
+    sc = load_scenario("S1-P1")
+    template = sc.sensors[0].model_copy(update={"kind": "magnitude"})
+    sensors = [template.model_copy(update={"id": f"E{i}", "position": (0.0, 10.0 * i - 35.0, -15.0)})
+               for i in range(8)]
+    model = model_from_scenario(sc.model_copy(update={"sensors": sensors}))
+    assert len(mirror_lines(model)) > MIRROR_REFINE
+    theta = model.to_internal(np.array([-150.0, -80.0, 8.0, 4.0, -6.8, 100.0]))
+    found = ambiguity_search(model, theta, sc.steps, starts=0)
+    alt, chi2, _, source = found[0]
+    assert source == "mirror" and chi2 < 1e-9
+    assert alt[0] == pytest.approx(150.0, abs=1e-6) and alt[1] == pytest.approx(-80.0, abs=1e-6)
