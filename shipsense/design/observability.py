@@ -104,6 +104,9 @@ def track_distance(model, theta, theta_alt, steps):
 LM_STRIDE = 2
 """Every LM_STRIDE-th sample enters the refinement fits (their chi-square is then taken on every sample)."""
 LM_ITERATIONS = 40
+FIT_CHUNK = 2.5e5
+"""Jacobian entries (rows x samples x channels x states) of one batched refinement fit (2 MB: batches that
+fit in cache were as fast as larger ones, or faster, on S1-P2 and S2-field-trial)."""
 MIRROR_REFINE = 24
 """Mirror candidates refined per passage (the closest as they stand; :func:`_search`)."""
 
@@ -230,8 +233,8 @@ def _search(model, thetas, steps, *, far, starts, seeds, refine=True, progress=F
     alt = init.copy()
     Ak = _powers(model.A, steps)[::LM_STRIDE]
     y_ref = model.h(np.einsum("kij,pj->pki", Ak, thetas))                   # (P, K', m)
-    # rows per chunk: the fit's Jacobian (rows, K', m, n) kept to about 4e6 numbers
-    chunk = max(8, int(4e6 // (len(Ak) * model.m * model.n)))
+    # rows per chunk: the fit's Jacobian (rows, K', m, n) kept to about FIT_CHUNK numbers
+    chunk = max(8, int(FIT_CHUNK // (len(Ak) * model.m * model.n)))
     todo = np.flatnonzero(fitted)
     bounds = range(0, len(todo), chunk)
     if progress:
