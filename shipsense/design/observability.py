@@ -15,13 +15,16 @@ the search is global:
    every pair of sensors and through each sensor at several angles, with the
    moment transformed correctly -- axial for the magnetic moment
    (:math:`m' = \det(M) M m`), polar for the electric dipole (it follows the
-   mirrored keel) -- then refined by least squares;
+   mirrored keel) -- each plane once, the :data:`MIRROR_REFINE` closest
+   candidates as they stand refined by least squares;
 2. **multi-start least squares**: batched Levenberg–Marquardt from random
    passages far from :math:`\theta`.
 
-Far apart means a mean distance between the two tracks above ``far`` metres.
-The verdict uses the actual measurement model, so identical layouts can
-differ by measurement kind (vector vs total-field magnetometers on a line).
+Every passage's candidates are refined together, in batches of about
+:data:`FIT_CHUNK` Jacobian entries.  Far apart means a mean distance between
+the two tracks above ``far`` metres.  The verdict uses the actual measurement
+model, so identical layouts can differ by measurement kind (vector vs
+total-field magnetometers on a line; vector vs magnitude electrodes on a line).
 """
 
 from __future__ import annotations
