@@ -90,11 +90,23 @@ class _Model(BaseModel):
 
 
 class SensorConfig(_Model):
-    """One seabed sensor."""
+    """One seabed sensor.
+
+    Measurement kinds (``kind``; :data:`shipsense.physics.array.KINDS`), with their components:
+
+    * magnetometer: ``vector`` (``R^T B``, 3), ``magnitude`` (``|B|``, 1), ``tmi`` (``B . b_E``, 1);
+    * electrode: ``vector`` (``R^T E``, signed, 3), ``envelope`` (``(|E_x|, |E_y|, |E_z|)``, the shaft-rate
+      envelope of each channel, 3), ``magnitude`` (``|E|``, the envelope of the field's magnitude, 1;
+      independent of ``orientation``);
+    * accelerometer: ``bearing`` (axial, rad, 1).
+
+    ``noise_std`` / ``noise_var`` lists have one value per component.
+    """
 
     id: str = Field(min_length=1, description="Unique sensor name.")
     type: Literal["magnetometer", "electrode", "accelerometer"]
-    kind: str = Field(description="Measurement kind; see shipsense.physics.array.KINDS.")
+    kind: str = Field(description="Measurement kind: magnetometer vector | magnitude | tmi; electrode vector | "
+                                  "envelope | magnitude; accelerometer bearing (shipsense.physics.array.KINDS).")
     position: Coord3 = Field(description="World position (x east, y north, z up; z = 0 at the surface), m.")
     noise_std: Std | list[Std] | None = Field(
         default=None, description="Per-component noise std, SI units (T, V/m, rad); scalar or one per component.")
@@ -190,7 +202,8 @@ class NoiseConfig(_Model):
 
 
 class EnvelopeChainConfig(_Model):
-    """How electrode envelopes are made: ideal ``|E| + noise``, or the raw shaft-rate chain."""
+    """How electrode envelopes (``envelope`` and ``magnitude`` kinds) are made: ideal ``|E| + noise``, or the raw
+    shaft-rate chain."""
 
     mode: Literal["ideal", "raw"] = "ideal"
     raw_rate_hz: Positive = 100.0

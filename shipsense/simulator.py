@@ -24,7 +24,7 @@ import numpy as np
 
 from shipsense.config import Scenario, load_scenario
 from shipsense.physics.array import SensorArray
-from shipsense.physics.envelope import envelope_chain, raw_channels
+from shipsense.physics.envelope import envelope_chain, magnitude_envelope_chain, raw_channels
 from shipsense.physics.motion import cv_positions
 from shipsense.physics.noise import dropout_mask
 from shipsense.physics.seismic import eigen_bearing, simulate_vibration, wrap_axial
@@ -231,7 +231,8 @@ def simulate(scenario, runs: int | None = None, seed: int | None = None, *, rand
         elif sc.seismic.bias_deg:
             meas[..., axial] += np.deg2rad(sc.seismic.bias_deg)
         meas[..., axial] = wrap_axial(meas[..., axial])
-    if sc.envelope_chain.mode == "raw" and "envelope" in array.kinds:
+    if sc.envelope_chain.mode == "raw" and any(t == "electrode" and k in ("envelope", "magnitude")
+                                               for t, k in zip(array.types, array.kinds)):
         cols, env = _envelope_chain(sc, array, x0, streams)
         meas[..., cols] = env
 
@@ -241,7 +242,12 @@ def simulate(scenario, runs: int | None = None, seed: int | None = None, *, rand
 
 
 def _envelope_chain(sc: Scenario, array: SensorArray, x0, streams):
-    """Envelopes of the envelope electrodes from simulated raw shaft-rate channels."""
+    """Envelopes of the envelope and magnitude electrodes from simulated raw shaft-rate channels.
+
+    Every such sensor records its three channels raw; an envelope sensor reports each channel's envelope, a
+    magnitude sensor the envelope of ``|E|`` (:func:`~shipsense.physics.envelope.extract_magnitude_envelope`).
+    Returns the measurement columns and their envelopes (runs, steps, columns).
+    """
     ch = sc.envelope_chain
     times = sc.times
     dt = 1.0 / ch.raw_rate_hz
@@ -250,15 +256,21 @@ def _envelope_chain(sc: Scenario, array: SensorArray, x0, streams):
         x0[:, None, 4:5], (x0.shape[0], raw_t.size, 1))], axis=-1)
     dip = keel_dipole(x0[:, None, 2:4], x0[:, None, 8])
     elec = array.group("electrode")
-    is_env = np.array([array.kinds[i] == "envelope" for i in elec])
-    E = array.electric_field(src, dip)[..., is_env, :]          # (runs, n_raw, S_env, 3)
-    amp = E.reshape(E.shape[:2] + (-1,))
-    raw = raw_channels(amp, raw_t, ch.shaft_hz, noise_std=ch.raw_noise_std, rng=streams["envelope"])
-    env = envelope_chain(raw, raw_t, times, ch.raw_rate_hz, ch.lowpass_hz)
-    sensor_of = array.channel_sensor
-    env_sensors = elec[is_env]
-    cols = np.flatnonzero(np.isin(sensor_of, env_sensors))
-    return cols, env
+    kinds = np.array([array.kinds[i] for i in elec])
+    chained = np.isin(kinds, ("envelope", "magnitude"))
+    E = array.electric_field(src, dip)[..., chained, :]          # (runs, n_raw, S_chain, 3)
+    raw = raw_channels(E.reshape(E.shape[:2] + (-1,)), raw_t, ch.shaft_hz, noise_std=ch.raw_noise_std,
+                       rng=streams["envelope"]).reshape(E.shape)
+    is_mag = kinds[chained] == "magnitude"
+    parts, cols = [], []
+    if (~is_mag).any():
+        r = raw[..., ~is_mag, :]
+        parts.append(envelope_chain(r.reshape(r.shape[:2] + (-1,)), raw_t, times, ch.raw_rate_hz, ch.lowpass_hz))
+        cols.append(np.flatnonzero(np.isin(array.channel_sensor, elec[chained][~is_mag])))
+    if is_mag.any():
+        parts.append(magnitude_envelope_chain(raw[..., is_mag, :], raw_t, times, ch.raw_rate_hz, ch.lowpass_hz))
+        cols.append(np.flatnonzero(np.isin(array.channel_sensor, elec[chained][is_mag])))
+    return np.concatenate(cols), np.concatenate(parts, axis=-1)
 
 
 def _seismic_chain(sc: Scenario, array: SensorArray, sources, streams):

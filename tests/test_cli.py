@@ -328,6 +328,19 @@ def test_check_gates_several_layouts_with_junit_and_the_worst_exit_code(tmp_path
     assert main(["check", "S1-P2", "--junit", str(tmp_path / "check.txt")]) == 2
 
 
+def test_check_of_a_line_of_magnitude_electrodes_fails_and_of_vector_electrodes_passes(tmp_path, capsys):
+    from pathlib import Path
+
+    import shipsense
+
+    text = (Path(shipsense.__file__).parent / "scenarios" / "S1-P1.toml").read_text()
+    assert text.count('kind = "envelope"') == 3
+    for kind, code in (("magnitude", 3), ("vector", 0)):
+        layout = tmp_path / f"line-{kind}.toml"
+        layout.write_text(text.replace('kind = "envelope"', f'kind = "{kind}"'))
+        assert main(["check", str(layout), "--passages", "2"]) == code, capsys.readouterr().out
+
+
 def test_the_pre_commit_hook_runs_the_check():
     from pathlib import Path
 

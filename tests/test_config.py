@@ -135,9 +135,17 @@ def test_moment_of_the_wrong_shape(tmp_path):
 
 
 def test_unknown_measurement_kind(tmp_path):
-    bad(tmp_path, BASE.replace('kind = "envelope"', 'kind = "magnitude"'), "sensors[1]",
-        "unknown measurement kind 'magnitude' for a electrode", "vector, envelope")
+    bad(tmp_path, BASE.replace('kind = "envelope"', 'kind = "tmi"'), "sensors[1]",
+        "unknown measurement kind 'tmi' for a electrode", "vector, envelope, magnitude")
     bad(tmp_path, BASE.replace('type = "electrode"', 'type = "hydrophone"'), "sensors[1].type")
+
+
+def test_magnitude_electrode_has_one_channel(tmp_path):
+    sc = load_text(tmp_path, BASE.replace('kind = "envelope"', 'kind = "magnitude"'))
+    assert sc.array().n_channels == 4 and sc.array().channels[-1] == ("E1", "e")
+    bad(tmp_path, BASE.replace('kind = "envelope"', 'kind = "magnitude"').replace(
+        "noise_std = 1e-7", "noise_std = [1e-7, 1e-7, 1e-7]"), "sensors[1]",
+        "a magnitude electrode has 1 components, got 3 values")
 
 
 def test_unknown_field_and_missing_field(tmp_path):

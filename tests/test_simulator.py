@@ -54,6 +54,19 @@ def test_envelopes_equal_series_field_of_the_keel_dipole():
             np.testing.assert_allclose(sim.clean[r][:, cols], np.abs(E), rtol=1e-6, atol=1e-6 * np.abs(E).max())
 
 
+def test_raw_chain_of_magnitude_electrodes_follows_the_field_magnitude():
+    base = load_scenario("S1-P2")
+    kinds = ["magnitude", "envelope", "magnitude"]
+    sc = base.model_copy(update={"sensors": [s.model_copy(update={"kind": k}) for s, k in zip(base.sensors, kinds)]})
+    ideal = simulate(sc, runs=2, seed=0)
+    assert ideal.measurements.shape[-1] == 5
+    env = simulate(base, runs=2, seed=0)                  # the same passages with envelope triads
+    np.testing.assert_allclose(ideal.clean[..., 0], np.linalg.norm(env.clean[..., 0:3], axis=-1), rtol=1e-12)
+    raw = simulate(sc.with_updates(envelope_chain={"mode": "raw", "raw_noise_std": 1e-8}), runs=2, seed=0)
+    rms = np.sqrt(np.mean((raw.measurements - raw.clean) ** 2, axis=1)) / np.abs(raw.clean).max(axis=1)
+    assert rms.shape == (2, 5) and rms.max() < 0.1, rms   # as for envelope triads (the low-pass smooths the peak)
+
+
 def test_noise_statistics_and_dropouts():
     sc = load_scenario("S0").with_updates(noise={"dropout": 0.1})
     sim = simulate(sc, runs=50, seed=2)

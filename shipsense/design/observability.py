@@ -15,13 +15,16 @@ the search is global:
    every pair of sensors and through each sensor at several angles, with the
    moment transformed correctly -- axial for the magnetic moment
    (:math:`m' = \det(M) M m`), polar for the electric dipole (it follows the
-   mirrored keel) -- then refined by least squares;
+   mirrored keel) -- each plane once, the :data:`MIRROR_REFINE` closest
+   candidates as they stand refined by least squares;
 2. **multi-start least squares**: batched Levenberg–Marquardt from random
    passages far from :math:`\theta`.
 
-Far apart means a mean distance between the two tracks above ``far`` metres.
-The verdict uses the actual measurement model, so identical layouts can
-differ by measurement kind (vector vs total-field magnetometers on a line).
+Every passage's candidates are refined together, in batches of about
+:data:`FIT_CHUNK` Jacobian entries.  Far apart means a mean distance between
+the two tracks above ``far`` metres.  The verdict uses the actual measurement
+model, so identical layouts can differ by measurement kind (vector vs
+total-field magnetometers on a line; vector vs magnitude electrodes on a line).
 """
 
 from __future__ import annotations
@@ -101,7 +104,17 @@ def track_distance(model, theta, theta_alt, steps):
     return np.linalg.norm(p - pa, axis=-1).mean(axis=-1)
 
 
-def lm_fit(model, theta_ref, theta_init, steps, stride=2, iterations=40):
+LM_STRIDE = 2
+"""Every LM_STRIDE-th sample enters the refinement fits (their chi-square is then taken on every sample)."""
+LM_ITERATIONS = 40
+FIT_CHUNK = 2.5e5
+"""Jacobian entries (rows x samples x channels x states) of one batched refinement fit (2 MB: batches that
+fit in cache were as fast as larger ones, or faster, on S1-P2 and S2-field-trial)."""
+MIRROR_REFINE = 24
+"""Mirror candidates refined per passage (the closest as they stand; :func:`_search`)."""
+
+
+def lm_fit(model, theta_ref, theta_init, steps, stride=LM_STRIDE, iterations=LM_ITERATIONS):
     """Passages (B, n) whose predictions best match those of ``theta_ref``; returns ``(theta, chi2)``
     with chi2 on the full passage."""
     Ak = _powers(model.A, steps)[::stride]
@@ -128,8 +141,10 @@ def mirror(model, theta, point, direction):
     return out                                                # z, p unchanged; the keel follows v
 
 
-def mirror_candidates(model, theta, angles=6):
-    """Mirror images of ``theta`` across lines through sensor pairs and through each sensor at ``angles`` angles."""
+def mirror_lines(model, angles=6):
+    """Distinct vertical mirror planes of an array: lines ``(point, direction)`` through every pair of sensors and
+    through each sensor at ``angles`` angles, each line once (a line through several sensors, e.g. a collinear
+    array's, or a sensor's line that is also a pair's, would otherwise give the same candidates again)."""
     pos = np.unique(np.round(model.array.positions[:, :2], 6), axis=0)
     lines = []
     for i in range(len(pos)):
@@ -137,6 +152,22 @@ def mirror_candidates(model, theta, angles=6):
             lines.append((pos[i], pos[j] - pos[i]))
         for a in np.arange(angles) * np.pi / angles:
             lines.append((pos[i], np.array([np.cos(a), np.sin(a)])))
+    seen, out = set(), []
+    for c, d in lines:
+        a = np.arctan2(d[1], d[0]) % np.pi
+        if a > np.pi - 1e-9:
+            a = 0.0
+        offset = -np.sin(a) * c[0] + np.cos(a) * c[1]          # signed distance of the line from the origin
+        key = (round(a, 9), round(offset, 6))
+        if key not in seen:
+            seen.add(key)
+            out.append((c, d))
+    return out
+
+
+def mirror_candidates(model, theta, angles=6, lines=None):
+    """Mirror images of ``theta`` across the lines of :func:`mirror_lines` (or ``lines``), (L, ..., n)."""
+    lines = mirror_lines(model, angles) if lines is None else lines
     return np.stack([mirror(model, theta, c, d) for c, d in lines])
 
 
@@ -169,25 +200,64 @@ def ambiguity_search(model, theta, steps, *, far=DEFAULT_FAR, starts=24, seed=0,
 
     Returns a list of ``(theta_alt, chi2, distance_m, source)``.
     """
-    rng = np.random.default_rng(seed)
-    cands = [("mirror", mirror_candidates(model, theta))]
-    if starts:
-        cands.append(("search", _random_starts(model, theta, starts, far, rng)))
-    found = []
-    for source, init in cands:
-        if refine:
-            alt, chi2 = lm_fit(model, theta, init, steps)
-            direct = discrepancy(model, theta, init, steps)     # the exact mirror may beat the refinement
-            use_init = direct <= chi2
-            alt = np.where(use_init[:, None], init, alt)
-            chi2 = np.minimum(direct, chi2)
-        else:
-            alt, chi2 = init, discrepancy(model, theta, init, steps)
-        dist = track_distance(model, theta, alt, steps)
-        for a, c, d in zip(alt, chi2, dist):
-            if d > far and np.isfinite(c):
-                found.append((a, float(c), float(d), source))
-    found.sort(key=lambda t: t[1])
+    return _search(model, np.asarray(theta, float)[None], steps, far=far, starts=starts, seeds=[seed],
+                   refine=refine)[0]
+
+
+def _search(model, thetas, steps, *, far, starts, seeds, refine=True, progress=False, mirrors=None):
+    """:func:`ambiguity_search` of each passage ``thetas`` (P, n) (``seeds[i]`` for passage i's random starts):
+    every candidate of every passage refined in one batched least-squares fit (in chunks that bound memory).
+
+    Of each passage's mirror candidates only the ``mirrors`` (default :data:`MIRROR_REFINE`) with the smallest
+    discrepancy as they stand are refined; the others keep their exact discrepancy.  A symmetry of the layout,
+    exact or nearly so -- what the mirror seeds are for -- is among the closest mirrors; the rest are far
+    passages like the random starts, and a large array's O(S^2) of them would otherwise dominate the cost.
+    Returns one list per passage.
+    """
+    mirrors = MIRROR_REFINE if mirrors is None else mirrors
+    lines = mirror_lines(model)
+    inits, ref, source, directs, fitted = [], [], [], [], []
+    for i, theta in enumerate(thetas):
+        cands = [("mirror", mirror_candidates(model, theta, lines=lines))]
+        if starts:
+            cands.append(("search", _random_starts(model, theta, starts, far, np.random.default_rng(seeds[i]))))
+        for name, init in cands:
+            direct = discrepancy(model, theta, init, steps)
+            fit = np.full(len(init), refine)
+            if name == "mirror" and len(init) > mirrors:
+                fit[np.argsort(direct, kind="stable")[mirrors:]] = False
+            inits.append(init)
+            directs.append(direct)
+            fitted.append(fit)
+            ref += [i] * len(init)
+            source += [name] * len(init)
+    init, chi2, fitted = np.concatenate(inits), np.concatenate(directs), np.concatenate(fitted)
+    ref = np.array(ref)
+    alt = init.copy()
+    Ak = _powers(model.A, steps)[::LM_STRIDE]
+    y_ref = model.h(np.einsum("kij,pj->pki", Ak, thetas))                   # (P, K', m)
+    # rows per chunk: the fit's Jacobian (rows, K', m, n) kept to about FIT_CHUNK numbers
+    chunk = max(8, int(FIT_CHUNK // (len(Ak) * model.m * model.n)))
+    todo = np.flatnonzero(fitted)
+    bounds = range(0, len(todo), chunk)
+    if progress:
+        from tqdm import tqdm
+
+        bounds = tqdm(bounds, desc="ambiguity search", unit="chunk", leave=False, disable=None)
+    for b in bounds:
+        rows = todo[b:b + chunk]
+        fit, _ = fit_passages(model, y_ref[ref[rows]], init[rows], steps, LM_STRIDE, LM_ITERATIONS)
+        c = discrepancy(model, thetas[ref[rows]], fit, steps)
+        better = c < chi2[rows]                             # the exact mirror may beat the refinement
+        alt[rows] = np.where(better[:, None], fit, init[rows])
+        chi2[rows] = np.where(better, c, chi2[rows])
+    dist = track_distance(model, thetas[ref], alt, steps)
+    found = [[] for _ in thetas]
+    for a, c, d, i, src in zip(alt, chi2, dist, ref, source):
+        if d > far and np.isfinite(c):
+            found[i].append((a, float(c), float(d), src))
+    for f in found:
+        f.sort(key=lambda t: t[1])
     return found
 
 
@@ -197,7 +267,8 @@ def check_array(model, thetas, steps, *, far=DEFAULT_FAR, chi2_threshold=DEFAULT
 
     ``degenerate`` if the Fisher information of some passage is numerically
     rank deficient or its condition number (internal units) exceeds 1e12; else ``ambiguous`` if some passage
-    has a far-apart alternative within ``chi2_threshold``; else ``observable``.
+    has a far-apart alternative within ``chi2_threshold``; else ``observable``.  The candidates of all
+    passages are refined together (one batched fit), passage ``i``'s random starts drawn with seed ``seed + i``.
     """
     thetas = np.atleast_2d(np.asarray(thetas, dtype=float))
     J = passage_fim(model, thetas, steps, stride=2)
@@ -206,13 +277,9 @@ def check_array(model, thetas, steps, *, far=DEFAULT_FAR, chi2_threshold=DEFAULT
     rank = int((w > model.n * np.finfo(float).eps * top).sum(axis=-1).min())   # numerical rank
     cond = float(np.max(w[:, -1] / np.maximum(w[:, 0], 1e-300)))
     pairs, best = [], np.inf
-    iterator = range(len(thetas))
-    if progress:
-        from tqdm import tqdm
-
-        iterator = tqdm(iterator, desc="ambiguity search", unit="passage", leave=False, disable=None)
-    for i in iterator:
-        found = ambiguity_search(model, thetas[i], steps, far=far, starts=starts, seed=seed + i)
+    searched = _search(model, thetas, steps, far=far, starts=starts, seeds=seed + np.arange(len(thetas)),
+                       progress=progress)
+    for i, found in enumerate(searched):
         if found:
             best = min(best, found[0][1])
             for alt, chi2, dist, source in found:

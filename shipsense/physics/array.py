@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from shipsense.physics.electric import Medium, fast_hed, hed_field
+from shipsense.physics.electric import Medium, fast_hed, hed_field, magnitude_jacobian, magnitude_reading
 from shipsense.physics.magnetic import dipole_field_at, dipole_field_jacobian
 from shipsense.physics.seismic import bearing, bearing_jacobian
 
@@ -25,6 +25,7 @@ CHANNELS: dict[tuple[str, str], tuple[str, ...]] = {
     ("magnetometer", "tmi"): ("tmi",),
     ("electrode", "vector"): ("ex", "ey", "ez"),
     ("electrode", "envelope"): ("ex", "ey", "ez"),
+    ("electrode", "magnitude"): ("e",),
     ("accelerometer", "bearing"): ("bearing",),
 }
 """Channel names of each (sensor type, measurement kind)."""
@@ -68,7 +69,7 @@ class SensorArray:
         World coordinates, m.
     orientations : array_like, shape (S, 3, 3), optional
         Columns are the sensor axes in world coordinates (identity if omitted);
-        applies to vector and envelope readings.
+        applies to vector and envelope readings (magnitudes do not depend on it).
     medium : Medium, optional
         Required when the array has electrodes.
     earth_direction : array_like, shape (3,), optional
@@ -110,6 +111,7 @@ class SensorArray:
             raise ValueError("an array with tmi magnetometers needs earth_direction")
         mag_code = np.array([_SCALAR_KIND_CODE.get(self.kinds[i], 0) for i in groups["magnetometer"]], dtype=int)
         env = np.array([self.kinds[i] == "envelope" for i in groups["electrode"]], dtype=bool)
+        emag = np.array([self.kinds[i] == "magnitude" for i in groups["electrode"]], dtype=bool)
         identity = np.allclose(self.orientations, np.eye(3), rtol=0, atol=0)
         # measure() stacks the sensor types' blocks (magnetometers and electrodes 3 slots per sensor, bearings 1)
         block = {"magnetometer": 0, "electrode": 3 * groups["magnetometer"].size,
@@ -120,7 +122,7 @@ class SensorArray:
         object.__setattr__(self, "_index", {
             "gather": np.array(gather, dtype=int),
             "channels": tuple(channels), "groups": groups,
-            "mag_code": mag_code, "envelope": env, "identity": identity,
+            "mag_code": mag_code, "envelope": env, "electric_magnitude": emag, "identity": identity,
             "positions": {t: pos[g] for t, g in groups.items()},
             "mag_vector_only": bool(mag_code.size) and not mag_code.any(),
             "group_gather": None if group_gather == list(range(block["accelerometer"] + groups["accelerometer"].size))
@@ -159,7 +161,7 @@ class SensorArray:
         idx = self.group("electrode")
         E = hed_field(self.positions[idx], np.asarray(sources, float)[..., None, :],
                       np.asarray(dipoles, float)[..., None, :], self.medium, method=self.electric_method)
-        return np.einsum("sji,...sj->...si", self.orientations[idx], E)
+        return E if self._index["identity"] else np.einsum("sji,...sj->...si", self.orientations[idx], E)
 
     def measure(self, sources, moments=None, dipoles=None):
         """Noise-free measurements of every channel.
@@ -205,7 +207,12 @@ class SensorArray:
             if dipoles is None:
                 raise ValueError("this array has electrodes: dipoles are required")
             E = self.electric_field(sources, dipoles)
-            parts.append(_block(np.where(self._index["envelope"][:, None], np.abs(E), E), batch))
+            out = np.where(self._index["envelope"][:, None], np.abs(E), E)
+            emag = self._index["electric_magnitude"]
+            if emag.any():   # one channel, |E|, in the sensor's first slot
+                e = magnitude_reading(E)
+                out = np.where(emag[:, None], np.stack([e, 0 * e, 0 * e], axis=-1), out)
+            parts.append(_block(out, batch))
         idx = groups["accelerometer"]
         if idx.size:
             parts.append(_block(bearing(self._index["positions"]["accelerometer"], sources[..., None, :])[..., None],
@@ -244,7 +251,9 @@ class SensorArray:
         electric derivatives come from the fast HED path
         (:meth:`~shipsense.physics.electric.FastHED.field_jacobian`).  An
         envelope channel's derivative is ``sign(E)`` times the field's (it has
-        a kink where the field changes sign).
+        a kink where the field changes sign); an electric magnitude's is
+        ``E^T dE / |E|``, zero where the field vanishes
+        (:func:`~shipsense.physics.electric.magnitude_jacobian`).
         """
         sources = np.asarray(sources, dtype=float)
         groups = self._index["groups"]
@@ -277,15 +286,24 @@ class SensorArray:
                 raise ValueError("this array has electrodes: dipoles are required")
             E, dEq, G = fast_hed(self.medium).field_jacobian(
                 self.positions[idx], sources[..., None, :], np.asarray(dipoles, float)[..., None, :])
-            R = self.orientations[idx]
-            E = np.einsum("sji,...sj->...si", R, E)
-            dEq = np.einsum("sji,...sjk->...sik", R, dEq)
-            G = np.einsum("sji,...sjk->...sik", R, G)
+            if not self._index["identity"]:   # sensor axes other than the world's
+                R = self.orientations[idx]
+                E = np.einsum("sji,...sj->...si", R, E)
+                dEq = np.einsum("sji,...sjk->...sik", R, dEq)
+                G = np.einsum("sji,...sjk->...sik", R, G)
             env = self._index["envelope"][:, None]
             sign = np.where(env, np.sign(E), 1.0)
             val[..., idx, :] = np.where(env, np.abs(E), E)
             dq[..., idx, :, :] = sign[..., None] * dEq
             dp[..., idx, :, :] = sign[..., None] * G
+            emag = self._index["electric_magnitude"]
+            if emag.any():   # magnitude sensors: |E| and its row in the first slot, zeros in the others
+                sel = idx[emag]
+                e, de_q = magnitude_jacobian(E[..., emag, :], dEq[..., emag, :, :])
+                _, de_p = magnitude_jacobian(E[..., emag, :], G[..., emag, :, :])
+                val[..., sel, :] = np.stack([e, 0 * e, 0 * e], axis=-1)
+                dq[..., sel, :, :] = np.concatenate([de_q[..., None, :], np.zeros_like(dEq[..., emag, 1:, :])], -2)
+                dp[..., sel, :, :] = np.concatenate([de_p[..., None, :], np.zeros_like(G[..., emag, 1:, :])], -2)
         idx = groups["accelerometer"]
         if idx.size:
             val[..., idx, 0] = bearing(self.positions[idx], sources[..., None, :])

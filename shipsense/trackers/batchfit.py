@@ -149,18 +149,27 @@ def fit_passages(model, y, theta_init, steps, stride=1, iterations=40, return_in
         mu = np.broadcast_to(np.asarray(prior[0], dtype=float), (B, n))
         root = np.sqrt(np.asarray(prior[1], dtype=float))                 # (n,): the prior's rows
 
+    # a model that gives h and H in one pass (FieldModel.h_and_H): every trial state's Jacobian is formed with
+    # its residual and kept, so an accepted step's next iteration needs no kernel pass of its own
+    fused = getattr(model, "h_and_H", None)
+
     def residual(th, idx):
         X = np.einsum("bkij,bj->bki", rows(Ak, idx), th)
-        r = (model.residual(model.h(X), rows(y, idx)) * w * rows(present, idx)).reshape(len(th), -1)
+        if fused is not None:
+            hx, Hx = fused(X)
+        else:
+            hx, Hx = model.h(X), None
+        r = (model.residual(hx, rows(y, idx)) * w * rows(present, idx)).reshape(len(th), -1)
         if prior is not None:
             r = np.concatenate([r, root * (th - mu[idx])], axis=-1)
-        return r, X
+        return r, X, Hx
 
     def cost_of(r):
         return np.sum(r * r, axis=-1) if huber is None else huber_cost(r, huber)
 
-    def jacobian(X, idx, r):
-        J = (model.H(X) @ rows(Ak, idx) * (w * rows(present, idx))[..., None]).reshape(len(X), -1, n)
+    def jacobian(X, idx, r, Hx=None):
+        Hx = model.H(X) if Hx is None else Hx
+        J = (Hx @ rows(Ak, idx) * (w * rows(present, idx))[..., None]).reshape(len(X), -1, n)
         if prior is not None:
             J = np.concatenate([J, np.broadcast_to(np.diag(root), (len(X), n, n))], axis=1)
         if huber is not None:   # IRLS: rows scaled by the square root of the Huber weight min(1, gamma / |r|)
@@ -171,7 +180,7 @@ def fit_passages(model, y, theta_init, steps, stride=1, iterations=40, return_in
         return r if huber is None else r * np.sqrt(np.minimum(1.0, huber / np.maximum(np.abs(r), 1e-300)))
 
     everyone = np.arange(B)
-    r, X = residual(theta, everyone)
+    r, X, Hs = residual(theta, everyone)
     cost = cost_of(r)
     lam = np.full(B, 1e-2)
     stall = np.zeros(B, dtype=int)
@@ -181,7 +190,7 @@ def fit_passages(model, y, theta_init, steps, stride=1, iterations=40, return_in
         a = np.flatnonzero(stall < 3)
         if a.size == 0:
             break
-        Jac = jacobian(X[a], a, r[a])
+        Jac = jacobian(X[a], a, r[a], None if Hs is None else Hs[a])
         JtJ = np.swapaxes(Jac, -1, -2) @ Jac
         g = np.einsum("bmn,bm->bn", Jac, weighted(r[a]))
         D = np.diagonal(JtJ, axis1=-2, axis2=-1)
@@ -190,7 +199,7 @@ def fit_passages(model, y, theta_init, steps, stride=1, iterations=40, return_in
         trial = theta[a] + step
         if lo is not None:   # projected steps: the fit stays physical (e.g. the source in the water)
             trial = np.clip(trial, lo, hi)
-        r_t, X_t = residual(trial, a)
+        r_t, X_t, H_t = residual(trial, a)
         cost_t = cost_of(r_t)
         better = np.isfinite(cost_t) & (cost_t < cost[a])
         gain = np.where(better, (cost[a] - cost_t) / np.maximum(cost[a], 1e-300), 0.0)
@@ -198,6 +207,8 @@ def fit_passages(model, y, theta_init, steps, stride=1, iterations=40, return_in
         theta[ok] = trial[better]
         r[ok] = r_t[better]
         X[ok] = X_t[better]
+        if Hs is not None:
+            Hs[ok] = H_t[better]
         cost[ok] = cost_t[better]
         lam[a] = np.clip(np.where(better, lam[a] / 3.0, lam[a] * 5.0), 1e-9, 1e9)
         # a stall: an accepted step that gained less than tol, or a rejected one at a large damping
@@ -205,7 +216,7 @@ def fit_passages(model, y, theta_init, steps, stride=1, iterations=40, return_in
         stall[a] = np.where(stalled, stall[a] + 1, 0)
     if return_information:
         huber, gamma = None, huber   # the information is J^T J (the sandwich's bread), unweighted
-        Jac = jacobian(X, everyone, r)
+        Jac = jacobian(X, everyone, r, Hs)
         huber = gamma
         return theta, cost, np.swapaxes(Jac, -1, -2) @ Jac
     return theta, cost

@@ -56,8 +56,10 @@ class GlobalInit:
 def _parameter_slots(model):
     labels = model.labels
     slots = [labels.index(c) for c in ("mx", "my", "mz", "p") if c in labels]
-    if any(k == "magnitude" for k in model.array.kinds):
-        raise ValueError("the global initialiser needs measurements linear in the moment (not 'magnitude')")
+    # |E| of an electrode is p |E(p = 1)| (linear in p >= 0, like the envelope); |B| is not linear in the moment
+    if any(k == "magnitude" and t == "magnetometer" for t, k in zip(model.array.types, model.array.kinds)):
+        raise ValueError("the global initialiser needs measurements linear in the moment (not magnetometer "
+                         "'magnitude')")
     return slots
 
 
@@ -86,8 +88,8 @@ _BASIS_CACHE_SIZE = 4
 def linear_basis(model, theta, steps, stride=1):
     """Offset (C, W, m) and unit-parameter basis (C, W, m, P) of candidate passages (internal units).
 
-    The measurements are linear in the moment (and ``p``) for vector, tmi and
-    envelope (``p >= 0``) channels: ``h = offset + basis @ params``; bearing
+    The measurements are linear in the moment (and ``p``) for vector, tmi,
+    envelope and electrode magnitude (``p >= 0``) channels: ``h = offset + basis @ params``; bearing
     channels are in the offset.  The last few results are kept (the grid and
     window are the same for every batch of passages a study initialises);
     treat them as read-only.

@@ -199,10 +199,17 @@ class FieldModel:
 
     def H(self, x):
         """Analytic Jacobian ``dh/dx`` (internal units), (..., n) -> (..., m, n)."""
+        return self.h_and_H(x)[1]
+
+    def h_and_H(self, x):
+        """``(h(x), H(x))`` from one pass of the kernels (the Jacobian's pass yields the readings too), for
+        callers that need both at the same states (least-squares fits).  With the series electric path
+        (``electric_method="series"``) the readings are :meth:`h`'s, evaluated apart."""
         x = np.asarray(x, dtype=float)
         d = self._d
         q, moment, dipole = self._source(x)
-        _, Jq, Jm, Jp = self.array.measure_jacobian(q, moment, dipole)
+        val, Jq, Jm, Jp = self.array.measure_jacobian(q, moment, dipole)
+        y = val / self.y_scale if self.array.electric_method == "fast" else self.h(x)
         J = np.zeros(x.shape[:-1] + (self.m, self.n))
         J[..., 0:2] = Jq[..., 0:2]
         if d["mom"] is not None:
@@ -214,11 +221,15 @@ class FieldModel:
             speed = np.sqrt(np.sum(v * v, axis=-1))
             safe = np.where(speed > 0, speed, 1.0)
             vhat = v / safe[..., None]
-            J[..., iz + 1] = np.einsum("...mj,...j->...m", Jp, vhat)
+            # 2-vector products written out (einsum over a trailing axis of 2 cost more than the kernels' rest)
+            ux, uy = vhat[..., 0, None], vhat[..., 1, None]
+            px, py = Jp[..., 0], Jp[..., 1]
+            J[..., iz + 1] = px * ux + py * uy
             # d(p v/|v|)/dv = p (I - vhat vhat^T) / |v|
-            proj = (np.eye(2) - vhat[..., :, None] * vhat[..., None, :]) * (x[..., iz + 1] / safe)[..., None, None]
-            J[..., 2:4] = np.einsum("...mj,...jk->...mk", Jp, proj)
-        return J / self.y_scale[:, None]
+            s = (x[..., iz + 1] / safe)[..., None]
+            J[..., 2] = s * (px * (1.0 - ux * ux) - py * (ux * uy))
+            J[..., 3] = s * (py * (1.0 - uy * uy) - px * (ux * uy))
+        return y, J / self.y_scale[:, None]
 
 
 class _Stepped:

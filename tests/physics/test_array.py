@@ -9,7 +9,7 @@ from shipsense.physics.magnetic import dipole_field
 from shipsense.physics.seismic import bearing
 
 KINDS = [("magnetometer", "vector"), ("magnetometer", "magnitude"), ("magnetometer", "tmi"),
-         ("electrode", "vector"), ("electrode", "envelope"), ("accelerometer", "bearing")]
+         ("electrode", "vector"), ("electrode", "envelope"), ("electrode", "magnitude"), ("accelerometer", "bearing")]
 EARTH = np.array([0.0, 0.5, -np.sqrt(0.75)])
 
 
@@ -24,7 +24,8 @@ def _per_sensor(arr, medium, q, m, p):
                     "tmi": [B @ EARTH]}[k]
         elif t == "electrode":
             E = hed_field(pos, q, p, medium, method="fast") @ R
-            out += list(np.moveaxis(np.abs(E) if k == "envelope" else E, -1, 0))
+            out += {"vector": list(np.moveaxis(E, -1, 0)), "envelope": list(np.moveaxis(np.abs(E), -1, 0)),
+                    "magnitude": [np.linalg.norm(E, axis=-1)]}[k]
         else:
             out.append(bearing(pos, q))
     return np.stack(np.broadcast_arrays(*out), axis=-1)

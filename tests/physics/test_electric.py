@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from shipsense.physics.electric import FastHED, Medium, hed_field, hed_potential
+from shipsense.physics.electric import FastHED, Medium, hed_field, hed_potential, magnitude_jacobian, magnitude_reading
 
 SIG1 = 4.0
 
@@ -184,3 +184,46 @@ def test_fast_jacobian_matches_complex_step_of_the_series(sigma2):
         cs = (total.T / (4 * np.pi * SIG1)).imag / h
         rel = np.linalg.norm(cs - dE[..., j], axis=-1) / np.linalg.norm(dE, axis=(-1, -2))
         assert rel.max() < 1e-5, (j, rel.max())
+
+
+def test_magnitude_reading_limits_and_symmetry():
+    """``|E|`` of the equal-conductivity medium is the length of the textbook source-plus-surface-image field;
+    it is the same for every sensor orientation, and the same at a sensor and at its mirror image across
+    the dipole's vertical plane (where the signed cross-keel component flips)."""
+    rng = np.random.default_rng(3)
+    medium = Medium(SIG1, SIG1, 15.0)
+    s, q, p = _geometry(rng, 200)
+    image = q * np.array([1, 1, -1])
+    expected = np.linalg.norm(fullspace(s, q, p, SIG1) + fullspace(s, image, p, SIG1), axis=-1)
+    np.testing.assert_allclose(magnitude_reading(hed_field(s, q, p, medium)), expected, rtol=1e-12)
+    R = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+    E = hed_field(s, q, p, Medium(SIG1, 0.04, 15.0), method="fast")
+    np.testing.assert_allclose(magnitude_reading(E @ R), magnitude_reading(E), rtol=1e-12)
+    # mirror across the vertical plane through the source along the dipole (the keel)
+    u = p[:, :2] / np.linalg.norm(p[:, :2], axis=-1, keepdims=True)
+    M = 2 * u[:, :, None] * u[:, None, :] - np.eye(2)
+    s_m = s.copy()
+    s_m[:, :2] = q[:, :2] + np.einsum("nij,nj->ni", M, s[:, :2] - q[:, :2])
+    E_m = hed_field(s_m, q, p, Medium(SIG1, 0.04, 15.0), method="fast")
+    np.testing.assert_allclose(magnitude_reading(E_m), magnitude_reading(E), rtol=1e-9)
+    cross = np.stack([-u[:, 1], u[:, 0]], -1)
+    np.testing.assert_allclose(np.sum(E_m[:, :2] * cross, -1), -np.sum(E[:, :2] * cross, -1),
+                               rtol=1e-9, atol=1e-12 * np.abs(E).max())
+
+
+def test_magnitude_jacobian_matches_finite_differences_and_is_zero_at_a_null():
+    medium = Medium(SIG1, 0.04, 15.0)
+    s, q, _ = _geometry(np.random.default_rng(7), 100)
+    p = np.array([60.0, 80.0, 0.0])
+    E, dE, _ = FastHED(medium).field_jacobian(s, q, p)
+    e, de = magnitude_jacobian(E, dE)
+    np.testing.assert_allclose(e, np.linalg.norm(E, axis=-1), rtol=1e-14)
+    h = 1e-4
+    for j in range(3):
+        dq = np.zeros(3)
+        dq[j] = h
+        fd = (magnitude_reading(FastHED(medium)(s, q + dq, p)) - magnitude_reading(FastHED(medium)(s, q - dq, p)))
+        np.testing.assert_allclose(de[:, j], fd / (2 * h), rtol=1e-5, atol=1e-6 * np.abs(de).max())
+    # at a null of the field the magnitude has a cone: the derivative is the zero subgradient, not NaN
+    e0, de0 = magnitude_jacobian(np.zeros((2, 3)), dE[:2])
+    assert np.all(e0 == 0) and np.all(de0 == 0)

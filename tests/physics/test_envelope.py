@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from shipsense.physics.envelope import envelope_chain, raw_channels
+from shipsense.physics.envelope import envelope_chain, magnitude_envelope_chain, raw_channels
 
 
 def test_recovers_constant_amplitude_within_2_percent_at_20_db():
@@ -33,3 +33,19 @@ def test_tracks_a_slow_amplitude_and_loses_a_fast_one():
     truth = 2 + np.sin(2 * np.pi * 0.02 * out_t)
     assert np.abs(env_slow[:, 0] - truth).max() < 0.01
     assert np.abs(env_fast[:, 0] - 2.0).max() < 0.05
+
+
+def test_magnitude_chain_recovers_the_length_of_the_amplitude_vector():
+    """Three channels sharing a carrier: the envelope of |E(t)| is |A|, a slowly turning amplitude included
+    (its components change sign; |A| does not)."""
+    rate = 100.0
+    t = np.arange(0, 200, 1 / rate)
+    ang = 2 * np.pi * 0.01 * t
+    A = np.stack([3 * np.cos(ang), 3 * np.sin(ang), np.full_like(t, 4.0)], -1)    # |A| = 5 throughout
+    raw = raw_channels(A, t, 5.0, phase=0.7).reshape(t.size, 1, 3)
+    out_t = np.arange(20, 180, 0.5)
+    env = magnitude_envelope_chain(raw, t, out_t, rate)
+    assert env.shape == (out_t.size, 1)
+    assert np.abs(env[:, 0] - 5.0).max() < 0.01
+    per_channel = envelope_chain(raw[:, 0], t, out_t, rate)
+    np.testing.assert_allclose(env[:, 0], np.linalg.norm(per_channel, axis=-1), rtol=0.02)

@@ -23,6 +23,21 @@ def test_basis_reproduces_the_measurement_model_for_any_moment():
     np.testing.assert_allclose(offset + basis @ m, model.h(X), rtol=1e-10, atol=1e-12)
 
 
+def test_basis_reproduces_electrode_magnitudes_for_any_non_negative_p():
+    sc = load_scenario("S1-P2")
+    sc = sc.model_copy(update={"sensors": [s.model_copy(update={"kind": "magnitude"}) for s in sc.sensors]})
+    model = model_from_scenario(sc)                         # |E| = p |E(p = 1)|: linear in p >= 0
+    grid = candidate_grid(model, [60.0, 120.0], [0.0, 90.0], [200.0], [5.0])
+    offset, basis = linear_basis(model, grid, 10)
+    from shipsense.trackers.batchfit import powers
+
+    for p in (0.0, 37.0, 180.0):
+        theta = grid.copy()
+        theta[:, -1] = p
+        X = np.einsum("kij,cj->cki", powers(model.A, 10), theta)
+        np.testing.assert_allclose(offset + basis @ [p], model.h(X), rtol=1e-10, atol=1e-12)
+
+
 @pytest.mark.parametrize("name, sensors, tol", [("S2", ["M1", "M2"], 3.0), ("S1-P2", None, 8.0)])
 def test_recovers_random_passages_without_a_prior_on_position(name, sensors, tol):
     sc = load_scenario(name)

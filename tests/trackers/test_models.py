@@ -48,6 +48,60 @@ def test_electric_jacobian_chain_rule_matches_finite_differences():
         np.testing.assert_allclose(H, fd, rtol=1e-4, atol=1e-5 * np.abs(H).max())
 
 
+@pytest.mark.parametrize("kinds", [("magnitude",) * 3, ("magnitude", "vector", "envelope")])
+def test_electric_magnitude_jacobian_matches_finite_differences(kinds):
+    sc = load_scenario("S1-P2")
+    R = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])   # a rotated first sensor: |E| ignores it
+    sensors = [s.model_copy(update={"kind": k, "orientation": tuple(map(tuple, R)) if i == 0 else None})
+               for i, (s, k) in enumerate(zip(sc.sensors, kinds))]
+    model = model_from_scenario(sc.model_copy(update={"sensors": sensors}))
+    assert model.m == sum(1 if k == "magnitude" else 3 for k in kinds)
+    rng = np.random.default_rng(2)
+    for _ in range(4):
+        x = np.array([*rng.uniform(-80, 80, 2), *rng.uniform(-8, 8, 2), rng.uniform(-10, -3), rng.uniform(50, 200)])
+        H = model.H(x)
+        np.testing.assert_allclose(H, central(model.h, x, 1e-4), rtol=1e-4, atol=1e-5 * np.abs(H).max())
+        e = np.linalg.norm(model_from_scenario("S1-P2").h(x)[:3])   # the first sensor's envelope triad
+        assert model.h(x)[0] == pytest.approx(e, rel=1e-12)
+
+
+def test_electric_magnitude_at_a_null_field_has_a_finite_jacobian():
+    sc = load_scenario("S1-P2")
+    sensors = [s.model_copy(update={"kind": "magnitude"}) for s in sc.sensors]
+    model = model_from_scenario(sc.model_copy(update={"sensors": sensors}))
+    x = np.array([30.0, -20.0, 5.0, 2.0, -6.8, 0.0])   # no dipole: |E| = 0 at every sensor
+    assert np.all(model.h(x) == 0)
+    H = model.H(x)
+    assert np.all(np.isfinite(H)) and np.all(H == 0)   # the zero subgradient of the cone, explicitly
+
+
+def test_candidate_model_copies_an_electric_magnitude_template():
+    from shipsense.trackers.models import candidate_model
+
+    sc = load_scenario("S1-P2")
+    sc = sc.model_copy(update={"sensors": [s.model_copy(update={"kind": "magnitude"}) for s in sc.sensors]})
+    pos = np.array([[10.0, 0.0, -15.0], [0.0, 30.0, -15.0]])
+    cand = candidate_model(sc, pos)
+    assert cand.m == 2 and cand.array.kinds == ("magnitude",) * 2 and cand.R.shape == (2,)
+    moved = [s.model_copy(update={"position": tuple(p)}) for s, p in zip(sc.sensors, pos)]
+    x = np.array([-40.0, 25.0, 6.0, -2.0, -6.8, 120.0])
+    np.testing.assert_allclose(cand.h(x), model_from_scenario(sc.model_copy(update={"sensors": moved})).h(x),
+                               rtol=1e-12)
+
+
+@pytest.mark.parametrize("name", ["demo", "S1-P1"])
+def test_h_and_H_in_one_pass_equal_h_and_H(name):
+    """The fits' fused pass (readings from the Jacobian's kernels) gives the readings of the measurement path."""
+    model = model_from_scenario(name)
+    rng = np.random.default_rng(4)
+    x = model.to_internal(model.state_from_truth(np.column_stack([
+        rng.uniform(-150, 150, (6, 2)), rng.uniform(-8, 8, (6, 2)), np.full(6, -6.0),
+        rng.uniform(-1e6, 1e6, (6, 3)), rng.uniform(50, 200, 6)])))
+    y, H = model.h_and_H(x)
+    np.testing.assert_allclose(y, model.h(x), rtol=1e-10, atol=1e-12 * np.abs(y).max())
+    np.testing.assert_array_equal(H, model.H(x))
+
+
 def test_bearing_jacobian_and_residual_wrap():
     model = model_from_scenario("S2", sensors=["A1"])
     x = np.array([30.0, 40.0, -2.0, 1.0])
