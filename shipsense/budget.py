@@ -6,7 +6,7 @@ one line naming the flag that raises them (``--max-memory GB``, ``--max-minutes 
 allocated: ``--runs 1e9`` is a message, not a 67 GB allocation or a run that never ends.
 
 The rates are measured on this project's reference machine (2 cores; ``shipsense reproduce S0|S1|S2 --runs N``
-at two N, ``benchmarks/track_rows.py``, ``shipsense check`` of S0, S2 and S1-P2), rounded towards the fast
+at two N, ``benchmarks/track_rows.py``, ``benchmarks/check.py`` on S0, S2 and S1-P2), rounded towards the fast
 side, so that the estimate refuses only work that is certainly beyond the limit and never a run that would
 have fitted. They are an order-of-magnitude guard, not a prediction: a faster machine finishes sooner.
 """
@@ -31,7 +31,7 @@ STUDY_S_PER_RUN = {"S0": 0.15, "S1": 0.3, "S2": 0.5}
 STUDY_BYTES_PER_RUN = {"S0": 3e6, "S1": 1e6, "S2": 2e7}
 WIDE_S_PER_PASSAGE = 0.3              # three families, one process (1009 s for 500 passages per family)
 WIDE_BYTES_PER_CHUNK = 5e8            # one chunk of passages in one worker
-CHECK_S_PER_VALUE = 4e-4              # ambiguity search per passage x step x channel (S0 4e-4 .. S1-P2 2e-3)
+CHECK_S_PER_VALUE = 1.5e-4            # ambiguity search per passage x step x channel (S0 1.3e-4 .. S1-P2 5e-4 CPU s)
 PPO_S_PER_STEP = {"scheduling": 2e-4, "placement": 0.05}
 
 

@@ -276,7 +276,7 @@ def test_import_shipsense_is_light_and_its_names_arrive_on_use():
     (["reproduce", "wide", "--runs", "40000"], "--max-minutes"),
     (["reproduce", "all", "--runs", "100000"], "--max-memory"),
     (["train", "scheduling", "--timesteps", "1000000000"], "--max-minutes"),
-    (["check", "S1-P2", "--passages", "10000", "--max-minutes", "30"], "--max-minutes"),
+    (["check", "S1-P2", "--passages", "10000", "--max-minutes", "10"], "--max-minutes"),
     (["track", "S2", "--max-minutes", "1e-6"], "--max-minutes"),
 ])
 def test_bad_counts_and_too_much_work_are_one_line_and_exit_2(argv, field, capsys):
