@@ -378,10 +378,12 @@ def solve_frank_wolfe(problem, criterion="D", cuts=None, iterations=300, tol=1e-
 
 
 # -- rounding ----------------------------------------------------------------------------
-def _value_of_sets(problem, sets, criterion, chunk=2048):
+def _value_of_sets(problem, sets, criterion, chunk=None):
     """Criterion of 0/1 designs given as index arrays (B, k): the chosen matrices are gathered, not weighted."""
     sets = np.asarray(sets)
     out = np.empty(len(sets))
+    if chunk is None:   # about 64 MB of gathered matrices at a time
+        chunk = max(1, int(8e6 // (problem.J.shape[0] * max(1, sets.shape[-1]) * problem.n ** 2)))
     eye = problem.eps * np.eye(problem.n)
     for start in range(0, len(sets), chunk):
         idx = sets[start:start + chunk]
@@ -515,6 +517,7 @@ class Placement:
     converged: bool = True
     message: str = ""
     dimension: int = 0
+    check_seconds: float = 0.0
 
     @property
     def certified_gap(self) -> float:
@@ -621,20 +624,31 @@ def place_with_cuts(problem, candidate_model, thetas, steps, criterion="D", tau=
 
     cuts = []
     result = None
+    solve_seconds = check_seconds = 0.0
+    messages = []
     for _ in range(max_rounds):
         result = place(problem, criterion, solver, cuts)
+        solve_seconds += result.seconds
+        if result.message and result.message not in messages:
+            messages.append(result.message)
+        t0 = time.perf_counter()
         design = subset_model(candidate_model, result.chosen)
         verdict = check_array(design, thetas[:check_passages], steps, chi2_threshold=tau, starts=starts,
                               seed=seed, progress=progress)
+        check_seconds += time.perf_counter() - t0
         result.verdict = verdict
         if verdict.verdict != "ambiguous":
             break
+        t0 = time.perf_counter()
         for pair in verdict.pairs:
             th = candidate_model.to_internal(pair.passage)
             alt = candidate_model.to_internal(pair.alternative)
             d = pair_discrepancy(candidate_model, th, alt, steps)
             cuts.append(np.minimum(d / tau, 1.0))
+        check_seconds += time.perf_counter() - t0
     result.cuts = cuts
+    result.seconds, result.check_seconds = solve_seconds, check_seconds
+    result.message = "; ".join(messages)
     return result
 
 

@@ -3,19 +3,9 @@
 from __future__ import annotations
 
 import io
-import os
-import uuid
 from pathlib import Path
 
-
-def atomic_write_bytes(path: Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` through a temporary file in the same folder and an atomic rename."""
-    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")
-    try:
-        tmp.write_bytes(data)
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
+from shipsense.fileio import atomic_write_bytes  # noqa: F401  (re-exported: the sweep and reproduce use it)
 
 
 def write_table(path: Path, table: dict | object) -> None:
