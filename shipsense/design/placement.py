@@ -403,12 +403,15 @@ def _feasible(sets, cuts, problem=None):
     return ok
 
 
-def _add_each(problem, M, criterion, chunk=1024):
-    """Criterion of ``M + J_i`` for every candidate i: M (S, n, n) -> (N,), in chunks of candidates."""
-    out = np.empty(problem.N)
-    for start in range(0, problem.N, chunk):
-        T = M[None] + np.swapaxes(problem.J[:, start:start + chunk], 0, 1)      # (B, S, n, n)
-        out[start:start + chunk] = _criterion(T, criterion)
+def _add_each(problem, M, criterion, subset=None, chunk=1024):
+    """Criterion of ``M + J_i`` for every candidate i (or those in ``subset``): M (S, n, n) -> (N,) (-inf outside
+    the subset), in chunks of candidates."""
+    idx = np.arange(problem.N) if subset is None else np.asarray(subset)
+    out = np.full(problem.N, -np.inf)
+    for start in range(0, len(idx), chunk):
+        part = idx[start:start + chunk]
+        T = M[None] + np.swapaxes(problem.J[:, part], 0, 1)                      # (B, S, n, n)
+        out[part] = _criterion(T, criterion)
     return out
 
 
@@ -433,14 +436,20 @@ def greedy(problem, criterion="D", cuts=None):
     return np.array(chosen)
 
 
-def swap_refine(problem, chosen, criterion="D", cuts=None, max_rounds=50):
+def swap_refine(problem, chosen, criterion="D", cuts=None, max_rounds=50, shortlist=None, full_round=True):
     """Exchange search: swap a placed sensor for a candidate while the criterion improves.
 
     For each placed sensor in turn, every unplaced candidate is tried in its
-    place (one batch of N evaluations of ``M - J_out + J_in``) and the best
+    place (one batch of evaluations of ``M - J_out + J_in``) and the best
     swap is kept if it improves the criterion and keeps the cuts and the
     budget satisfied; rounds repeat until a whole round changes nothing (a
     local optimum under single exchanges) or ``max_rounds``.  Never worsens.
+
+    ``shortlist`` (indices): try only these candidates until they give no
+    improvement, then one round over all candidates (which goes on with the
+    full set if it still improves), so the result is a local optimum over all
+    candidates either way; the shortlist only saves evaluations at large N.
+    ``full_round=False`` stops when the shortlist is exhausted.
 
     Returns
     -------
@@ -453,12 +462,13 @@ def swap_refine(problem, chosen, criterion="D", cuts=None, max_rounds=50):
         best = -np.inf                      # any feasible swap is an improvement
     C = None if not cuts else np.asarray(cuts)
     M = problem.eps * np.eye(problem.n) + problem.J[:, chosen].sum(axis=1)          # (S, n, n)
+    subset = None if shortlist is None else np.unique(shortlist)
     for _ in range(max_rounds):
         improved = False
         for j in range(len(chosen)):
             out = chosen[j]
             Mj = M - problem.J[:, out]
-            vals = _add_each(problem, Mj, criterion)
+            vals = _add_each(problem, Mj, criterion, subset)
             vals[chosen] = -np.inf
             if C is not None:
                 base = C[:, chosen].sum(axis=1) - C[:, out]
@@ -470,7 +480,9 @@ def swap_refine(problem, chosen, criterion="D", cuts=None, max_rounds=50):
             if vals[i] > best + 1e-10 * max(1.0, abs(best)):
                 chosen[j], best, M, improved = i, float(vals[i]), Mj + problem.J[:, i], True
         if not improved:
-            break
+            if subset is None or not full_round:
+                break
+            subset = None                   # the shortlist is exhausted: a round over every candidate
     chosen = np.sort(chosen)
     if np.isfinite(best):   # re-evaluate from scratch (the running M accumulates round-off)
         best = float(_value_of_sets(problem, chosen[None], criterion)[0])
@@ -478,13 +490,29 @@ def swap_refine(problem, chosen, criterion="D", cuts=None, max_rounds=50):
 
 
 def round_design(problem, w, criterion="D", cuts=None):
-    """Top-k and greedy rounding, each refined by the exchange search; the better one."""
+    """Top-k and greedy rounding, each refined by the exchange search; the better one.
+
+    Above 8k candidates the exchange search starts from a shortlist: the 4k
+    candidates of largest relaxed weight and the 4k of largest gradient at
+    the relaxed optimum (those a swap can improve most, to first order); the
+    better of the two refined designs then gets exchange rounds over every
+    candidate until none improves.
+    """
+    shortlist = None
+    if problem.N > 8 * problem.k:
+        g = gradient(problem, np.clip(w, 0.0, 1.0), criterion)
+        shortlist = np.union1d(np.argsort(w)[::-1][: 4 * problem.k], np.argsort(g)[::-1][: 4 * problem.k])
     top = np.argsort(w)[::-1][: problem.k]
     if not _feasible(top[None], cuts, problem)[0]:
         top = greedy(problem, criterion, cuts)
-    a = swap_refine(problem, top, criterion, cuts)
-    b = swap_refine(problem, greedy(problem, criterion, cuts), criterion, cuts)
-    return a if a[1] >= b[1] else b
+    if shortlist is None:
+        a = swap_refine(problem, top, criterion, cuts)
+        b = swap_refine(problem, greedy(problem, criterion, cuts), criterion, cuts)
+        return a if a[1] >= b[1] else b
+    a = swap_refine(problem, top, criterion, cuts, shortlist=shortlist, full_round=False)
+    b = swap_refine(problem, greedy(problem, criterion, cuts), criterion, cuts, shortlist=shortlist, full_round=False)
+    best = a if a[1] >= b[1] else b
+    return swap_refine(problem, best[0], criterion, cuts, shortlist=shortlist)   # ends with a full round
 
 
 # -- the whole method ----------------------------------------------------------------------
