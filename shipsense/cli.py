@@ -302,7 +302,7 @@ def cmd_design(args) -> int:
     try:
         result = design_array(sc, args.k, criterion=args.criterion, candidates=cands, costs=costs, budget=args.budget,
                               passages=args.passages, seed=args.seed, solver=args.solver, cuts=not args.no_cuts,
-                              prior_floor=args.prior_floor, progress=not _QUIET["on"])
+                              prior_floor=args.prior_floor, bb_seconds=args.bb_seconds, progress=not _QUIET["on"])
     except ValueError as err:
         raise _BadInput(str(err)) from None
     out = Path(args.out)
@@ -465,6 +465,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="relaxation solver: auto (CLARABEL up to 800 candidates, else first-order), clarabel "
                         "(interior point; falls back to first-order if it fails) or first-order (projected "
                         "gradient, Frank-Wolfe with cuts or a budget); default auto")
+    g.add_argument("--bb-seconds", type=float, default=20.0,
+                   help="time limit of the branch and bound that tightens the bound for k <= 3 (default 20; 0: off)")
     g.add_argument("--prior-floor", type=float, default=None,
                    help="floor on the scaled prior information (a regulariser; default: none, the scenario's "
                         "prior covariance as it is)")

@@ -206,7 +206,7 @@ def test_check_exit_codes_and_json(capsys):
 
 def test_design_writes_a_layout_that_check_accepts(tmp_path, capsys):
     out = tmp_path / "layout.toml"
-    assert main(["design", "S1-P2", "--k", "3", "--passages", "4", "--out", str(out)]) == 0
+    assert main(["design", "S1-P2", "--k", "3", "--passages", "4", "--bb-seconds", "1", "--out", str(out)]) == 0
     assert out.is_file() and out.with_suffix(".png").is_file() and out.with_suffix(".bounds.png").is_file()
     import json
 

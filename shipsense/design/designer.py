@@ -53,7 +53,7 @@ class DesignResult:
             "solver_status": r.status, "solver_message": r.message, "prior_floor": self.prior_floor,
             "relaxation_objective": r.relaxation, "upper_bound": r.upper_bound, "design_objective": r.value,
             "certified_gap": r.certified_gap, "guaranteed_efficiency": r.guaranteed_efficiency,
-            "ambiguity_cuts": len(r.cuts),
+            "branch_and_bound": r.branch_and_bound, "ambiguity_cuts": len(r.cuts),
             "verdict": r.verdict.verdict if r.verdict is not None else None,
             "min_chi2": r.verdict.min_chi2 if r.verdict is not None else None,
             "sensors": [list(map(float, p)) for p in self.sensors],
@@ -139,7 +139,7 @@ def _efficiency(criterion, value, reference, d):
 
 def design_array(scenario, k, *, criterion="D", candidates=None, costs=None, budget=None, passages=8, seed=0,
                  solver="auto", cuts=True, prior_floor=None, stride=2, random_layouts=RANDOM_LAYOUTS,
-                 progress=False):
+                 bb_seconds=20.0, progress=False):
     """Design an array of ``k`` copies of the scenario's first sensor.
 
     Parameters
@@ -164,6 +164,9 @@ def design_array(scenario, k, *, criterion="D", candidates=None, costs=None, bud
         standard deviations) as it is.
     random_layouts : int
         Random layouts for the best-of-random baseline.
+    bb_seconds : float
+        Time limit of the branch and bound that tightens the bound for k <= 3
+        (0: none).
     progress : bool
         A progress bar on a terminal.
 
@@ -183,6 +186,8 @@ def design_array(scenario, k, *, criterion="D", candidates=None, costs=None, bud
         raise ValueError(f"--criterion must be one of {', '.join(pl.CRITERIA)}, got {criterion!r}")
     if solver not in pl.SOLVERS:
         raise ValueError(f"--solver must be one of {', '.join(pl.SOLVERS)}, got {solver!r}")
+    if not (np.isfinite(bb_seconds) and bb_seconds >= 0):
+        raise ValueError(f"--bb-seconds must be a number >= 0, got {bb_seconds!r}")
     if prior_floor is not None and not (np.isfinite(prior_floor) and prior_floor > 0):
         raise ValueError(f"--prior-floor must be a positive number, got {prior_floor!r}")
     cands = default_candidates(scenario) if candidates is None else np.asarray(candidates, dtype=float)
@@ -212,11 +217,12 @@ def design_array(scenario, k, *, criterion="D", candidates=None, costs=None, bud
             problem = problem.with_costs(costs, budget)
         bar.set_description("design: relaxation, rounding" + ("" if not cuts else " and ambiguity cuts"))
         if cuts:
-            result = pl.place_with_cuts(problem, model, thetas, scenario.steps, criterion, solver=solver)
+            result = pl.place_with_cuts(problem, model, thetas, scenario.steps, criterion, solver=solver,
+                                        bb_seconds=bb_seconds)
             timings["relaxation_and_rounding"] = result.seconds
             timings["ambiguity_check"] = result.check_seconds
         else:
-            result = pl.place(problem, criterion, solver)
+            result = pl.place(problem, criterion, solver, bb_seconds=bb_seconds)
             timings["relaxation_and_rounding"] = result.seconds
             t0 = time.perf_counter()
             result.verdict = check_array(subset_model(model, result.chosen), thetas[:4], scenario.steps, starts=8)
@@ -299,6 +305,11 @@ def summary_lines(result):
         lines.append(f"  note: {r.message}")
     lines.append(f"  objective {r.value:.4g}; relaxation {r.relaxation:.4g}; certified upper bound "
                  f"{r.upper_bound:.4g}; gap {r.certified_gap:.3g} (no {k}-sensor design does better by more)")
+    if r.branch_and_bound is not None:
+        b = r.branch_and_bound
+        lines.append(f"  branch and bound: {b['nodes']} nodes in {b['seconds']:.1f} s, "
+                     + ("complete: the design is optimal" if b["complete"] else
+                        f"stopped at the time limit, proved bound {b['upper_bound']:.4g}"))
     if eff is not None:
         lines.append(f"  guaranteed efficiency {eff:.3f} against the best {k}-sensor design")
     lines.append(f"  ambiguity cuts added: {len(r.cuts)}; verdict: "

@@ -288,7 +288,7 @@ def _fw_gap(problem, w, g):
     return float(np.partition(g, problem.N - problem.k)[problem.N - problem.k:].sum() - g @ w)
 
 
-def solve_first_order(problem, criterion="D", iterations=3000, tol=1e-4, return_info=False):
+def solve_first_order(problem, criterion="D", iterations=3000, tol=1e-4, return_info=False, w0=None):
     """Projected-gradient ascent on the relaxation, stopped by the duality (Frank–Wolfe) gap.
 
     The relaxation's feasible set is the capped simplex ``{0 <= w <= 1,
@@ -305,7 +305,7 @@ def solve_first_order(problem, criterion="D", iterations=3000, tol=1e-4, return_
     info : dict, with ``return_info``
         ``converged`` (gap <= tol), ``iterations`` and ``gap``.
     """
-    w = np.full(problem.N, problem.k / problem.N)
+    w = np.full(problem.N, problem.k / problem.N) if w0 is None else project_capped_simplex(np.asarray(w0), problem.k)
     f = float(objective(problem, w, criterion))
     step = 1.0
     gap = np.inf
@@ -515,6 +515,111 @@ def round_design(problem, w, criterion="D", cuts=None):
     return swap_refine(problem, best[0], criterion, cuts, shortlist=shortlist)   # ends with a full round
 
 
+# -- branch and bound (few sensors) --------------------------------------------------------
+def _node_bound(problem, criterion, lo, hi, w0, iterations=150, tol=1e-4):
+    """Upper bound on the relaxation with ``lo <= w <= hi`` (some weights fixed at 0 or 1): projected gradient,
+    then the Frank–Wolfe bound (valid whether or not the iteration converged).  Returns (bound, w)."""
+    k = problem.k
+
+    def project(v):
+        a, b = (v - hi).min() - 1.0, (v - lo).max() + 1.0
+        for _ in range(60):
+            tau = 0.5 * (a + b)
+            if np.clip(v - tau, lo, hi).sum() > k:
+                a = tau
+            else:
+                b = tau
+        return np.clip(v - 0.5 * (a + b), lo, hi)
+
+    w = project(w0)
+    f = float(objective(problem, w, criterion))
+    step = 1.0
+    free = lo < hi
+    m = k - int(lo.sum())                 # weight left for the free candidates
+    for _ in range(iterations):
+        g = gradient(problem, w, criterion)
+        best = g[lo == 1].sum() + (np.sort(g[free])[::-1][:m].sum() if m > 0 else 0.0)
+        gap = best - g @ w
+        if gap <= tol:
+            break
+        while True:
+            trial = project(w + step * g)
+            ft = float(objective(problem, trial, criterion))
+            if ft >= f or step < 1e-14:
+                break
+            step *= 0.5
+        if ft < f:
+            break
+        w, f = trial, ft
+        step *= 2.0
+    g = gradient(problem, w, criterion)
+    best = g[lo == 1].sum() + (np.sort(g[free])[::-1][:m].sum() if m > 0 else 0.0)
+    return f + best - float(g @ w), w
+
+
+def branch_and_bound(problem, criterion="D", incumbent=None, time_limit=20.0, w0=None):
+    """Best-first branch and bound on the relaxation (no cuts, no costs): the optimal k-subset, or what it proved.
+
+    Each node fixes some candidates in (w = 1) or out (w = 0); its bound is
+    the certified relaxation bound with those fixings (:func:`_node_bound`).
+    Nodes whose bound does not beat the incumbent are pruned; the candidate
+    of largest relaxed weight is branched on.  Stopped at ``time_limit``
+    seconds, the bound it proved is the largest bound of the open nodes (or
+    the incumbent's value if none is left: then the incumbent is optimal).
+
+    Returns
+    -------
+    dict
+        ``chosen`` (k,), ``value``, ``upper_bound`` (proved), ``nodes``,
+        ``complete`` (the tree was exhausted), ``seconds``.
+    """
+    import heapq
+
+    t0 = time.perf_counter()
+    N, k = problem.N, problem.k
+    if incumbent is None:
+        incumbent = greedy(problem, criterion)
+    best_set = np.sort(np.asarray(incumbent))
+    best = float(_value_of_sets(problem, best_set[None], criterion)[0])
+    lo, hi = np.zeros(N), np.ones(N)
+    w0 = np.full(N, k / N) if w0 is None else np.asarray(w0, dtype=float)
+    bound, w = _node_bound(problem, criterion, lo, hi, w0)
+    heap = [(-bound, 0, lo, hi, w)]
+    counter, nodes = 1, 1
+    tol = 1e-9
+    while heap and time.perf_counter() - t0 < time_limit:
+        neg, _, lo, hi, w = heapq.heappop(heap)
+        if -neg <= best + tol:
+            heap = []                            # best-first: every other open node is worse
+            break
+        fixed_in = np.flatnonzero(lo == 1)
+        free = np.flatnonzero(lo < hi)
+        if len(fixed_in) == k or len(fixed_in) + len(free) == k:
+            leaf = np.sort(np.concatenate([fixed_in, free]) if len(fixed_in) < k else fixed_in)
+            v = float(_value_of_sets(problem, leaf[None], criterion)[0])
+            if v > best:
+                best, best_set = v, leaf
+            continue
+        i = int(free[np.argmax(w[free])])
+        for child in ("in", "out"):
+            clo, chi = lo.copy(), hi.copy()
+            if child == "in":
+                clo[i] = 1.0
+            else:
+                chi[i] = 0.0
+            if clo.sum() > k or chi.sum() < k:
+                continue
+            b, cw = _node_bound(problem, criterion, clo, chi, w)
+            nodes += 1
+            if b > best + tol:
+                heapq.heappush(heap, (-b, counter, clo, chi, cw))
+                counter += 1
+    complete = not heap
+    proved = best if complete else max(best, max(-h[0] for h in heap))
+    return {"chosen": best_set, "value": best, "upper_bound": float(proved), "nodes": nodes,
+            "complete": bool(complete), "seconds": time.perf_counter() - t0}
+
+
 # -- the whole method ----------------------------------------------------------------------
 SOLVERS = ("auto", "clarabel", "first-order")
 
@@ -546,6 +651,7 @@ class Placement:
     message: str = ""
     dimension: int = 0
     check_seconds: float = 0.0
+    branch_and_bound: dict | None = None
 
     @property
     def certified_gap(self) -> float:
@@ -594,8 +700,18 @@ def solve_relaxation(problem, criterion="D", solver="auto", cuts=None, first_ord
     if solver == "clarabel":
         try:
             w, status = solve_convex(problem, criterion, cuts, return_status=True)
-            return w, {"method": "convex", "solver": "clarabel", "status": status,
-                       "converged": status == "optimal", "message": ""}
+            info = {"method": "convex", "solver": "clarabel", "status": status, "converged": status == "optimal",
+                    "message": ""}
+            if not constrained and status != "optimal":
+                # an inaccurate interior point (the prior term is ~1e-12 of the data): polish it by projected
+                # gradient from there, stopped by the duality gap
+                upper, f = certified_bound(problem, w, criterion)
+                if upper - f > 1e-4:
+                    w, fo = solve_first_order(problem, criterion, return_info=True, w0=w)
+                    info.update(solver="clarabel+projected-gradient", converged=fo["converged"],
+                                status=f"{status}; polished by projected gradient: duality gap {fo['gap']:.2g} "
+                                       f"after {fo['iterations']} iterations")
+            return w, info
         except Exception as err:   # cvxpy and the solver raise several types; the fallback is always safe
             message = f"CLARABEL failed ({type(err).__name__}: {err}); fell back to the first-order solver"
     if constrained:
@@ -619,12 +735,17 @@ def pair_discrepancy(model, theta, theta_alt, steps):
     return np.bincount(model.array.channel_sensor, weights=per_channel, minlength=S)
 
 
-def place(problem, criterion="D", method="auto", cuts=None, first_order_above=800):
+def place(problem, criterion="D", method="auto", cuts=None, first_order_above=800, bb_max_k=3, bb_seconds=20.0):
     """Solve the relaxation, certify it, round and refine; returns a :class:`Placement`.
 
     ``method``: ``auto``, ``clarabel`` (also spelled ``convex``) or
     ``first-order``; see :func:`solve_relaxation`.  A solver failure falls
     back to the first-order method (the Placement's ``message`` says so).
+
+    For few sensors (``k <= bb_max_k``, no cuts, no costs), where the
+    relaxation is loose, a time-limited :func:`branch_and_bound` tightens the
+    bound (and may improve the design); what it proved is in
+    ``branch_and_bound``.
     """
     t0 = time.perf_counter()
     solver = "clarabel" if method == "convex" else method
@@ -633,14 +754,21 @@ def place(problem, criterion="D", method="auto", cuts=None, first_order_above=80
     w, info = solve_relaxation(problem, criterion, solver, cuts, first_order_above)
     upper, relax = certified_bound(problem, w, criterion, cuts)
     chosen, value = round_design(problem, w, criterion, cuts)
+    bb = None
+    if problem.k <= bb_max_k and not cuts and problem.costs is None and bb_seconds > 0:
+        bb = branch_and_bound(problem, criterion, incumbent=chosen, time_limit=bb_seconds, w0=w)
+        if bb["value"] > value:
+            chosen, value = bb["chosen"], bb["value"]
+        upper = min(upper, bb["upper_bound"])
+        bb = {k: v for k, v in bb.items() if k != "chosen"}
     upper = max(upper, value)   # the bound holds for every design; round-off never makes it lower than one
     return Placement(chosen, w, criterion, relax, upper, value, info["method"], time.perf_counter() - t0,
                      list(cuts or []), status=info["status"], solver=info["solver"], converged=info["converged"],
-                     message=info["message"], dimension=problem.n)
+                     message=info["message"], dimension=problem.n, branch_and_bound=bb)
 
 
 def place_with_cuts(problem, candidate_model, thetas, steps, criterion="D", tau=DEFAULT_CHI2, max_rounds=6,
-                    check_passages=4, starts=8, seed=0, progress=False, solver="auto"):
+                    check_passages=4, starts=8, seed=0, progress=False, solver="auto", bb_seconds=20.0):
     """Place sensors, then add ambiguity cuts until the rounded design passes the ambiguity check.
 
     The check is :func:`~shipsense.design.observability.check_array` on the
@@ -655,7 +783,7 @@ def place_with_cuts(problem, candidate_model, thetas, steps, criterion="D", tau=
     solve_seconds = check_seconds = 0.0
     messages = []
     for _ in range(max_rounds):
-        result = place(problem, criterion, solver, cuts)
+        result = place(problem, criterion, solver, cuts, bb_seconds=bb_seconds)
         solve_seconds += result.seconds
         if result.message and result.message not in messages:
             messages.append(result.message)

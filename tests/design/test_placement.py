@@ -140,3 +140,15 @@ def test_frank_wolfe_with_costs_is_certified(small):
     sets, values = pl.enumerate_designs(constrained, "D")
     assert res.solver == "frank-wolfe"
     assert costs[res.chosen].sum() <= 5.0 and values.max() <= res.upper_bound + 1e-9
+
+
+def test_branch_and_bound_proves_the_optimum_or_a_true_bound(small):
+    *_, problem = small
+    sets, values = pl.enumerate_designs(problem, "D")
+    bb = pl.branch_and_bound(problem, "D", time_limit=30.0)
+    assert bb["complete"] and bb["value"] == pytest.approx(values.max(), abs=1e-9)
+    assert bb["upper_bound"] == pytest.approx(values.max(), abs=1e-9)
+    early = pl.branch_and_bound(problem, "D", incumbent=sets[np.argmin(values)], time_limit=0.0)
+    assert early["upper_bound"] >= values.max() - 1e-9                     # stopped at once: still a true bound
+    res = pl.place(problem, "D")                                            # k = 3: place runs it
+    assert res.branch_and_bound["complete"] and res.guaranteed_efficiency == pytest.approx(1.0, abs=1e-9)
