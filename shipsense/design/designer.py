@@ -273,7 +273,7 @@ def design_files(result, out):
     centre = cands[:, :2].mean(axis=0)
     xs = centre[0] + np.linspace(-span, span, 41)
     ys = centre[1] + np.linspace(-span, span, 41)
-    bound, _ = bound_map(design_model, xs, ys, velocity=thetas[0, 2:4], params=thetas[0, 4:])
+    bound, _ = bound_map(design_model, xs, ys, velocity=thetas[0, 2:4], params=thetas[0, 4:], per_sensor=False)
     buf = io.BytesIO()
     plot_bound_map(design_model.array, xs, ys, bound, buf,
                    title=f"position CRLB of the design (passage segments at {np.hypot(*thetas[0, 2:4]):.1f} m/s)")
