@@ -11,7 +11,15 @@ deviations :math:`D` of the passage parameters and :math:`\tilde J = D J D`,
 The problem is normalised by a scalar :math:`c` (``I + X = c (I/c + X/c)``),
 which leaves the optimiser unchanged and keeps the cone solver's data O(1)
 (unscaled, the data span 1e9 to 2e13 on S1 and CLARABEL failed); the prior
-term ``1/c`` is floored (see :func:`build_problem`).
+term is ``1/c`` exactly (the scenario's prior), unless a floor is asked for
+(see :func:`build_problem`).
+
+Solvers (:func:`solve_relaxation`): CLARABEL through cvxpy, projected
+gradient on the capped simplex, Frank–Wolfe with a linear-programming
+oracle when there are cuts or costs; the first-order ones stop on their
+duality gap, and a CLARABEL failure falls back to them.  Rounding: top-k
+and greedy, then an exchange search (:func:`swap_refine`); for few sensors
+a time-limited :func:`branch_and_bound` tightens the bound.
 
 Certificate.  After every solve the objective and its (super)gradient ``g``
 are recomputed in numpy from the returned weights; for a concave ``f``,
@@ -735,7 +743,7 @@ def pair_discrepancy(model, theta, theta_alt, steps):
     return np.bincount(model.array.channel_sensor, weights=per_channel, minlength=S)
 
 
-def place(problem, criterion="D", method="auto", cuts=None, first_order_above=800, bb_max_k=3, bb_seconds=20.0):
+def place(problem, criterion="D", method="auto", cuts=None, first_order_above=800, bb_max_k=3, bb_seconds=0.0):
     """Solve the relaxation, certify it, round and refine; returns a :class:`Placement`.
 
     ``method``: ``auto``, ``clarabel`` (also spelled ``convex``) or
@@ -743,9 +751,10 @@ def place(problem, criterion="D", method="auto", cuts=None, first_order_above=80
     back to the first-order method (the Placement's ``message`` says so).
 
     For few sensors (``k <= bb_max_k``, no cuts, no costs), where the
-    relaxation is loose, a time-limited :func:`branch_and_bound` tightens the
-    bound (and may improve the design); what it proved is in
-    ``branch_and_bound``.
+    relaxation is loose, ``bb_seconds > 0`` runs a time-limited
+    :func:`branch_and_bound` that tightens the bound (and may improve the
+    design); what it proved is in ``branch_and_bound``.  Off by default here;
+    ``shipsense design`` gives it 20 s.
     """
     t0 = time.perf_counter()
     solver = "clarabel" if method == "convex" else method
@@ -768,7 +777,7 @@ def place(problem, criterion="D", method="auto", cuts=None, first_order_above=80
 
 
 def place_with_cuts(problem, candidate_model, thetas, steps, criterion="D", tau=DEFAULT_CHI2, max_rounds=6,
-                    check_passages=4, starts=8, seed=0, progress=False, solver="auto", bb_seconds=20.0):
+                    check_passages=4, starts=8, seed=0, progress=False, solver="auto", bb_seconds=0.0):
     """Place sensors, then add ambiguity cuts until the rounded design passes the ambiguity check.
 
     The check is :func:`~shipsense.design.observability.check_array` on the

@@ -150,5 +150,5 @@ def test_branch_and_bound_proves_the_optimum_or_a_true_bound(small):
     assert bb["upper_bound"] == pytest.approx(values.max(), abs=1e-9)
     early = pl.branch_and_bound(problem, "D", incumbent=sets[np.argmin(values)], time_limit=0.0)
     assert early["upper_bound"] >= values.max() - 1e-9                     # stopped at once: still a true bound
-    res = pl.place(problem, "D")                                            # k = 3: place runs it
+    res = pl.place(problem, "D", bb_seconds=30.0)                           # k = 3: place runs it
     assert res.branch_and_bound["complete"] and res.guaranteed_efficiency == pytest.approx(1.0, abs=1e-9)
