@@ -33,6 +33,7 @@ WIDE_S_PER_PASSAGE = 0.3              # three families, one process (1009 s for 
 WIDE_BYTES_PER_CHUNK = 5e8            # one chunk of passages in one worker
 CHECK_S_PER_VALUE = 1.5e-4            # ambiguity search per passage x step x channel (S0 1.3e-4 .. S1-P2 5e-4 CPU s)
 PPO_S_PER_STEP = {"scheduling": 2e-4, "placement": 0.05}
+DESIGN_S_PER_VALUE = 5e-7             # Fisher build per candidate x passage x step x channel (1600 x 32 of S1-P2: 12 s)
 
 
 class WorkTooLarge(ShipsenseError):
@@ -142,6 +143,18 @@ def check(scenario, passages: int) -> Work:
     values = passages * scenario.steps * scenario.array().n_channels
     return Work(f"checking {scenario.name} on {passages} passages of {scenario.steps} steps", values * 64 * 8.0,
                 values * CHECK_S_PER_VALUE, "--passages (or the scenario's steps)")
+
+
+def design(scenario, candidates: int, passages: int) -> Work:
+    """``shipsense design``: per-candidate Fisher information over ``passages`` prior passages (the relaxation,
+    rounding and check cost less at these sizes; benchmarks/design.py)."""
+    n = scenario.sensors[0]
+    channels = {"vector": 3, "envelope": 3}.get(n.kind, 1)
+    d = 8
+    values = float(candidates) * passages * scenario.steps * channels
+    return Work(f"designing from {candidates} candidates and {passages} passages of {scenario.steps} steps",
+                candidates * passages * d * d * 8.0 * 4 + values * d * 8.0 / max(1, scenario.steps),
+                values * DESIGN_S_PER_VALUE, "candidates or --passages")
 
 
 def training(task: str, timesteps: int) -> Work:

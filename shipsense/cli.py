@@ -311,99 +311,25 @@ def _read_candidates(path, z_default):
 
 
 def cmd_design(args) -> int:
-    import json
-
-    from shipsense.config import load_scenario, to_toml
-    from shipsense.design.placement import CRITERIA, build_problem, grid_candidates, place, place_with_cuts
-    from shipsense.plotting import plot_design
-    from shipsense.simulator import sample_passages
-    from shipsense.trackers.bank import study_bank
-    from shipsense.trackers.models import candidate_model
+    from shipsense import budget
+    from shipsense.config import load_scenario
+    from shipsense.design.designer import default_candidates, design_array, summary_lines, write_design
 
     sc = load_scenario(args.scenario)
-    if args.criterion not in CRITERIA:
-        raise _BadInput(f"--criterion must be one of {', '.join(CRITERIA)}, got {args.criterion!r}")
-    template = sc.sensors[0]
-    z = template.position[2]
-    costs = None
-    if args.candidates:
-        cands, costs = _read_candidates(args.candidates, z)
-    else:
-        pos = np.array([s.position[:2] for s in sc.sensors])
-        centre = pos.mean(axis=0)
-        half = max(30.0, 1.5 * np.ptp(pos, axis=0).max())
-        box = [(centre[0] - half, centre[1] - half), (centre[0] + half, centre[1] - half),
-               (centre[0] + half, centre[1] + half), (centre[0] - half, centre[1] + half)]
-        cands = grid_candidates(box, 2 * half / 10, z)
-    if not 1 <= args.k <= len(cands):
-        raise _BadInput(f"--k must be between 1 and the number of candidates ({len(cands)}), got {args.k}")
-    model = candidate_model(sc, cands)
-    truth = sample_passages(sc, args.passages if sc.prior is not None else 1, seed=args.seed,
-                            random=sc.prior is not None)
-    thetas = model.to_internal(model.state_from_truth(truth))
-    _, b = study_bank(sc)
-    prior_std = model.to_internal(b.state_std(model.labels))
-    bar = _progress(2, f"design: {len(cands)} candidates x {len(thetas)} passages")
-    problem = build_problem(model, thetas, sc.steps, args.k, prior_std)
-    if (costs is None) != (args.budget is None):
-        raise _BadInput("--budget needs candidate costs (a 'cost' column in the candidate CSV), and vice versa")
-    if costs is not None:
-        try:
-            problem = problem.with_costs(costs, args.budget)
-        except ValueError as err:
-            raise _BadInput(str(err)) from None
-    bar.update(1)
-    if args.no_cuts:
-        result = place(problem, args.criterion)
-        from shipsense.design.observability import check_array
-        from shipsense.trackers.models import subset_model
-
-        result.verdict = check_array(subset_model(model, result.chosen), thetas[:4], sc.steps, starts=8)
-    else:
-        result = place_with_cuts(problem, model, thetas, sc.steps, args.criterion)
-    bar.update(1)
-    bar.close()
-    chosen = cands[result.chosen]
-    sensors = [template.model_copy(update={"id": f"D{i + 1}", "position": tuple(map(float, p))})
-               for i, p in enumerate(chosen)]
-    layout = sc.model_copy(update={"sensors": sensors, "name": f"{sc.name}-design-k{args.k}",
-                                   "description": f"{args.criterion}-optimal layout of {args.k} {template.type}s "
-                                                  f"({template.kind}) designed from {sc.name}"})
+    cands, costs = (None, None) if not args.candidates else _read_candidates(args.candidates, sc.sensors[0].position[2])
+    n_cands = len(cands) if cands is not None else len(default_candidates(sc))
+    _within_budget(args, budget.design(sc, n_cands, args.passages if sc.prior is not None else 1))
+    try:
+        result = design_array(sc, args.k, criterion=args.criterion, candidates=cands, costs=costs, budget=args.budget,
+                              passages=args.passages, seed=args.seed, solver=args.solver, cuts=not args.no_cuts,
+                              prior_floor=args.prior_floor, bb_seconds=args.bb_seconds, progress=not _QUIET["on"])
+    except ValueError as err:
+        raise _BadInput(str(err)) from None
     out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(to_toml(layout))
-    report = {"criterion": args.criterion, "k": args.k, "candidates": len(cands), "passages": len(thetas),
-              "method": result.method, "solver_status": result.status, "relaxation_objective": result.relaxation,
-              "upper_bound": result.upper_bound, "design_objective": result.value,
-              "certified_gap": result.certified_gap, "ambiguity_cuts": len(result.cuts),
-              "verdict": result.verdict.verdict if result.verdict is not None else None,
-              "min_chi2": result.verdict.min_chi2 if result.verdict is not None else None,
-              "sensors": [list(map(float, p)) for p in chosen], "seconds": result.seconds}
-    report_path = out.with_suffix(".json")
-    report_path.write_text(json.dumps(report, indent=2) + "\n")
-    plot_design(cands, result.weights, result.chosen, truth, out.with_suffix(".png"),
-                title=f"{args.criterion}-optimal {args.k} of {len(cands)} candidates: {report['verdict']}")
-    from shipsense.design.fisher import bound_map
-    from shipsense.plotting import plot_bound_map
-    from shipsense.trackers.models import subset_model
-
-    design_model = subset_model(model, result.chosen)
-    span = np.ptp(cands[:, :2], axis=0).max() / 2 + 40.0
-    centre = cands[:, :2].mean(axis=0)
-    xs = centre[0] + np.linspace(-span, span, 41)
-    ys = centre[1] + np.linspace(-span, span, 41)
-    bound, _ = bound_map(design_model, xs, ys, velocity=thetas[0, 2:4], params=thetas[0, 4:])
-    plot_bound_map(design_model.array, xs, ys, bound, out.with_suffix(".bounds.png"),
-                   title=f"position CRLB of the design (passage segments at {np.hypot(*thetas[0, 2:4]):.1f} m/s)")
-    print(f"{args.criterion}-optimal design of {args.k} {template.type}s ({template.kind}) from {len(cands)} "
-          f"candidates and {len(thetas)} prior passages ({result.method} relaxation, solver: {result.status})")
-    print(f"  objective {result.value:.4g}; relaxation {result.relaxation:.4g}; certified upper bound "
-          f"{result.upper_bound:.4g}; gap {result.certified_gap:.3g} (no {args.k}-sensor design does better by more)")
-    print(f"  ambiguity cuts added: {len(result.cuts)}; verdict: {report['verdict']}")
-    for sid, p in zip([s.id for s in sensors], chosen):
-        print(f"  {sid}: ({p[0]:.1f}, {p[1]:.1f}, {p[2]:.1f})")
-    print(f"wrote {out} (layout; check it with `shipsense check {out}`), {report_path}, {out.with_suffix('.png')} "
-          f"and {out.with_suffix('.bounds.png')}")
+    paths = write_design(result, out)
+    for line in summary_lines(result):
+        print(line)
+    print(f"wrote {out} (layout; check it with `shipsense check {out}`), " + ", ".join(map(str, paths[1:])))
     return EXIT_OK
 
 
@@ -566,6 +492,15 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--budget", type=float, default=None,
                    help="total cost allowed, with a 'cost' column in the candidate CSV")
     g.add_argument("--no-cuts", action="store_true", help="skip the ambiguity cuts")
+    g.add_argument("--solver", default="auto",
+                   help="relaxation solver: auto (CLARABEL up to 800 candidates, else first-order), clarabel "
+                        "(interior point; falls back to first-order if it fails) or first-order (projected "
+                        "gradient, Frank-Wolfe with cuts or a budget); default auto")
+    g.add_argument("--bb-seconds", type=float, default=20.0,
+                   help="time limit of the branch and bound that tightens the bound for k <= 3 (default 20; 0: off)")
+    g.add_argument("--prior-floor", type=float, default=None,
+                   help="floor on the scaled prior information (a regulariser; default: none, the scenario's "
+                        "prior covariance as it is)")
     g.set_defaults(func=cmd_design)
 
     tr = sub.add_parser("train", parents=[limits],

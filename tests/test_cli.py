@@ -206,7 +206,7 @@ def test_check_exit_codes_and_json(capsys):
 
 def test_design_writes_a_layout_that_check_accepts(tmp_path, capsys):
     out = tmp_path / "layout.toml"
-    assert main(["design", "S1-P2", "--k", "3", "--passages", "4", "--out", str(out)]) == 0
+    assert main(["design", "S1-P2", "--k", "3", "--passages", "4", "--bb-seconds", "1", "--out", str(out)]) == 0
     assert out.is_file() and out.with_suffix(".png").is_file() and out.with_suffix(".bounds.png").is_file()
     import json
 
@@ -278,6 +278,7 @@ def test_import_shipsense_is_light_and_its_names_arrive_on_use():
     (["train", "scheduling", "--timesteps", "1000000000"], "--max-minutes"),
     (["check", "S1-P2", "--passages", "10000", "--max-minutes", "10"], "--max-minutes"),
     (["track", "S2", "--max-minutes", "1e-6"], "--max-minutes"),
+    (["design", "S1-P2", "--k", "3", "--passages", "10000", "--max-minutes", "1"], "--max-minutes"),
 ])
 def test_bad_counts_and_too_much_work_are_one_line_and_exit_2(argv, field, capsys):
     """Counts and seeds are checked before any work (a negative seed was a numpy error, --passages 0 a division

@@ -30,7 +30,7 @@ def trajectory(model, theta, steps):
     return np.einsum("kij,...j->...ki", _powers(model.A, steps), np.asarray(theta, dtype=float))
 
 
-def passage_fim(model, theta, steps, per_sensor=False, stride=1):
+def passage_fim(model, theta, steps, per_sensor=False, stride=1, block=10_000, progress=None):
     """Fisher information of passages about their initial state (internal units).
 
     Parameters
@@ -45,22 +45,66 @@ def passage_fim(model, theta, steps, per_sensor=False, stride=1):
     stride : int
         Use every ``stride``-th sample (and weight it by ``stride``): a cheaper
         approximation for long passages.
+    block : int
+        Jacobian rows (samples x sensors) evaluated at once: the samples are
+        taken in blocks of about this many rows (whole passages at once made
+        temporaries of hundreds of MB for large candidate sets; single
+        samples paid Python overhead per call).
+    progress : callable, optional
+        Called with the fraction done after every block.
 
     Returns
     -------
     J : ndarray, shape (..., n, n) or (..., S, n, n)
     """
-    Ak = _powers(model.A, steps)[::stride]
-    X = np.einsum("kij,...j->...ki", Ak, np.asarray(theta, dtype=float))
-    G = model.H(X) @ Ak                                        # (..., K, m, n)
-    W = G / np.sqrt(model.R)[:, None]
-    if not per_sensor:
-        return stride * np.einsum("...kcn,...kcp->...np", W, W)
-    per_channel = stride * np.einsum("...kcn,...kcp->...cnp", W, W)   # (..., m, n, n)
+    theta = np.asarray(theta, dtype=float)
+    Ak = _powers(model.A, steps)[::stride]                     # (K, n, n)
+    batch, n = theta.shape[:-1], theta.shape[-1]
+    flat = theta.reshape(-1, n)
     sensor = model.array.channel_sensor
     S = len(model.array.ids)
-    onehot = (sensor[None, :] == np.arange(S)[:, None]).astype(float)  # (S, m)
-    return np.einsum("sc,...cnp->...snp", onehot, per_channel)
+    order = np.argsort(sensor, kind="stable")
+    starts = np.searchsorted(sensor[order], np.arange(S))
+    per = len(sensor) // S if S else 0
+    uniform = S > 0 and per * S == len(sensor) and np.array_equal(sensor[order], np.repeat(np.arange(S), per))
+    inv_sd = 1.0 / np.sqrt(model.R)
+    K = len(Ak)
+    m = len(sensor)
+
+    def information(W):
+        """(pb, kb, m, n) weighted Jacobian rows -> (pb, S, n, n) or (pb, n, n), summed over the samples."""
+        if not per_sensor:
+            return np.einsum("bkcn,bkcp->bnp", W, W)
+        Ws = W[:, :, order]
+        if uniform:   # the same number of channels per sensor: one batched product per sensor
+            pb, kb = Ws.shape[:2]
+            Ws = np.ascontiguousarray(Ws.reshape(pb, kb, S, per, n).transpose(0, 2, 1, 3, 4)).reshape(pb, S, -1, n)
+            return np.swapaxes(Ws, -1, -2) @ Ws
+        return np.add.reduceat(np.einsum("bkcn,bkcp->bcnp", Ws, Ws), starts, axis=1)
+
+    out = np.zeros((len(flat), S, n, n) if per_sensor else (len(flat), n, n))
+    total = len(flat) * K
+    done = 0
+    passages_per_block = block // max(1, K * m)
+    if passages_per_block >= 1:       # short passages or small arrays: whole passages at once
+        for b0 in range(0, len(flat), passages_per_block):
+            th = flat[b0:b0 + passages_per_block]
+            X = np.einsum("kij,bj->bki", Ak, th)
+            out[b0:b0 + len(th)] = information((model.H(X) @ Ak) * inv_sd[:, None])
+            done += len(th) * K
+            if progress is not None:
+                progress(done / total)
+    else:                             # long passages past large arrays: blocks of samples
+        per_block = max(1, block // max(1, m))
+        for b, th in enumerate(flat):
+            for k0 in range(0, K, per_block):
+                A = Ak[k0:k0 + per_block]
+                W = (model.H(A @ th) @ A) * inv_sd[:, None]            # (kb, m, n)
+                out[b] += information(W[None])[0]
+                done += len(A)
+                if progress is not None:
+                    progress(done / total)
+    return stride * out.reshape(batch + out.shape[1:])
 
 
 def crlb(J):
@@ -131,7 +175,7 @@ def pcrlb_from_information(model, info, J0, Q=None):
     return out
 
 
-def bound_map(model, xs, ys, velocity, params, steps=21):
+def bound_map(model, xs, ys, velocity, params, steps=21, per_sensor=True):
     """Position bound over a grid of target positions.
 
     For each grid point, a passage segment of ``steps`` samples with the given
@@ -143,7 +187,8 @@ def bound_map(model, xs, ys, velocity, params, steps=21):
     -------
     bound : ndarray, shape (len(ys), len(xs))
     per_sensor : ndarray, shape (S, len(ys), len(xs))
-        The bound with only that sensor.
+        The bound with only that sensor (None unless ``per_sensor``: it costs
+        one pseudo-inverse per sensor and grid point).
     """
     X, Y = np.meshgrid(np.asarray(xs, float), np.asarray(ys, float))
     half = (steps - 1) / 2 * model.period
@@ -153,7 +198,7 @@ def bound_map(model, xs, ys, velocity, params, steps=21):
     theta[..., 1] = Y - half * v[1]
     theta[..., 2:4] = v
     theta[..., 4:] = params
-    Js = passage_fim(model, theta, steps, per_sensor=True)     # (ny, nx, S, n, n)
+    Js = passage_fim(model, theta, steps, per_sensor=per_sensor)     # (ny, nx, [S,] n, n)
     centre = _powers(model.A, steps)[(steps - 1) // 2]
 
     def pos_bound(J):
@@ -162,4 +207,6 @@ def bound_map(model, xs, ys, velocity, params, steps=21):
         rank = np.linalg.matrix_rank(J, hermitian=True)
         return np.where(rank < model.n, np.inf, val)
 
+    if not per_sensor:
+        return pos_bound(Js), None
     return pos_bound(Js.sum(axis=-3)), np.moveaxis(pos_bound(Js), -1, 0)

@@ -11,7 +11,15 @@ deviations :math:`D` of the passage parameters and :math:`\tilde J = D J D`,
 The problem is normalised by a scalar :math:`c` (``I + X = c (I/c + X/c)``),
 which leaves the optimiser unchanged and keeps the cone solver's data O(1)
 (unscaled, the data span 1e9 to 2e13 on S1 and CLARABEL failed); the prior
-term ``1/c`` is floored (see :func:`build_problem`).
+term is ``1/c`` exactly (the scenario's prior), unless a floor is asked for
+(see :func:`build_problem`).
+
+Solvers (:func:`solve_relaxation`): CLARABEL through cvxpy, projected
+gradient on the capped simplex, Frank–Wolfe with a linear-programming
+oracle when there are cuts or costs; the first-order ones stop on their
+duality gap, and a CLARABEL failure falls back to them.  Rounding: top-k
+and greedy, then an exchange search (:func:`swap_refine`); for few sensors
+a time-limited :func:`branch_and_bound` tightens the bound.
 
 Certificate.  After every solve the objective and its (super)gradient ``g``
 are recomputed in numpy from the returned weights; for a concave ``f``,
@@ -117,36 +125,57 @@ class DesignProblem:
         return self.J.shape[1]
 
 
-def build_problem(model, thetas, steps, k, prior_std, stride=2, prior_floor=1e-4):
+def build_problem(model, thetas, steps, k, prior_std, stride=2, prior_floor=None, progress=None):
     """Per-candidate Fisher matrices of passages ``thetas`` (S, n) for the candidate ``model`` (one sensor each).
 
-    The matrices are scaled by the prior standard deviations (``D J D``, so
-    the prior information is the identity) and divided by ``c``, the mean
-    eigenvalue of a uniform k-sensor design, so that the data are O(1).  The
-    prior term then is ``1/c``; it is floored at ``prior_floor``.  That floor is
-    a deliberate regulariser: a passage carries so much information (``c``
-    ~ 1e12 on S1) that the true prior term is 1e-12, and with it CLARABEL's
-    A- and E-optimal solves were measured inaccurate (certified gap 6e5)
-    while D-optimal designs are the same for every floor from 1e-6 to 1e-3.
+    The matrices are scaled by the prior standard deviations ``prior_std``
+    (``D J D``, so the prior information is the identity) and divided by
+    ``c``, the mean eigenvalue of a uniform k-sensor design, so that the data
+    are O(1).  The prior term then is ``1/c``: the Bayesian criterion with the
+    prior covariance ``diag(prior_std**2)`` exactly.
+
+    Parameters
+    ----------
+    prior_floor : float, optional
+        Floor the scaled prior term at this value (a regulariser: the true
+        prior term is about 1e-12 on S1, and CLARABEL's A- and E-optimal solves
+        were measured inaccurate there).  None (the default): no floor, the
+        scenario's prior as it is.  The floor changes the criterion, not only
+        the numerics: on S0 a floor of 1e-4 picked a design 0.972 as efficient
+        as the Bayes-optimal one.
+    progress : callable, optional
+        Called with the fraction of the Fisher matrices built.
     """
-    J = passage_fim(model, thetas, steps, per_sensor=True, stride=stride)         # (S, N, n, n)
+    J = passage_fim(model, thetas, steps, per_sensor=True, stride=stride, progress=progress)   # (S, N, n, n)
     D = np.asarray(prior_std, dtype=float)
+    if D.shape != (J.shape[-1],) or not np.all(np.isfinite(D)) or np.any(D <= 0):
+        raise ValueError(f"prior_std must be {J.shape[-1]} positive numbers, got {D}")
     J = J * D[:, None] * D[None, :]
     c = float(k * np.mean(np.trace(J, axis1=-2, axis2=-1)) / J.shape[-1])
     c = c if c > 0 else 1.0
-    return DesignProblem(J / c, max(1.0 / c, prior_floor), int(k), c)
+    eps = 1.0 / c if prior_floor is None else max(1.0 / c, float(prior_floor))
+    return DesignProblem(np.ascontiguousarray(J / c), eps, int(k), c)
+
+
+def _flat(problem):
+    """The information as (S, N, n*n) (a view)."""
+    S, N, n = problem.J.shape[0], problem.N, problem.n
+    return problem.J.reshape(S, N, n * n)
 
 
 def _matrices(problem, w):
     """M_s = eps I + sum_i w_i J_si for weights w (..., N) -> (..., S, n, n)."""
-    return problem.eps * np.eye(problem.n) + np.einsum("...i,sinp->...snp", w, problem.J)
+    w = np.asarray(w, dtype=float)
+    n = problem.n
+    X = np.matmul(w[..., None, None, :], _flat(problem))[..., 0, :]          # (..., S, n*n)
+    return problem.eps * np.eye(n) + X.reshape(X.shape[:-1] + (n, n))
 
 
-def objective(problem, w, criterion="D"):
-    """The criterion (to maximise) at weights w (..., N)."""
-    M = _matrices(problem, np.asarray(w, dtype=float))
+def _criterion(M, criterion):
+    """The criterion of matrices M (..., S, n, n), averaged (D, A) or minimised (E) over S -> (...)."""
     if criterion == "D":
-        return np.linalg.slogdet(M)[1].mean(axis=-1)
+        sign, logdet = np.linalg.slogdet(M)
+        return np.where(sign > 0, logdet, -np.inf).mean(axis=-1)
     if criterion == "A":
         return -np.trace(np.linalg.inv(M), axis1=-2, axis2=-1).mean(axis=-1)
     if criterion == "E":
@@ -154,20 +183,26 @@ def objective(problem, w, criterion="D"):
     raise ValueError(f"criterion must be one of {CRITERIA}, got {criterion!r}")
 
 
+def objective(problem, w, criterion="D"):
+    """The criterion (to maximise) at weights w (..., N)."""
+    if criterion not in CRITERIA:
+        raise ValueError(f"criterion must be one of {CRITERIA}, got {criterion!r}")
+    return _criterion(_matrices(problem, w), criterion)
+
+
 def gradient(problem, w, criterion="D"):
     """(Super)gradient of the criterion at w (N,)."""
     M = _matrices(problem, np.asarray(w, dtype=float))                           # (S, n, n)
-    if criterion == "D":
+    S, n = M.shape[0], problem.n
+    if criterion in ("D", "A"):
         Minv = np.linalg.inv(M)
-        return np.einsum("snp,sipn->i", Minv, problem.J) / M.shape[0]
-    if criterion == "A":
-        Minv = np.linalg.inv(M)
-        M2 = Minv @ Minv
-        return np.einsum("snp,sipn->i", M2, problem.J) / M.shape[0]
+        G = Minv if criterion == "D" else Minv @ Minv
+        G = 0.5 * (G + np.swapaxes(G, -1, -2))
+        return np.matmul(_flat(problem), G.reshape(S, n * n, 1))[..., 0].mean(axis=0)
     vals, vecs = np.linalg.eigh(M)
     s = int(np.argmin(vals[:, 0]))
     u = vecs[s, :, 0]
-    return np.einsum("n,inp,p->i", u, problem.J[s], u)
+    return _flat(problem)[s] @ np.outer(u, u).ravel()
 
 
 def certified_bound(problem, w, criterion="D", cuts=None):
@@ -256,44 +291,112 @@ def project_capped_simplex(v, k):
     return np.clip(v - 0.5 * (lo + hi), 0.0, 1.0)
 
 
-def solve_first_order(problem, criterion="D", iterations=500, tol=1e-6):
-    """Projected-gradient ascent on the relaxation (for large candidate sets); returns the weights."""
-    w = np.full(problem.N, problem.k / problem.N)
+def _fw_gap(problem, w, g):
+    """Frank–Wolfe gap over the capped simplex: max_{w' feasible} g.(w' - w) (the k largest g_i minus g.w)."""
+    return float(np.partition(g, problem.N - problem.k)[problem.N - problem.k:].sum() - g @ w)
+
+
+def solve_first_order(problem, criterion="D", iterations=3000, tol=1e-4, return_info=False, w0=None):
+    """Projected-gradient ascent on the relaxation, stopped by the duality (Frank–Wolfe) gap.
+
+    The relaxation's feasible set is the capped simplex ``{0 <= w <= 1,
+    sum w = k}``; each step moves along the gradient and projects back
+    (:func:`project_capped_simplex`), with a backtracking step size.  For a
+    concave criterion the Frank–Wolfe gap ``max_w' g.(w' - w)`` bounds the
+    distance of ``f(w)`` to the relaxed optimum, so the iteration stops when
+    it is below ``tol`` (nats for D).  Unconstrained only (no cuts, no costs:
+    see :func:`solve_frank_wolfe` for those).
+
+    Returns
+    -------
+    w : ndarray, shape (N,)
+    info : dict, with ``return_info``
+        ``converged`` (gap <= tol), ``iterations`` and ``gap``.
+    """
+    w = np.full(problem.N, problem.k / problem.N) if w0 is None else project_capped_simplex(np.asarray(w0), problem.k)
     f = float(objective(problem, w, criterion))
     step = 1.0
+    gap = np.inf
+    it = 0
     for _ in range(iterations):
+        it += 1
         g = gradient(problem, w, criterion)
+        gap = _fw_gap(problem, w, g)
+        if gap <= tol:
+            break
         while True:
             trial = project_capped_simplex(w + step * g, problem.k)
             ft = float(objective(problem, trial, criterion))
-            if ft >= f or step < 1e-12:
+            if ft >= f or step < 1e-14:
                 break
             step *= 0.5
-        moved = np.abs(trial - w).max()
-        w, f = trial, max(f, ft)
-        step *= 1.5
-        if moved < tol:
+        if ft < f:   # no ascent even with the smallest step: at the precision limit
             break
-    return w
+        w, f = trial, ft
+        step *= 2.0
+    info = {"converged": bool(gap <= tol), "iterations": it, "gap": float(gap)}
+    return (w, info) if return_info else w
+
+
+def _lmo(problem, g, cuts):
+    """Linear maximisation oracle: argmax g.w over the relaxation's polytope (capped simplex, cuts, costs)."""
+    from scipy.optimize import linprog
+
+    rows, rhs = [-np.asarray(c) for c in cuts or []], [-1.0] * len(cuts or [])
+    if problem.costs is not None:
+        rows.append(problem.costs)
+        rhs.append(problem.budget)
+    res = linprog(-g, A_ub=np.array(rows) if rows else None, b_ub=np.array(rhs) if rhs else None,
+                  A_eq=np.ones((1, problem.N)), b_eq=[problem.k], bounds=[(0, 1)] * problem.N, method="highs")
+    if not res.success:
+        raise RuntimeError(f"the relaxation is infeasible with these cuts or costs ({res.message})")
+    return np.clip(res.x, 0.0, 1.0)
+
+
+def solve_frank_wolfe(problem, criterion="D", cuts=None, iterations=300, tol=1e-3, return_info=False):
+    """Frank–Wolfe on the relaxation with linear constraints (ambiguity cuts, a cost budget).
+
+    Each step solves a linear program over the polytope (the oracle) and
+    moves towards its vertex with a line search; the step's duality gap
+    ``g.(v - w)`` stops the iteration.  Slower to converge than the conic
+    solver but it cannot fail on scaling, so it is the fallback for
+    constrained problems.  Same returns as :func:`solve_first_order`.
+    """
+    g = gradient(problem, np.full(problem.N, problem.k / problem.N), criterion)
+    w = _lmo(problem, g, cuts)
+    f = float(objective(problem, w, criterion))
+    gap = np.inf
+    it = 0
+    gammas = np.array([1.0, 0.5, 0.25, 0.125, 0.0625, 0.03125, 0.015625, 0.0078125])
+    for _ in range(iterations):
+        it += 1
+        g = gradient(problem, w, criterion)
+        v = _lmo(problem, g, cuts)
+        gap = float(g @ (v - w))
+        if gap <= tol:
+            break
+        trials = w[None] + gammas[:, None] * (v - w)[None]
+        vals = objective(problem, trials, criterion)
+        i = int(np.argmax(vals))
+        if vals[i] <= f:
+            break
+        w, f = trials[i], float(vals[i])
+    info = {"converged": bool(gap <= tol), "iterations": it, "gap": float(gap)}
+    return (w, info) if return_info else w
 
 
 # -- rounding ----------------------------------------------------------------------------
-def _value_of_sets(problem, sets, criterion, chunk=4096):
+def _value_of_sets(problem, sets, criterion, chunk=None):
     """Criterion of 0/1 designs given as index arrays (B, k): the chosen matrices are gathered, not weighted."""
     sets = np.asarray(sets)
     out = np.empty(len(sets))
+    if chunk is None:   # about 64 MB of gathered matrices at a time
+        chunk = max(1, int(8e6 // (problem.J.shape[0] * max(1, sets.shape[-1]) * problem.n ** 2)))
     eye = problem.eps * np.eye(problem.n)
     for start in range(0, len(sets), chunk):
         idx = sets[start:start + chunk]
         M = eye + problem.J[:, idx].sum(axis=2)                      # (S, B, n, n)
-        M = np.swapaxes(M, 0, 1)                                      # (B, S, n, n)
-        if criterion == "D":
-            v = np.linalg.slogdet(M)[1].mean(axis=-1)
-        elif criterion == "A":
-            v = -np.trace(np.linalg.inv(M), axis1=-2, axis2=-1).mean(axis=-1)
-        else:
-            v = np.linalg.eigvalsh(M)[..., 0].min(axis=-1)
-        out[start:start + chunk] = v
+        out[start:start + chunk] = _criterion(np.swapaxes(M, 0, 1), criterion)
     return out
 
 
@@ -308,60 +411,237 @@ def _feasible(sets, cuts, problem=None):
     return ok
 
 
+def _add_each(problem, M, criterion, subset=None, chunk=1024):
+    """Criterion of ``M + J_i`` for every candidate i (or those in ``subset``): M (S, n, n) -> (N,) (-inf outside
+    the subset), in chunks of candidates."""
+    idx = np.arange(problem.N) if subset is None else np.asarray(subset)
+    out = np.full(problem.N, -np.inf)
+    for start in range(0, len(idx), chunk):
+        part = idx[start:start + chunk]
+        T = M[None] + np.swapaxes(problem.J[:, part], 0, 1)                      # (B, S, n, n)
+        out[part] = _criterion(T, criterion)
+    return out
+
+
 def greedy(problem, criterion="D", cuts=None):
+    """Add, k times, the candidate that improves the criterion most (one batch of N evaluations per step)."""
     chosen = []
-    for _ in range(problem.k):
-        rest = np.setdiff1d(np.arange(problem.N), chosen)
-        sets = np.array([chosen + [i] for i in rest])
-        vals = _value_of_sets(problem, sets, criterion)
-        if len(chosen) == problem.k - 1:
-            vals = np.where(_feasible(sets, cuts, problem), vals, -np.inf)
-        elif problem.costs is not None:   # keep enough budget for the cheapest completion
-            spent = problem.costs[sets].sum(axis=-1)
+    M = problem.eps * np.broadcast_to(np.eye(problem.n), problem.J.shape[:1] + (problem.n, problem.n)).copy()
+    C = None if not cuts else np.asarray(cuts)
+    for step in range(problem.k):
+        vals = _add_each(problem, M, criterion)
+        vals[chosen] = -np.inf
+        last = step == problem.k - 1
+        if last and C is not None:
+            vals = np.where(np.all(C[:, chosen].sum(axis=1)[:, None] + C >= 1.0 - 1e-9, axis=0), vals, -np.inf)
+        if problem.costs is not None:   # keep enough budget for the cheapest completion
+            spent = problem.costs[chosen].sum() + problem.costs
             left = np.sort(problem.costs)[: problem.k - len(chosen) - 1].sum()
             vals = np.where(spent + left <= problem.budget + 1e-9, vals, -np.inf)
-        chosen.append(int(rest[np.argmax(vals)]))
+        i = int(np.argmax(vals))
+        chosen.append(i)
+        M = M + problem.J[:, i]
     return np.array(chosen)
 
 
-def swap_refine(problem, chosen, criterion="D", cuts=None, max_rounds=50):
-    """Best-improvement swaps (one in, one out) until none improves; keeps the cuts satisfied."""
-    chosen = np.array(chosen)
+def swap_refine(problem, chosen, criterion="D", cuts=None, max_rounds=50, shortlist=None, full_round=True):
+    """Exchange search: swap a placed sensor for a candidate while the criterion improves.
+
+    For each placed sensor in turn, every unplaced candidate is tried in its
+    place (one batch of evaluations of ``M - J_out + J_in``) and the best
+    swap is kept if it improves the criterion and keeps the cuts and the
+    budget satisfied; rounds repeat until a whole round changes nothing (a
+    local optimum under single exchanges) or ``max_rounds``.  Never worsens.
+
+    ``shortlist`` (indices): try only these candidates until they give no
+    improvement, then one round over all candidates (which goes on with the
+    full set if it still improves), so the result is a local optimum over all
+    candidates either way; the shortlist only saves evaluations at large N.
+    ``full_round=False`` stops when the shortlist is exhausted.
+
+    Returns
+    -------
+    chosen : ndarray, shape (k,), sorted
+    value : float
+    """
+    chosen = np.array(chosen, dtype=int)
     best = float(_value_of_sets(problem, chosen[None], criterion)[0])
+    if not _feasible(chosen[None], cuts, problem)[0]:
+        best = -np.inf                      # any feasible swap is an improvement
+    C = None if not cuts else np.asarray(cuts)
+    M = problem.eps * np.eye(problem.n) + problem.J[:, chosen].sum(axis=1)          # (S, n, n)
+    subset = None if shortlist is None else np.unique(shortlist)
     for _ in range(max_rounds):
-        out = np.setdiff1d(np.arange(problem.N), chosen)
-        trials = []
+        improved = False
         for j in range(len(chosen)):
-            for i in out:
-                t = chosen.copy()
-                t[j] = i
-                trials.append(t)
-        if not trials:
-            break
-        trials = np.array(trials)
-        vals = _value_of_sets(problem, trials, criterion)
-        vals = np.where(_feasible(trials, cuts, problem), vals, -np.inf)
-        i = int(np.argmax(vals))
-        if vals[i] <= best + 1e-12:
-            break
-        chosen, best = trials[i], float(vals[i])
-    return np.sort(chosen), best
+            out = chosen[j]
+            Mj = M - problem.J[:, out]
+            vals = _add_each(problem, Mj, criterion, subset)
+            vals[chosen] = -np.inf
+            if C is not None:
+                base = C[:, chosen].sum(axis=1) - C[:, out]
+                vals = np.where(np.all(base[:, None] + C >= 1.0 - 1e-9, axis=0), vals, -np.inf)
+            if problem.costs is not None:
+                spent = problem.costs[chosen].sum() - problem.costs[out] + problem.costs
+                vals = np.where(spent <= problem.budget + 1e-9, vals, -np.inf)
+            i = int(np.argmax(vals))
+            if vals[i] > best + 1e-10 * max(1.0, abs(best)):
+                chosen[j], best, M, improved = i, float(vals[i]), Mj + problem.J[:, i], True
+        if not improved:
+            if subset is None or not full_round:
+                break
+            subset = None                   # the shortlist is exhausted: a round over every candidate
+    chosen = np.sort(chosen)
+    if np.isfinite(best):   # re-evaluate from scratch (the running M accumulates round-off)
+        best = float(_value_of_sets(problem, chosen[None], criterion)[0])
+    return chosen, best
 
 
 def round_design(problem, w, criterion="D", cuts=None):
-    """Top-k and greedy rounding, each refined by swaps; the better one."""
+    """Top-k and greedy rounding, each refined by the exchange search; the better one.
+
+    Above 8k candidates the exchange search starts from a shortlist: the 4k
+    candidates of largest relaxed weight and the 4k of largest gradient at
+    the relaxed optimum (those a swap can improve most, to first order); the
+    better of the two refined designs then gets exchange rounds over every
+    candidate until none improves.
+    """
+    shortlist = None
+    if problem.N > 8 * problem.k:
+        g = gradient(problem, np.clip(w, 0.0, 1.0), criterion)
+        shortlist = np.union1d(np.argsort(w)[::-1][: 4 * problem.k], np.argsort(g)[::-1][: 4 * problem.k])
     top = np.argsort(w)[::-1][: problem.k]
     if not _feasible(top[None], cuts, problem)[0]:
         top = greedy(problem, criterion, cuts)
-    a = swap_refine(problem, top, criterion, cuts)
-    b = swap_refine(problem, greedy(problem, criterion, cuts), criterion, cuts)
-    return a if a[1] >= b[1] else b
+    if shortlist is None:
+        a = swap_refine(problem, top, criterion, cuts)
+        b = swap_refine(problem, greedy(problem, criterion, cuts), criterion, cuts)
+        return a if a[1] >= b[1] else b
+    a = swap_refine(problem, top, criterion, cuts, shortlist=shortlist, full_round=False)
+    b = swap_refine(problem, greedy(problem, criterion, cuts), criterion, cuts, shortlist=shortlist, full_round=False)
+    best = a if a[1] >= b[1] else b
+    return swap_refine(problem, best[0], criterion, cuts, shortlist=shortlist)   # ends with a full round
+
+
+# -- branch and bound (few sensors) --------------------------------------------------------
+def _node_bound(problem, criterion, lo, hi, w0, iterations=150, tol=1e-4):
+    """Upper bound on the relaxation with ``lo <= w <= hi`` (some weights fixed at 0 or 1): projected gradient,
+    then the Frank–Wolfe bound (valid whether or not the iteration converged).  Returns (bound, w)."""
+    k = problem.k
+
+    def project(v):
+        a, b = (v - hi).min() - 1.0, (v - lo).max() + 1.0
+        for _ in range(60):
+            tau = 0.5 * (a + b)
+            if np.clip(v - tau, lo, hi).sum() > k:
+                a = tau
+            else:
+                b = tau
+        return np.clip(v - 0.5 * (a + b), lo, hi)
+
+    w = project(w0)
+    f = float(objective(problem, w, criterion))
+    step = 1.0
+    free = lo < hi
+    m = k - int(lo.sum())                 # weight left for the free candidates
+    for _ in range(iterations):
+        g = gradient(problem, w, criterion)
+        best = g[lo == 1].sum() + (np.sort(g[free])[::-1][:m].sum() if m > 0 else 0.0)
+        gap = best - g @ w
+        if gap <= tol:
+            break
+        while True:
+            trial = project(w + step * g)
+            ft = float(objective(problem, trial, criterion))
+            if ft >= f or step < 1e-14:
+                break
+            step *= 0.5
+        if ft < f:
+            break
+        w, f = trial, ft
+        step *= 2.0
+    g = gradient(problem, w, criterion)
+    best = g[lo == 1].sum() + (np.sort(g[free])[::-1][:m].sum() if m > 0 else 0.0)
+    return f + best - float(g @ w), w
+
+
+def branch_and_bound(problem, criterion="D", incumbent=None, time_limit=20.0, w0=None):
+    """Best-first branch and bound on the relaxation (no cuts, no costs): the optimal k-subset, or what it proved.
+
+    Each node fixes some candidates in (w = 1) or out (w = 0); its bound is
+    the certified relaxation bound with those fixings (:func:`_node_bound`).
+    Nodes whose bound does not beat the incumbent are pruned; the candidate
+    of largest relaxed weight is branched on.  Stopped at ``time_limit``
+    seconds, the bound it proved is the largest bound of the open nodes (or
+    the incumbent's value if none is left: then the incumbent is optimal).
+
+    Returns
+    -------
+    dict
+        ``chosen`` (k,), ``value``, ``upper_bound`` (proved), ``nodes``,
+        ``complete`` (the tree was exhausted), ``seconds``.
+    """
+    import heapq
+
+    t0 = time.perf_counter()
+    N, k = problem.N, problem.k
+    if incumbent is None:
+        incumbent = greedy(problem, criterion)
+    best_set = np.sort(np.asarray(incumbent))
+    best = float(_value_of_sets(problem, best_set[None], criterion)[0])
+    lo, hi = np.zeros(N), np.ones(N)
+    w0 = np.full(N, k / N) if w0 is None else np.asarray(w0, dtype=float)
+    bound, w = _node_bound(problem, criterion, lo, hi, w0)
+    heap = [(-bound, 0, lo, hi, w)]
+    counter, nodes = 1, 1
+    tol = 1e-9
+    while heap and time.perf_counter() - t0 < time_limit:
+        neg, _, lo, hi, w = heapq.heappop(heap)
+        if -neg <= best + tol:
+            heap = []                            # best-first: every other open node is worse
+            break
+        fixed_in = np.flatnonzero(lo == 1)
+        free = np.flatnonzero(lo < hi)
+        if len(fixed_in) == k or len(fixed_in) + len(free) == k:
+            leaf = np.sort(np.concatenate([fixed_in, free]) if len(fixed_in) < k else fixed_in)
+            v = float(_value_of_sets(problem, leaf[None], criterion)[0])
+            if v > best:
+                best, best_set = v, leaf
+            continue
+        i = int(free[np.argmax(w[free])])
+        for child in ("in", "out"):
+            clo, chi = lo.copy(), hi.copy()
+            if child == "in":
+                clo[i] = 1.0
+            else:
+                chi[i] = 0.0
+            if clo.sum() > k or chi.sum() < k:
+                continue
+            b, cw = _node_bound(problem, criterion, clo, chi, w)
+            nodes += 1
+            if b > best + tol:
+                heapq.heappush(heap, (-b, counter, clo, chi, cw))
+                counter += 1
+    complete = not heap
+    proved = best if complete else max(best, max(-h[0] for h in heap))
+    return {"chosen": best_set, "value": best, "upper_bound": float(proved), "nodes": nodes,
+            "complete": bool(complete), "seconds": time.perf_counter() - t0}
 
 
 # -- the whole method ----------------------------------------------------------------------
+SOLVERS = ("auto", "clarabel", "first-order")
+
+
 @dataclass
 class Placement:
-    """A placement: the chosen candidates and the figures behind them."""
+    """A placement: the chosen candidates and the figures behind them.
+
+    ``method`` is "convex" when the interior-point solver's weights were
+    used and "first-order" otherwise; ``solver`` names the algorithm that
+    produced them (``clarabel``, ``projected-gradient``, ``frank-wolfe``),
+    ``converged`` whether it met its own stopping rule, and ``message`` why
+    another solver than the one asked for ran (empty otherwise).
+    """
 
     chosen: np.ndarray
     weights: np.ndarray
@@ -374,11 +654,84 @@ class Placement:
     cuts: list = field(default_factory=list)
     verdict: object = None
     status: str = "optimal"
+    solver: str = ""
+    converged: bool = True
+    message: str = ""
+    dimension: int = 0
+    check_seconds: float = 0.0
+    branch_and_bound: dict | None = None
 
     @property
     def certified_gap(self) -> float:
         """Upper bound minus the rounded design's value (>= 0): no k-sensor design beats it by more."""
         return float(self.upper_bound - self.value)
+
+    @property
+    def guaranteed_efficiency(self) -> float | None:
+        """Lower bound on the design's efficiency relative to the best k-sensor design.
+
+        D: ``exp(-gap / d)`` (d the parameter dimension: the ratio of the
+        geometric-mean eigenvalues, averaged over passages); A: ``bound /
+        value`` (ratio of the averaged traces of the inverse); E: ``value /
+        bound``.  None where it is undefined (no dimension, E bound <= 0).
+        """
+        gap = max(self.certified_gap, 0.0)
+        if self.criterion == "D":
+            return float(np.exp(-gap / self.dimension)) if self.dimension else None
+        if self.criterion == "A":
+            return float(min(1.0, self.upper_bound / self.value)) if self.value < 0 else None
+        return float(min(1.0, self.value / self.upper_bound)) if self.upper_bound > 0 and self.value > 0 else None
+
+
+def solve_relaxation(problem, criterion="D", solver="auto", cuts=None, first_order_above=800):
+    """Solve the relaxation with the chosen (or the automatically chosen) solver, falling back on failure.
+
+    ``auto``: CLARABEL (interior point) up to ``first_order_above``
+    candidates, otherwise projected gradient (no cuts, no costs) or
+    Frank–Wolfe (with them).  ``clarabel``: CLARABEL, and if it fails the
+    first-order method, with a message saying so.  ``first-order``: projected
+    gradient or Frank–Wolfe.
+
+    Returns
+    -------
+    w : ndarray, shape (N,)
+    info : dict
+        ``method`` ("convex" / "first-order"), ``solver``, ``status``,
+        ``converged``, ``message``.
+    """
+    if solver not in SOLVERS:
+        raise ValueError(f"solver must be one of {', '.join(SOLVERS)}, got {solver!r}")
+    constrained = bool(cuts) or problem.costs is not None
+    if solver == "auto":
+        solver = "clarabel" if problem.N <= first_order_above else "first-order"
+    message = ""
+    if solver == "clarabel":
+        try:
+            w, status = solve_convex(problem, criterion, cuts, return_status=True)
+            info = {"method": "convex", "solver": "clarabel", "status": status, "converged": status == "optimal",
+                    "message": ""}
+            if not constrained and status != "optimal":
+                # an inaccurate interior point (the prior term is ~1e-12 of the data): polish it by projected
+                # gradient from there, stopped by the duality gap
+                upper, f = certified_bound(problem, w, criterion)
+                if upper - f > 1e-4:
+                    w, fo = solve_first_order(problem, criterion, return_info=True, w0=w)
+                    info.update(solver="clarabel+projected-gradient", converged=fo["converged"],
+                                status=f"{status}; polished by projected gradient: duality gap {fo['gap']:.2g} "
+                                       f"after {fo['iterations']} iterations")
+            return w, info
+        except Exception as err:   # cvxpy and the solver raise several types; the fallback is always safe
+            message = f"CLARABEL failed ({type(err).__name__}: {err}); fell back to the first-order solver"
+    if constrained:
+        w, info = solve_frank_wolfe(problem, criterion, cuts, return_info=True)
+        name = "frank-wolfe"
+    else:
+        w, info = solve_first_order(problem, criterion, return_info=True)
+        name = "projected-gradient"
+    status = f"{'converged' if info['converged'] else 'not converged'} after {info['iterations']} iterations " \
+             f"(duality gap {info['gap']:.2g})"
+    return w, {"method": "first-order", "solver": name, "status": status, "converged": info["converged"],
+               "message": message}
 
 
 def pair_discrepancy(model, theta, theta_alt, steps):
@@ -390,52 +743,77 @@ def pair_discrepancy(model, theta, theta_alt, steps):
     return np.bincount(model.array.channel_sensor, weights=per_channel, minlength=S)
 
 
-def place(problem, criterion="D", method="auto", cuts=None, first_order_above=800):
-    """Solve the relaxation, certify it, round and refine; returns a :class:`Placement`."""
+def place(problem, criterion="D", method="auto", cuts=None, first_order_above=800, bb_max_k=3, bb_seconds=0.0):
+    """Solve the relaxation, certify it, round and refine; returns a :class:`Placement`.
+
+    ``method``: ``auto``, ``clarabel`` (also spelled ``convex``) or
+    ``first-order``; see :func:`solve_relaxation`.  A solver failure falls
+    back to the first-order method (the Placement's ``message`` says so).
+
+    For few sensors (``k <= bb_max_k``, no cuts, no costs), where the
+    relaxation is loose, ``bb_seconds > 0`` runs a time-limited
+    :func:`branch_and_bound` that tightens the bound (and may improve the
+    design); what it proved is in ``branch_and_bound``.  Off by default here;
+    ``shipsense design`` gives it 20 s.
+    """
     t0 = time.perf_counter()
-    if method == "auto":
-        method = "first-order" if problem.N > first_order_above and not cuts and problem.costs is None else "convex"
-    status = "first-order"
-    if method == "convex":
-        try:
-            w, status = solve_convex(problem, criterion, cuts, return_status=True)
-        except RuntimeError as err:
-            if cuts or problem.costs is not None:
-                raise
-            w, status = solve_first_order(problem, criterion), f"first-order fallback ({err})"
-    elif method == "first-order":
-        if cuts or problem.costs is not None:
-            raise ValueError("ambiguity cuts and costs need the convex solver")
-        w = solve_first_order(problem, criterion)
-    else:
-        raise ValueError(f"method must be 'auto', 'convex' or 'first-order', got {method!r}")
+    solver = "clarabel" if method == "convex" else method
+    if solver not in SOLVERS:
+        raise ValueError(f"method must be one of 'auto', 'clarabel' ('convex') or 'first-order', got {method!r}")
+    w, info = solve_relaxation(problem, criterion, solver, cuts, first_order_above)
     upper, relax = certified_bound(problem, w, criterion, cuts)
     chosen, value = round_design(problem, w, criterion, cuts)
-    return Placement(chosen, w, criterion, relax, upper, value, method, time.perf_counter() - t0, list(cuts or []),
-                     status=status)
+    bb = None
+    if problem.k <= bb_max_k and not cuts and problem.costs is None and bb_seconds > 0:
+        bb = branch_and_bound(problem, criterion, incumbent=chosen, time_limit=bb_seconds, w0=w)
+        if bb["value"] > value:
+            chosen, value = bb["chosen"], bb["value"]
+        upper = min(upper, bb["upper_bound"])
+        bb = {k: v for k, v in bb.items() if k != "chosen"}
+    upper = max(upper, value)   # the bound holds for every design; round-off never makes it lower than one
+    return Placement(chosen, w, criterion, relax, upper, value, info["method"], time.perf_counter() - t0,
+                     list(cuts or []), status=info["status"], solver=info["solver"], converged=info["converged"],
+                     message=info["message"], dimension=problem.n, branch_and_bound=bb)
 
 
 def place_with_cuts(problem, candidate_model, thetas, steps, criterion="D", tau=DEFAULT_CHI2, max_rounds=6,
-                    check_passages=4, starts=8, seed=0, progress=False):
-    """Place sensors, then add ambiguity cuts until the rounded design passes the ambiguity check."""
+                    check_passages=4, starts=8, seed=0, progress=False, solver="auto", bb_seconds=0.0):
+    """Place sensors, then add ambiguity cuts until the rounded design passes the ambiguity check.
+
+    The check is :func:`~shipsense.design.observability.check_array` on the
+    rounded design (k sensors, not the candidates); each ambiguous pair it
+    finds becomes one cut, with the pair's per-candidate discrepancy computed
+    for all candidates in one batch (:func:`pair_discrepancy`).
+    """
     from shipsense.trackers.models import subset_model
 
     cuts = []
     result = None
+    solve_seconds = check_seconds = 0.0
+    messages = []
     for _ in range(max_rounds):
-        result = place(problem, criterion, "convex", cuts)
+        result = place(problem, criterion, solver, cuts, bb_seconds=bb_seconds)
+        solve_seconds += result.seconds
+        if result.message and result.message not in messages:
+            messages.append(result.message)
+        t0 = time.perf_counter()
         design = subset_model(candidate_model, result.chosen)
         verdict = check_array(design, thetas[:check_passages], steps, chi2_threshold=tau, starts=starts,
                               seed=seed, progress=progress)
+        check_seconds += time.perf_counter() - t0
         result.verdict = verdict
         if verdict.verdict != "ambiguous":
             break
+        t0 = time.perf_counter()
         for pair in verdict.pairs:
             th = candidate_model.to_internal(pair.passage)
             alt = candidate_model.to_internal(pair.alternative)
             d = pair_discrepancy(candidate_model, th, alt, steps)
             cuts.append(np.minimum(d / tau, 1.0))
+        check_seconds += time.perf_counter() - t0
     result.cuts = cuts
+    result.seconds, result.check_seconds = solve_seconds, check_seconds
+    result.message = "; ".join(messages)
     return result
 
 

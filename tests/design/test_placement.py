@@ -92,3 +92,63 @@ def test_grid_candidates_respect_polygon_exclusions_and_spacing():
     assert np.all(np.hypot(pts[:, 0], pts[:, 1]) > 7.0)
     d = np.linalg.norm(pts[:, None, :2] - pts[None, :, :2], axis=-1) + np.eye(len(pts)) * 1e9
     assert d.min() >= 9.0
+
+
+def test_exchange_search_never_worsens_and_reaches_the_optimum(small):
+    *_, problem = small
+    sets, values = pl.enumerate_designs(problem, "D")
+    rng = np.random.default_rng(0)
+    reached = 0
+    for _ in range(12):
+        start = rng.choice(problem.N, problem.k, replace=False)
+        before = pl._value_of_sets(problem, start[None], "D")[0]
+        chosen, value = pl.swap_refine(problem, start, "D")
+        assert value >= before - 1e-12
+        assert value == pytest.approx(pl._value_of_sets(problem, chosen[None], "D")[0], abs=1e-12)
+        reached += value >= values.max() - 1e-9
+    assert reached >= 1
+    assert pl.round_design(problem, pl.solve_first_order(problem), "D")[1] == pytest.approx(values.max(), abs=1e-9)
+
+
+@pytest.mark.parametrize("criterion", ["D", "A"])
+def test_the_guaranteed_efficiency_is_a_true_lower_bound(small, criterion):
+    *_, problem = small
+    sets, values = pl.enumerate_designs(problem, criterion)
+    for method in ("clarabel", "first-order"):
+        res = pl.place(problem, criterion, method=method)
+        assert res.upper_bound >= values.max() - 1e-9
+        true_eff = np.exp((res.value - values.max()) / problem.n) if criterion == "D" else values.max() / res.value
+        assert res.guaranteed_efficiency <= true_eff + 1e-12
+
+
+def test_first_order_stops_on_the_duality_gap(small):
+    *_, problem = small
+    w, info = pl.solve_first_order(problem, "D", tol=1e-6, return_info=True)
+    assert info["converged"] and info["gap"] <= 1e-6
+    upper, f = pl.certified_bound(problem, w, "D")
+    assert upper - f <= 1e-6 + 1e-12
+    conic = pl.solve_convex(problem, "D")
+    assert f >= float(pl.objective(problem, conic, "D")) - 1e-5
+
+
+def test_frank_wolfe_with_costs_is_certified(small):
+    *_, problem = small
+    costs = np.ones(problem.N)
+    costs[:4] = 3.0
+    constrained = problem.with_costs(costs, budget=5.0)
+    res = pl.place(constrained, "D", method="first-order")
+    sets, values = pl.enumerate_designs(constrained, "D")
+    assert res.solver == "frank-wolfe"
+    assert costs[res.chosen].sum() <= 5.0 and values.max() <= res.upper_bound + 1e-9
+
+
+def test_branch_and_bound_proves_the_optimum_or_a_true_bound(small):
+    *_, problem = small
+    sets, values = pl.enumerate_designs(problem, "D")
+    bb = pl.branch_and_bound(problem, "D", time_limit=30.0)
+    assert bb["complete"] and bb["value"] == pytest.approx(values.max(), abs=1e-9)
+    assert bb["upper_bound"] == pytest.approx(values.max(), abs=1e-9)
+    early = pl.branch_and_bound(problem, "D", incumbent=sets[np.argmin(values)], time_limit=0.0)
+    assert early["upper_bound"] >= values.max() - 1e-9                     # stopped at once: still a true bound
+    res = pl.place(problem, "D", bb_seconds=30.0)                           # k = 3: place runs it
+    assert res.branch_and_bound["complete"] and res.guaranteed_efficiency == pytest.approx(1.0, abs=1e-9)

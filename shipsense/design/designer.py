@@ -1,0 +1,328 @@
+"""`shipsense design` as a library call: design an array for a scenario, then write its report.
+
+:func:`design_array` builds the per-candidate Fisher matrices of prior
+passages, solves the relaxation (:func:`~shipsense.design.placement.place`,
+with ambiguity cuts unless disabled), scores baselines on the same passages
+and returns a :class:`DesignResult`; :func:`write_design` writes the layout
+(TOML), the report (JSON) and the plots, all atomically.  Errors the caller
+can cause raise ``ValueError`` with one line naming the argument.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from shipsense.design import placement as pl
+
+RANDOM_LAYOUTS = 1000
+
+
+@dataclass
+class DesignResult:
+    """A designed array and the figures behind it (see :meth:`report` for the JSON keys)."""
+
+    scenario: object            # the scenario designed for
+    layout: object              # the designed layout, a scenario with the k sensors
+    candidates: np.ndarray      # (N, 3), m
+    placement: pl.Placement
+    truth: np.ndarray           # the prior passages (S, state), SI
+    thetas: np.ndarray          # the same, internal units of the candidate model
+    model: object               # the candidate model
+    k: int
+    criterion: str
+    prior_floor: float | None
+    baselines: dict = field(default_factory=dict)
+    timings: dict = field(default_factory=dict)
+
+    @property
+    def sensors(self) -> np.ndarray:
+        return self.candidates[self.placement.chosen]
+
+    def report(self) -> dict:
+        """The ``design.json`` document."""
+        r = self.placement
+        return {
+            "criterion": self.criterion, "k": self.k, "candidates": len(self.candidates),
+            "passages": len(self.thetas), "method": r.method, "solver": r.solver, "converged": r.converged,
+            "solver_status": r.status, "solver_message": r.message, "prior_floor": self.prior_floor,
+            "relaxation_objective": r.relaxation, "upper_bound": r.upper_bound, "design_objective": r.value,
+            "certified_gap": r.certified_gap, "guaranteed_efficiency": r.guaranteed_efficiency,
+            "branch_and_bound": r.branch_and_bound, "ambiguity_cuts": len(r.cuts),
+            "verdict": r.verdict.verdict if r.verdict is not None else None,
+            "min_chi2": r.verdict.min_chi2 if r.verdict is not None else None,
+            "sensors": [list(map(float, p)) for p in self.sensors],
+            "baselines": self.baselines,
+            "seconds": self.timings.get("total"), "timings": self.timings,
+        }
+
+
+def default_candidates(scenario):
+    """An 11 x 11 grid around the scenario's array (at least 60 m across), at the template sensor's height."""
+    pos = np.array([s.position[:2] for s in scenario.sensors])
+    centre = pos.mean(axis=0)
+    half = max(30.0, 1.5 * np.ptp(pos, axis=0).max())
+    box = [(centre[0] - half, centre[1] - half), (centre[0] + half, centre[1] - half),
+           (centre[0] + half, centre[1] + half), (centre[0] - half, centre[1] + half)]
+    return pl.grid_candidates(box, 2 * half / 10, scenario.sensors[0].position[2])
+
+
+def _nearest_unused(candidates, targets):
+    """For each target point (x, y) in turn, the index of the nearest candidate not taken yet."""
+    taken = []
+    for t in targets:
+        d = np.hypot(*(candidates[:, :2] - t).T)
+        d[taken] = np.inf
+        taken.append(int(np.argmin(d)))
+    return np.array(taken)
+
+
+def baseline_layouts(candidates, k, rng, random_layouts=RANDOM_LAYOUTS):
+    """Index sets of the baselines: ``random`` (B, k), ``line`` (k,) and ``triangle`` (k,).
+
+    The line runs north-south through the candidates' centre across their
+    extent (the collinear layout); the triangle is equilateral, centred, with
+    a circumradius of a quarter of the extent, and the k sensors spread
+    evenly along its perimeter (its corners for k = 3).
+    """
+    xy = candidates[:, :2]
+    centre = 0.5 * (xy.min(axis=0) + xy.max(axis=0))
+    lo, hi = xy[:, 1].min(), xy[:, 1].max()
+    line = np.column_stack([np.full(k, centre[0]), np.linspace(lo, hi, k) if k > 1 else [centre[1]]])
+    r = 0.25 * np.ptp(xy, axis=0).max()
+    corners = centre + r * np.column_stack([np.cos(np.pi / 2 + 2 * np.pi * np.arange(4) / 3),
+                                            np.sin(np.pi / 2 + 2 * np.pi * np.arange(4) / 3)])
+    s = 3.0 * np.arange(k) / k                          # perimeter position in edges
+    e = np.minimum(s.astype(int), 2)
+    tri = corners[e] + (s - e)[:, None] * (corners[e + 1] - corners[e])
+    N = len(candidates)
+    random = np.argsort(rng.random((random_layouts, N)), axis=1)[:, :k]
+    return {"random": random, "line": _nearest_unused(candidates, line), "triangle": _nearest_unused(candidates, tri)}
+
+
+def score_baselines(problem, candidates, placement, criterion, seed=0, random_layouts=RANDOM_LAYOUTS):
+    """The baselines' criterion values on the design's own passages, and their efficiency against the design.
+
+    Efficiency (D): ``exp((value - design value) / d)``; only layouts that
+    satisfy the budget (if any) count.
+    """
+    sets = baseline_layouts(candidates, problem.k, np.random.default_rng(seed), random_layouts)
+    out = {}
+    rand = sets["random"]
+    ok = pl._feasible(rand, None, problem)
+    vals = np.full(len(rand), -np.inf)
+    if ok.any():
+        vals[ok] = pl._value_of_sets(problem, rand[ok], criterion)
+    best = int(np.argmax(vals))
+    named = {f"best_of_{len(rand)}_random": rand[best], "line": sets["line"], "triangle": sets["triangle"]}
+    for name, idx in named.items():
+        v = float(pl._value_of_sets(problem, np.asarray(idx)[None], criterion)[0])
+        eff = _efficiency(criterion, v, placement.value, problem.n)
+        out[name] = {"value": v, "efficiency_vs_design": eff, "sensors": [list(map(float, p)) for p in candidates[idx]]}
+    return out
+
+
+def _efficiency(criterion, value, reference, d):
+    if not np.isfinite(value):
+        return 0.0
+    if criterion == "D":
+        return float(np.exp((value - reference) / d))
+    if criterion == "A":
+        return float(reference / value) if value < 0 else None
+    return float(value / reference) if reference > 0 else None
+
+
+def design_array(scenario, k, *, criterion="D", candidates=None, costs=None, budget=None, passages=8, seed=0,
+                 solver="auto", cuts=True, prior_floor=None, stride=2, random_layouts=RANDOM_LAYOUTS,
+                 bb_seconds=20.0, check=True, progress=False):
+    """Design an array of ``k`` copies of the scenario's first sensor.
+
+    Parameters
+    ----------
+    scenario : Scenario
+    k : int
+        Sensors to place.
+    criterion : {"D", "A", "E"}
+    candidates : ndarray, shape (N, 3), optional
+        Allowed positions, m (default :func:`default_candidates`).
+    costs, budget : optional
+        Per-candidate costs (N,) and the total allowed.
+    passages : int
+        Prior passages to average over (the nominal passage if the scenario
+        has no ``[prior]``).
+    solver : {"auto", "clarabel", "first-order"}
+    cuts : bool
+        Add ambiguity cuts until the design passes the check.
+    prior_floor : float, optional
+        Floor on the scaled prior term (:func:`~shipsense.design.placement.build_problem`);
+        None uses the scenario's prior covariance (the tracker bank's initial
+        standard deviations) as it is.
+    random_layouts : int
+        Random layouts for the best-of-random baseline.
+    check : bool
+        Run the ambiguity check on the design (with ``cuts=False``; the cuts
+        need it).  Off only to time the rest (benchmarks): the verdict is then None.
+    bb_seconds : float
+        Time limit of the branch and bound that tightens the bound for k <= 3
+        (0: none).
+    progress : bool
+        A progress bar on a terminal.
+
+    Returns
+    -------
+    DesignResult
+    """
+    from tqdm import tqdm
+
+    from shipsense.design.observability import check_array
+    from shipsense.simulator import sample_passages
+    from shipsense.trackers.bank import study_bank
+    from shipsense.trackers.models import candidate_model, subset_model
+
+    t_start = time.perf_counter()
+    if criterion not in pl.CRITERIA:
+        raise ValueError(f"--criterion must be one of {', '.join(pl.CRITERIA)}, got {criterion!r}")
+    if solver not in pl.SOLVERS:
+        raise ValueError(f"--solver must be one of {', '.join(pl.SOLVERS)}, got {solver!r}")
+    if not (np.isfinite(bb_seconds) and bb_seconds >= 0):
+        raise ValueError(f"--bb-seconds must be a number >= 0, got {bb_seconds!r}")
+    if prior_floor is not None and not (np.isfinite(prior_floor) and prior_floor > 0):
+        raise ValueError(f"--prior-floor must be a positive number, got {prior_floor!r}")
+    cands = default_candidates(scenario) if candidates is None else np.asarray(candidates, dtype=float)
+    if cands.ndim != 2 or cands.shape[1] != 3 or len(cands) == 0 or not np.isfinite(cands).all():
+        raise ValueError(f"candidates must be at least one finite (x, y, z) position, got shape {cands.shape}")
+    if not 1 <= k <= len(cands):
+        raise ValueError(f"--k must be between 1 and the number of candidates ({len(cands)}), got {k}")
+    if (costs is None) != (budget is None):
+        raise ValueError("--budget needs candidate costs (a 'cost' column in the candidate CSV), and vice versa")
+    template = scenario.sensors[0]
+    model = candidate_model(scenario, cands)
+    truth = sample_passages(scenario, passages if scenario.prior is not None else 1, seed=seed,
+                            random=scenario.prior is not None)
+    thetas = model.to_internal(model.state_from_truth(truth))
+    _, bank = study_bank(scenario)
+    prior_std = model.to_internal(bank.state_std(model.labels))
+    timings = {}
+    bar = tqdm(total=100, desc=f"design: Fisher matrices, {len(cands)} candidates x {len(thetas)} passages",
+               unit="%", leave=False, disable=None if progress else True,
+               bar_format="{desc}: {percentage:3.0f}%|{bar}| {elapsed}")
+    try:
+        t0 = time.perf_counter()
+        problem = pl.build_problem(model, thetas, scenario.steps, k, prior_std, stride=stride,
+                                   prior_floor=prior_floor, progress=lambda f: bar.update(int(100 * f) - bar.n))
+        timings["fisher"] = time.perf_counter() - t0
+        if costs is not None:
+            problem = problem.with_costs(costs, budget)
+        bar.set_description("design: relaxation, rounding" + ("" if not cuts else " and ambiguity cuts"))
+        if cuts:
+            result = pl.place_with_cuts(problem, model, thetas, scenario.steps, criterion, solver=solver,
+                                        bb_seconds=bb_seconds)
+            timings["relaxation_and_rounding"] = result.seconds
+            timings["ambiguity_check"] = result.check_seconds
+        else:
+            result = pl.place(problem, criterion, solver, bb_seconds=bb_seconds)
+            timings["relaxation_and_rounding"] = result.seconds
+            t0 = time.perf_counter()
+            if check:
+                result.verdict = check_array(subset_model(model, result.chosen), thetas[:4], scenario.steps,
+                                             starts=8)
+            timings["ambiguity_check"] = time.perf_counter() - t0 if check else None
+        bar.set_description("design: baselines")
+        t0 = time.perf_counter()
+        baselines = score_baselines(problem, cands, result, criterion, seed=seed, random_layouts=random_layouts)
+        timings["baselines"] = time.perf_counter() - t0
+    finally:
+        bar.close()
+    sensors = [template.model_copy(update={"id": f"D{i + 1}", "position": tuple(map(float, p))})
+               for i, p in enumerate(cands[result.chosen])]
+    layout = scenario.model_copy(update={"sensors": sensors, "name": f"{scenario.name}-design-k{k}",
+                                         "description": f"{criterion}-optimal layout of {k} {template.type}s "
+                                                        f"({template.kind}) designed from {scenario.name}"})
+    timings["total"] = time.perf_counter() - t_start
+    return DesignResult(scenario, layout, cands, result, truth, thetas, model, k, criterion, prior_floor,
+                        baselines, timings)
+
+
+def design_files(result, out):
+    """The output files of a design as ``{path: bytes}`` (nothing written): the layout TOML ``out``, the report
+    (``out`` with ``.json``), the candidates-and-weights plot (``.png``) and the bound map (``.bounds.png``)."""
+    from shipsense.config import to_toml
+    from shipsense.design.fisher import bound_map
+    from shipsense.plotting import plot_bound_map, plot_design
+    from shipsense.trackers.models import subset_model
+
+    out = Path(out)
+    r = result.placement
+    files = {out: to_toml(result.layout).encode(),
+             out.with_suffix(".json"): (json.dumps(result.report(), indent=2) + "\n").encode()}
+    eff = r.guaranteed_efficiency
+    buf = io.BytesIO()
+    plot_design(result.candidates, r.weights, r.chosen, result.truth, buf,
+                title=f"{result.criterion}-optimal {result.k} of {len(result.candidates)} candidates: "
+                      f"{r.verdict.verdict if r.verdict is not None else 'unchecked'}"
+                      + (f", guaranteed efficiency {eff:.3f}" if eff is not None else ""))
+    files[out.with_suffix(".png")] = buf.getvalue()
+    design_model = subset_model(result.model, r.chosen)
+    cands, thetas = result.candidates, result.thetas
+    span = np.ptp(cands[:, :2], axis=0).max() / 2 + 40.0
+    centre = cands[:, :2].mean(axis=0)
+    xs = centre[0] + np.linspace(-span, span, 41)
+    ys = centre[1] + np.linspace(-span, span, 41)
+    bound, _ = bound_map(design_model, xs, ys, velocity=thetas[0, 2:4], params=thetas[0, 4:], per_sensor=False)
+    buf = io.BytesIO()
+    plot_bound_map(design_model.array, xs, ys, bound, buf,
+                   title=f"position CRLB of the design (passage segments at {np.hypot(*thetas[0, 2:4]):.1f} m/s)")
+    files[out.with_suffix(".bounds.png")] = buf.getvalue()
+    return files
+
+
+def write_design(result, out):
+    """Write the design's files (see :func:`design_files`) atomically; returns their paths.
+
+    Everything is rendered in memory first; each file goes through a
+    temporary file and a rename, and if any write fails the ones already
+    written are removed, so a failure leaves nothing in the output folder.
+    """
+    from shipsense.atomic import atomic_write_files
+
+    files = design_files(result, out)
+    Path(out).parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_files(files)
+    return list(files)
+
+
+def summary_lines(result):
+    """The command's printed summary."""
+    r, k = result.placement, result.k
+    template = result.scenario.sensors[0]
+    eff = r.guaranteed_efficiency
+    lines = [f"{result.criterion}-optimal design of {k} {template.type}s ({template.kind}) from "
+             f"{len(result.candidates)} candidates and {len(result.thetas)} prior passages "
+             f"({result.timings['total']:.1f} s)",
+             f"  solver: {r.solver} ({r.method} relaxation), {'converged' if r.converged else 'NOT converged'}: "
+             f"{r.status}"]
+    if r.message:
+        lines.append(f"  note: {r.message}")
+    lines.append(f"  objective {r.value:.4g}; relaxation {r.relaxation:.4g}; certified upper bound "
+                 f"{r.upper_bound:.4g}; gap {r.certified_gap:.3g} (no {k}-sensor design does better by more)")
+    if r.branch_and_bound is not None:
+        b = r.branch_and_bound
+        lines.append(f"  branch and bound: {b['nodes']} nodes in {b['seconds']:.1f} s, "
+                     + ("complete: the design is optimal" if b["complete"] else
+                        f"stopped at the time limit, proved bound {b['upper_bound']:.4g}"))
+    if eff is not None:
+        lines.append(f"  guaranteed efficiency {eff:.3f} against the best {k}-sensor design")
+    lines.append(f"  ambiguity cuts added: {len(r.cuts)}; verdict: "
+                 f"{r.verdict.verdict if r.verdict is not None else None}")
+    for name, b in result.baselines.items():
+        e = b["efficiency_vs_design"]
+        lines.append(f"  baseline {name}: objective {b['value']:.4g}"
+                     + (f" (efficiency {e:.3f} of the design)" if e is not None else ""))
+    for i, p in enumerate(result.sensors):
+        lines.append(f"  D{i + 1}: ({p[0]:.1f}, {p[1]:.1f}, {p[2]:.1f})")
+    return lines
