@@ -335,6 +335,7 @@ def cmd_design(args) -> int:
 
 def cmd_train(args) -> int:
     from shipsense import budget
+    from shipsense.atomic import staged_directory
     from shipsense.envs import training
 
     if args.timesteps is not None and args.timesteps < 64:
@@ -343,15 +344,16 @@ def cmd_train(args) -> int:
     _within_budget(args, budget.training(args.task, timesteps))
     out = args.out or f"results/train-{args.task}"
     try:
+        with staged_directory(out) as stage:   # the model and its evaluation, or nothing
+            summary = (training.train_scheduling if args.task == "scheduling" else training.train_placement)(
+                timesteps, stage, args.seed, progress=not _QUIET["on"])
         if args.task == "scheduling":
-            summary = training.train_scheduling(timesteps, out, args.seed, progress=not _QUIET["on"])
             print(f"scheduling (Passage-v0, S2, one read per step): PPO {summary['timesteps']} steps at "
                   f"{summary['ppo_fps']:.0f} frames/s; held-out episodes: {summary['held_out_episodes']}")
             for name, r in summary["results"].items():
                 print(f"  {name:<26} mean error {r['mean_error_m']:8.2f} m  median {r['median_error_m']:7.2f} m  "
                       f"reads/step {r['reads_per_step']:.2f}")
         else:
-            summary = training.train_placement(timesteps, out, args.seed, progress=not _QUIET["on"])
             print(f"placement (ArrayDesign-v0, S1-P2, k = 3): MaskablePPO {summary['timesteps']} steps at "
                   f"{summary['ppo_fps']:.1f} frames/s; held-out passages: {summary['held_out_passages']}")
             for name, r in summary["results"].items():
