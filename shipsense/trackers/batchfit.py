@@ -136,7 +136,8 @@ def fit_passages(model, y, theta_init, steps, stride=1, iterations=40, return_in
     residuals, e.g. 1.345) the fit is a Huber M-estimate (iteratively
     reweighted: residuals beyond gamma count linearly), robust to outliers;
     its "chi-square" is then :func:`huber_cost` and its information the
-    Gauss-Newton information ``J^T J`` unweighted (scale the covariance by
+    Gauss-Newton information ``J^T J`` unweighted, corrected for leverage
+    (:func:`leverage_information`; scale the covariance by
     :attr:`Huber.variance_factor`).  Returns the fitted
     initial states (B, n), kept within the model's ``state_bounds`` (projected
     steps), and their chi-square over the fitted samples (and,

@@ -223,3 +223,27 @@ def test_a_huber_fit_dominated_by_one_sample_reports_the_variance_of_its_masked_
     assert var > 4.0 * asymptotic, (var, asymptotic)
     assert 0.8 < var / leverage < 1.6, (var, leverage)
 
+
+def test_faulty_passages_are_inside_their_ellipses_as_often_as_they_say():
+    """20 % outliers of 10 std and 30 % dropouts on two magnetometers: after convergence the truth lies inside
+    the reported 95 % ellipse in 0.90-0.99 of the samples (issue 16 asks >= 0.85).  Measured on these passages:
+    0.965; 0.873 with the leverage in the refits' covariance only (not in the Huber UKF's); 0.765 with neither
+    (seed 11: 0.926, 0.925, 0.858)."""
+    from shipsense.trackers.metrics import converged_until, passage_ends
+
+    sc = load_scenario("S2").with_updates(noise={"model": "contaminated", "eps": 0.2, "outlier_scale": 10.0,
+                                                 "dropout": 0.3})
+    sim = simulate(sc, runs=16, seed=12, random=True)
+    tr = Tracker(sc, passages=16, sensors=["M1", "M2"])
+    res = tr.track(sim.times, sim.measurements[..., :6])
+    truth = tr.model.state_from_truth(sim.truth)
+    conv, err, valid = converged_until(res.estimates, truth, passage_ends(truth, tr.model.array.positions[
+        :, :2].mean(axis=0), sc.period))
+    assert conv.mean() >= 0.9
+    k = np.arange(truth.shape[1])
+    above = np.where(valid, err >= 10.0, False)
+    settled = np.where(above.any(axis=1), truth.shape[1] - np.argmax(above[:, ::-1], axis=1), 0)
+    post = valid & conv[:, None] & (k >= settled[:, None]) & (res.status >= TRACKING)
+    d = res.estimates[..., :2] - truth[..., :2]
+    q = np.einsum("pki,pkij,pkj->pk", d, np.linalg.inv(res.position_cov), d)
+    assert 0.90 <= np.mean(q[post] <= 5.991) <= 0.99, np.mean(q[post] <= 5.991)
