@@ -248,16 +248,13 @@ class Tracker:
         if opts.method == "bank":
             self.unit, self.model = study_unit, model
         else:
+            self.unit = get_filter(opts.unit or ("huber_ukf" if opts.robust else "ukf"))
             self.model = model.without_process_noise()
         self.options = opts
         self.huber = None
         if opts.robust:
             contaminated = sc.noise.model == "contaminated"
             self.huber = Huber(eps=sc.noise.eps, scale=sc.noise.outlier_scale) if contaminated else Huber()
-        if opts.method != "bank":
-            # the Huber UKF is told the declared noise: its R is the nominal one times kappa (below)
-            name = opts.unit or ("huber_ukf" if opts.robust else "ukf")
-            self.unit = get_filter(name, **({"noise": self.huber} if name == "huber_ukf" and self.huber else {}))
         # the bank's noise: with Huber updates the estimate's variance is kappa times the nominal one
         kappa = self.huber.variance_factor if self.huber is not None else 1.0
         self.filter_model = replace(self.model, R=self.model.R * kappa)

@@ -29,19 +29,8 @@ from shipsense.trackers.filters.ukf import merwe_weights, sigma_statistics
 GAMMA = 1.345
 
 
-def update(belief: Belief, y, model, mask=None, gamma=GAMMA, iterations=10, alpha=1.0, beta=2.0, kappa=0.0,
-           noise=None):
-    """Huber-UKF measurement update; returns ``(belief, innovation)``.
-
-    ``noise``, optional, is the declared noise (a :class:`~shipsense.trackers.batchfit.Huber`) when the
-    model's ``R`` is the nominal one times its ``variance_factor`` (the tracker's bank).  The covariance then
-    holds the variance of the noise the update actually lets through, as the batch fits' does
-    (:func:`~shipsense.trackers.batchfit.leverage_information`): a component of leverage ``h`` (the diagonal
-    of ``H K``) is fitted to ``(1 - h)`` of its noise, so the clip at ``gamma`` standard deviations of ``R``
-    -- ``c = gamma sqrt(variance_factor)`` nominal ones -- is a clip at ``c / (1 - h)`` on the noise, which
-    enters through the gain with ``variance_factor_at(c / (1 - h)) / variance_factor`` times ``R``: an
-    outlier on a sample that dominates the update is masked and counted at nearly its full variance.
-    """
+def update(belief: Belief, y, model, mask=None, gamma=GAMMA, iterations=10, alpha=1.0, beta=2.0, kappa=0.0):
+    """Huber-UKF measurement update; returns ``(belief, innovation)``."""
     y, present, R = prepare(y, model, mask)
     spread, Wm, Wc = merwe_weights(belief.mean.shape[-1], alpha, beta, kappa)
     eps, Pxy, Pyy = sigma_statistics(belief, y, model, present, spread, Wm, Wc)
@@ -59,13 +48,4 @@ def update(belief: Belief, y, model, mask=None, gamma=GAMMA, iterations=10, alph
         if np.allclose(new, R_eff, rtol=1e-9, atol=0):
             break
         R_eff = new
-    if noise is None:
-        return gain_update(belief, eps, Pxy, Pyy + R_eff[..., :, None] * eye, present)
-    Ls, _ = safe_cholesky(Pyy + R_eff[..., :, None] * eye)
-    Kt = _chol_solve(Ls, T(Pxy, -1, -2))               # K^T (m, n) with the final weights
-    h = np.clip(np.einsum("...nm,...mn->...m", Ht, Kt), 0.0, 1.0 - 1e-12)
-    kappa_r = noise.variance_factor
-    rel = noise.variance_factor_at(gamma * np.sqrt(kappa_r) / (1.0 - h)) / kappa_r
-    extra = np.where(present, (rel - 1.0) * R_eff, 0.0)   # P+ = P - K S K^T + K diag(extra) K^T
-    P = belief.cov + np.einsum("...mi,...m,...mj->...ij", Kt, extra, Kt)
-    return gain_update(belief, eps, Pxy, Pyy + R_eff[..., :, None] * eye, present, P=P)
+    return gain_update(belief, eps, Pxy, Pyy + R_eff[..., :, None] * eye, present)
