@@ -72,6 +72,26 @@ class Huber:
         outliers of ten times the standard deviation.  A robust fit's covariance is ``kappa (J^T J)^-1``."""
         return _huber_figures(self.gamma, self.eps, self.scale)[2]
 
+    def variance_factor_at(self, threshold):
+        """``kappa`` of a Huber clip at ``threshold`` (array) on a residual of the noise model, in closed form:
+        ``E[min(e^2, c^2)] / P(|e| <= c)^2`` (``threshold = gamma``: :attr:`variance_factor`; infinite: the
+        noise's variance ``1 - eps + eps scale^2``)."""
+        from scipy.special import ndtr
+
+        c = np.asarray(threshold, dtype=float)
+        finite = np.isfinite(c)
+        psi2, slope = np.zeros_like(c), np.zeros_like(c)
+        for share, sd in ((1.0 - self.eps, 1.0), (self.eps, self.scale)):
+            if share == 0.0:
+                continue
+            a = np.where(finite, c, 0.0) / sd
+            inside = np.where(finite, 2.0 * ndtr(a) - 1.0, 1.0)
+            tail_a = np.where(finite, a * np.exp(-0.5 * a * a) / np.sqrt(2.0 * np.pi), 0.0)
+            tail_c = np.where(finite, a * a * 2.0 * ndtr(-a), 0.0) * sd * sd
+            psi2 += share * (sd * sd * (inside - 2.0 * tail_a) + tail_c)
+            slope += share * inside
+        return psi2 / slope**2
+
     def _figures(self):
         def cost(e):
             return huber_cost(np.atleast_1d(e)[:, None], self.gamma)[0]
@@ -116,7 +136,8 @@ def fit_passages(model, y, theta_init, steps, stride=1, iterations=40, return_in
     residuals, e.g. 1.345) the fit is a Huber M-estimate (iteratively
     reweighted: residuals beyond gamma count linearly), robust to outliers;
     its "chi-square" is then :func:`huber_cost` and its information the
-    Gauss-Newton information ``J^T J`` unweighted (scale the covariance by
+    Gauss-Newton information ``J^T J`` unweighted, corrected for leverage
+    (:func:`leverage_information`; scale the covariance by
     :attr:`Huber.variance_factor`).  Returns the fitted
     initial states (B, n), kept within the model's ``state_bounds`` (projected
     steps), and their chi-square over the fitted samples (and,
@@ -126,8 +147,10 @@ def fit_passages(model, y, theta_init, steps, stride=1, iterations=40, return_in
     (an accepted step gaining less than the relative ``tol``, or a rejected
     step at a damping of 1e6 or more).
     """
-    if isinstance(huber, Huber):
-        huber = huber.gamma
+    noise = None
+    if huber is not None:
+        noise = huber if isinstance(huber, Huber) else Huber(gamma=float(huber))
+        huber = noise.gamma
     if taus is None:
         Ak = powers(model.A, steps)[::stride][None]                     # (1, K', n, n)
     else:
@@ -218,5 +241,33 @@ def fit_passages(model, y, theta_init, steps, stride=1, iterations=40, return_in
         huber, gamma = None, huber   # the information is J^T J (the sandwich's bread), unweighted
         Jac = jacobian(X, everyone, r, Hs)
         huber = gamma
-        return theta, cost, np.swapaxes(Jac, -1, -2) @ Jac
+        JtJ = np.swapaxes(Jac, -1, -2) @ Jac
+        if noise is not None:
+            JtJ = leverage_information(Jac, JtJ, noise, Jac.shape[1] - (n if prior is not None else 0))
+        return theta, cost, JtJ
     return theta, cost
+
+
+def leverage_information(J, JtJ, huber, rows):
+    """The information ``I`` of a Huber fit whose covariance ``variance_factor * I^-1`` accounts for leverage.
+
+    The asymptotic ``kappa (J^T J)^-1`` holds when every residual has a small leverage ``h_i`` (the diagonal
+    of ``J (J^T J)^-1 J^T``).  A residual of leverage ``h`` is fitted to ``(1 - h)`` of its noise, so Huber's
+    clip at ``gamma`` on the residual is a clip at ``gamma / (1 - h)`` on the noise: an outlier on a sample
+    that dominates the information (an inverse-cube field at the closest approach) is masked and enters
+    with nearly its full variance.  The covariance is then the sandwich
+    ``(J^T J)^-1 J^T diag(kappa(gamma / (1 - h_i))) J (J^T J)^-1``
+    (:meth:`Huber.variance_factor_at`); returned as ``I`` with ``kappa I^-1`` equal to it, so that callers
+    scaling ``I^-1`` by :attr:`Huber.variance_factor` get it (``I = J^T J`` when every leverage is small).
+    Rows of ``J`` (B, M, n) past ``rows`` are a prior's (exact, weight 1 relative to the noise's kappa).
+    """
+    with np.errstate(all="ignore"):
+        inv = np.linalg.pinv(JtJ, hermitian=True)
+        h = np.clip(np.einsum("bmi,bij,bmj->bm", J, inv, J), 0.0, 1.0 - 1e-12)
+        rel = huber.variance_factor_at(huber.gamma / (1.0 - h)) / huber.variance_factor
+    rel[:, rows:] = 1.0
+    rel = np.where(np.isfinite(rel), rel, 1.0)
+    meat = np.swapaxes(J, -1, -2) @ (J * rel[..., None])
+    info = JtJ @ np.linalg.solve(meat + 1e-300 * np.eye(JtJ.shape[-1]), JtJ)
+    ok = np.isfinite(info).all(axis=(-1, -2))
+    return np.where(ok[:, None, None], 0.5 * (info + np.swapaxes(info, -1, -2)), JtJ)

@@ -184,3 +184,66 @@ def test_an_inconsistent_track_reports_no_more_than_the_prior_knows():
     q = np.einsum("ki,kij,kj->k", d, np.linalg.inv(res.position_cov[0]), d)
     assert q[bad].max() < 13.8, q[bad].max()
     assert err[ends[29] - 10: ends[29]].max() < 1.0       # and it recovers
+
+
+def test_huber_variance_factor_at_a_threshold_matches_quadrature():
+    from shipsense.trackers.batchfit import Huber
+
+    h = Huber(eps=0.2, scale=10.0)
+    for c in (0.5, 1.345, 3.0, 20.0):
+        psi2 = h.expect(lambda e, c=c: min(e * e, c * c))
+        slope = h.expect(lambda e, c=c: float(abs(e) <= c))
+        assert abs(h.variance_factor_at(c) / (psi2 / slope**2) - 1.0) < 1e-6   # quadrature's accuracy
+    assert abs(h.variance_factor_at(h.gamma) / h.variance_factor - 1.0) < 1e-8
+    assert abs(h.variance_factor_at(np.inf) - (0.8 + 0.2 * 100.0)) < 1e-9   # no clip: the noise's variance
+
+
+def test_a_huber_fit_dominated_by_one_sample_reports_the_variance_of_its_masked_outliers():
+    """One sample carrying most of the information (an inverse-cube field at the closest approach) is fitted
+    so closely that an outlier on it goes undetected: the asymptotic ``kappa (J^T J)^-1`` is then several times
+    too small (8x here); the leverage-aware information comes within 1.3x of the Monte Carlo variance of the
+    Huber fit (linear model; the clip at ``gamma / (1 - h)`` ignores the other samples' share of the residual)."""
+    from shipsense.trackers.batchfit import Huber, leverage_information
+
+    rng = np.random.default_rng(0)
+    h, n_rows, draws = Huber(eps=0.2, scale=10.0), 60, 4000
+    J = np.column_stack([np.ones(n_rows), np.linspace(-1.0, 1.0, n_rows)])
+    J[n_rows // 2] = [0.0, 12.0]                      # the dominant sample: leverage 0.87
+    e = rng.standard_normal((draws, n_rows)) * np.where(rng.random((draws, n_rows)) < h.eps, h.scale, 1.0)
+    theta = np.zeros((draws, 2))
+    for _ in range(60):                                # the Huber M-estimate of every draw (IRLS, batched)
+        r = e - theta @ J.T
+        w = np.minimum(1.0, h.gamma / np.maximum(np.abs(r), 1e-300))
+        rhs = np.einsum("ri,dr->di", J, w * e)[..., None]
+        theta = np.linalg.solve(np.einsum("ri,dr,rj->dij", J, w, J), rhs)[..., 0]
+    var = theta[:, 1].var()
+    JtJ = J.T @ J
+    asymptotic = h.variance_factor * np.linalg.inv(JtJ)[1, 1]
+    leverage = h.variance_factor * np.linalg.inv(leverage_information(J[None], JtJ[None], h, n_rows)[0])[1, 1]
+    assert var > 4.0 * asymptotic, (var, asymptotic)
+    assert 0.8 < var / leverage < 1.6, (var, leverage)
+
+
+def test_faulty_passages_are_inside_their_ellipses_as_often_as_they_say():
+    """20 % outliers of 10 std and 30 % dropouts on two magnetometers: after convergence the truth lies inside
+    the reported 95 % ellipse in 0.85-0.99 of the samples (issue 16's target).  Measured on these passages: 0.873
+    with the refits' covariance accounting for leverage, 0.765 with the asymptotic ``kappa (J^T J)^-1`` (seed 11:
+    0.925 and 0.858)."""
+    from shipsense.trackers.metrics import converged_until, passage_ends
+
+    sc = load_scenario("S2").with_updates(noise={"model": "contaminated", "eps": 0.2, "outlier_scale": 10.0,
+                                                 "dropout": 0.3})
+    sim = simulate(sc, runs=16, seed=12, random=True)
+    tr = Tracker(sc, passages=16, sensors=["M1", "M2"])
+    res = tr.track(sim.times, sim.measurements[..., :6])
+    truth = tr.model.state_from_truth(sim.truth)
+    conv, err, valid = converged_until(res.estimates, truth, passage_ends(truth, tr.model.array.positions[
+        :, :2].mean(axis=0), sc.period))
+    assert conv.mean() >= 0.9
+    k = np.arange(truth.shape[1])
+    above = np.where(valid, err >= 10.0, False)
+    settled = np.where(above.any(axis=1), truth.shape[1] - np.argmax(above[:, ::-1], axis=1), 0)
+    post = valid & conv[:, None] & (k >= settled[:, None]) & (res.status >= TRACKING)
+    d = res.estimates[..., :2] - truth[..., :2]
+    q = np.einsum("pki,pkij,pkj->pk", d, np.linalg.inv(res.position_cov), d)
+    assert 0.85 <= np.mean(q[post] <= 5.991) <= 0.99, np.mean(q[post] <= 5.991)
