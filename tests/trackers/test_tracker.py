@@ -187,13 +187,20 @@ def test_an_inconsistent_track_reports_no_more_than_the_prior_knows():
 
 
 def test_huber_variance_factor_at_a_threshold_matches_quadrature():
+    from scipy import integrate, stats
+
     from shipsense.trackers.batchfit import Huber
 
     h = Huber(eps=0.2, scale=10.0)
+
+    def expect(f, c):   # E[f(e)] under the contaminated noise, by quadrature split at the kinks +-c
+        return sum(share * integrate.quad(lambda e, sd=sd: f(e) * stats.norm(scale=sd).pdf(e), lo, hi, epsabs=1e-12)[0]
+                   for share, sd in ((0.8, 1.0), (0.2, 10.0)) for lo, hi in ((-np.inf, -c), (-c, c), (c, np.inf)))
+
     for c in (0.5, 1.345, 3.0, 20.0):
-        psi2 = h.expect(lambda e, c=c: min(e * e, c * c))
-        slope = h.expect(lambda e, c=c: float(abs(e) <= c))
-        assert abs(h.variance_factor_at(c) / (psi2 / slope**2) - 1.0) < 1e-6   # quadrature's accuracy
+        psi2 = expect(lambda e, c=c: min(e * e, c * c), c)
+        slope = expect(lambda e, c=c: float(abs(e) <= c), c)
+        assert abs(h.variance_factor_at(c) / (psi2 / slope**2) - 1.0) < 1e-8   # quadrature's accuracy
     assert abs(h.variance_factor_at(h.gamma) / h.variance_factor - 1.0) < 1e-8
     assert abs(h.variance_factor_at(np.inf) - (0.8 + 0.2 * 100.0)) < 1e-9   # no clip: the noise's variance
 
