@@ -1,7 +1,8 @@
-"""Environment benchmark: steps per second of Passage-v0 (single and native vector, 64 envs),
-each with a 12-hypothesis bank, with CartPole-v1 measured in the same run as the reference.
+"""Environment benchmark: steps per second of Passage-v0 (single and native vector, 64 envs) with the
+project's tracker as observer (what users get; ``--observer bank``: the studies' 12-hypothesis bank),
+with CartPole-v1 measured in the same run as the reference.
 
-Run:  python benchmarks/envs.py [--steps 2000] [--num-envs 64]
+Run:  python benchmarks/envs.py [--steps 2000] [--num-envs 64] [--observer tracker|bank] [--allocator tuned|default]
 
 Actions are all-ones (read every sensor) so that every step runs the full
 update; autoresets are included.  Every rate is the best of three timed runs.  PPO frames per second are reported by
@@ -64,23 +65,25 @@ def main(argv=None):
     ap.add_argument("--num-envs", type=int, default=64)
     ap.add_argument("--allocator", choices=("tuned", "default"), default="tuned",
                     help="tuned: shipsense.tune_allocator() as the shipsense command does; default: glibc's")
+    ap.add_argument("--observer", choices=("tracker", "bank"), default="tracker",
+                    help="the environment's observer (default: the tracker, as users get it)")
     args = ap.parse_args(argv)
+    kwargs = {"observer": args.observer} | ({"overrides": TWELVE} if args.observer == "bank" else {})
     tuned = args.allocator == "tuned" and shipsense.tune_allocator()
     print(f"allocator: {'tuned (shipsense.tune_allocator)' if tuned else 'default'}")
     n = args.num_envs
     cart = single_rate(gym.make("CartPole-v1"), args.steps, 1)
     cart_vec = vector_rate(gym.make_vec("CartPole-v1", num_envs=n, vectorization_mode="vector_entry_point"),
                            args.steps // 10, np.ones(n, dtype=np.int64))
-    env = gym.make("shipsense/Passage-v0", overrides=TWELVE)
-    assert env.unwrapped.core.H == 12
+    env = gym.make("shipsense/Passage-v0", **kwargs)
+    print(f"observer: {args.observer}")
     single = single_rate(env, args.steps, np.ones(3, dtype=np.int8))
-    venv = gym.make_vec("shipsense/Passage-v0", num_envs=n, vectorization_mode="vector_entry_point",
-                        overrides=TWELVE)
+    venv = gym.make_vec("shipsense/Passage-v0", num_envs=n, vectorization_mode="vector_entry_point", **kwargs)
     vec = vector_rate(venv, max(args.steps // 10, 20), np.ones((n, 3), dtype=np.int8))
     print(f"{'environment':<40}{'steps/s':>12}")
     print(f"{'CartPole-v1 (single)':<40}{cart:>12,.0f}")
     print(f"{f'CartPole-v1 (native vector, {n} envs)':<40}{cart_vec:>12,.0f}")
-    print(f"{'shipsense/Passage-v0 (single, 12 hyp.)':<40}{single:>12,.0f}")
+    print(f"{f'shipsense/Passage-v0 (single, {args.observer})':<40}{single:>12,.0f}")
     print(f"{f'shipsense/Passage-v0 (vector, {n} envs)':<40}{vec:>12,.0f}")
     print(f"\nPassage-v0 / CartPole-v1: single {single / cart:.3f}, vector {vec / cart_vec:.3f}")
 
