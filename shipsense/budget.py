@@ -24,7 +24,7 @@ TIME_LIMIT_MINUTES = 180.0
 
 # measured rates (reference machine), on the fast side
 SIMULATE_S_PER_VALUE = 2e-8           # per run x step x channel: kernels, noise, envelope chain
-TRACK_S_PER_ROW = 1e-4                # the project's tracker on one passage (benchmarks/track_rows.py: ~2e-4)
+TRACK_S_PER_ROW = 1.5e-4              # the project's tracker on one passage (benchmarks/track_rows.py: ~2e-4)
 TRACK_BYTES_PER_ROW = 3_000.0         # estimates, covariances, status and the recording's own arrays
 RECORDING_BYTES_PER_LINE = 20.0       # a CSV line "time,sensor,channel,value" is at least this long
 STUDY_S_PER_RUN = {"S0": 0.15, "S1": 0.3, "S2": 0.5}
@@ -33,6 +33,7 @@ WIDE_S_PER_PASSAGE = 0.3              # three families, one process (1009 s for 
 WIDE_BYTES_PER_CHUNK = 5e8            # one chunk of passages in one worker
 CHECK_S_PER_VALUE = 1.5e-4            # ambiguity search per passage x step x channel (S0 1.3e-4 .. S1-P2 5e-4 CPU s)
 PPO_S_PER_STEP = {"scheduling": 2e-4, "placement": 0.05}
+TRAIN_EVALUATION_S = {"scheduling": 10.0, "placement": 40.0}   # the held-out evaluation after training
 DESIGN_S_PER_VALUE = 5e-7             # Fisher build per candidate x passage x step x channel (1600 x 32 of S1-P2: 12 s)
 
 
@@ -68,7 +69,7 @@ class Work:
 
 def _duration(seconds: float) -> str:
     if seconds < 120:
-        return f"{seconds:.0f} s"
+        return f"{seconds:.2g} s"
     if seconds < 7200:
         return f"{seconds / 60:.0f} minutes"
     if seconds < 2 * 86400:
@@ -80,7 +81,7 @@ def check_limits(max_memory_gb: float, max_minutes: float) -> None:
     """Refuse limits that are not positive finite numbers (the flags' own values)."""
     for flag, value in (("--max-memory", max_memory_gb), ("--max-minutes", max_minutes)):
         if not (isinstance(value, (int, float)) and value == value and 0 < value < float("inf")):
-            raise WorkTooLarge(f"{flag} must be a positive number, got {value!r}")
+            raise WorkTooLarge(f"{flag} must be a positive finite number, got {value!r}")
 
 
 def enforce(work: Work, max_memory_gb: float = MEMORY_LIMIT_GB, max_minutes: float = TIME_LIMIT_MINUTES) -> Work:
@@ -145,18 +146,20 @@ def check(scenario, passages: int) -> Work:
                 values * CHECK_S_PER_VALUE, "--passages (or the scenario's steps)")
 
 
-def design(scenario, candidates: int, passages: int) -> Work:
+def design(scenario, candidates: int, passages: int, search_seconds: float = 0.0) -> Work:
     """``shipsense design``: per-candidate Fisher information over ``passages`` prior passages (the relaxation,
-    rounding and check cost less at these sizes; benchmarks/design.py)."""
+    rounding and check cost less at these sizes; benchmarks/design.py), plus ``search_seconds`` (the branch
+    and bound's time limit, when it runs)."""
     n = scenario.sensors[0]
     channels = {"vector": 3, "envelope": 3}.get(n.kind, 1)
     d = 8
     values = float(candidates) * passages * scenario.steps * channels
     return Work(f"designing from {candidates} candidates and {passages} passages of {scenario.steps} steps",
                 candidates * passages * d * d * 8.0 * 4 + values * d * 8.0 / max(1, scenario.steps),
-                values * DESIGN_S_PER_VALUE, "candidates or --passages")
+                values * DESIGN_S_PER_VALUE + search_seconds, "candidates or --passages")
 
 
 def training(task: str, timesteps: int) -> Work:
     """``shipsense train TASK --timesteps N``."""
-    return Work(f"training {task} for {timesteps} steps", 2e9, timesteps * PPO_S_PER_STEP[task], "--timesteps")
+    return Work(f"training {task} for {timesteps} steps", 2e9,
+                timesteps * PPO_S_PER_STEP[task] + TRAIN_EVALUATION_S[task], "--timesteps")

@@ -6,6 +6,7 @@ Exit codes: 0 success, 2 bad input (an invalid scenario, file or argument).
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from pathlib import Path
@@ -23,9 +24,8 @@ VERDICT_EXIT = {"observable": EXIT_OK, "ambiguous": EXIT_AMBIGUOUS, "degenerate"
 
 
 class _Parser(argparse.ArgumentParser):
-    def error(self, message):  # argparse exits 2 as well; keep its usage line
-        self.print_usage(sys.stderr)
-        self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message}\n")
+    def error(self, message):  # one line, exit 2 (the usage is one --help away)
+        self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
     def parse_known_args(self, args=None, namespace=None):
         # argparse reads "--flag=--" as an empty list, bypassing the flag's type (a crash further on)
@@ -69,6 +69,22 @@ def _progress(total, desc):
                 file=sys.stderr)
 
 
+def _writable(flag, path, directory=False):
+    """Refuse an output path that cannot be written, before any work (not a raw OS error after it)."""
+    p = Path(path)
+    if directory:
+        if p.exists() and not p.is_dir():
+            raise _BadInput(f"{flag} must be a folder, but {path} is a file")
+        return
+    if p.is_dir():
+        raise _BadInput(f"{flag} must be a file, but {path} is a folder")
+    parent = p.parent
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    if not (parent.is_dir() and os.access(parent, os.W_OK)):
+        raise _BadInput(f"{flag}: cannot write {path} (folder {parent} is not a writable folder)")
+
+
 def _within_budget(args, work):
     """Refuse work estimated above ``--max-memory`` / ``--max-minutes`` before any of it is allocated."""
     from shipsense.budget import enforce
@@ -102,6 +118,9 @@ def cmd_simulate(args) -> int:
     if args.random and sc.prior is None:
         raise _BadInput(f"scenario {sc.name!r} has no [prior] section; --random needs one")
     _within_budget(args, budget.simulation(sc, args.runs or sc.runs))
+    for flag, path in (("--out", args.out), ("--plot", args.plot)):
+        if path is not None:
+            _writable(flag, path)
     bar = _progress(3, f"simulate {sc.name}")
     sim = simulate(sc, runs=args.runs, seed=args.seed, random=args.random)
     bar.update(1)
@@ -156,6 +175,7 @@ def cmd_demo(args) -> int:
     from shipsense.tracking import describe, track_to_files
 
     out = Path(args.out)
+    _writable("--out", out, directory=True)
     sc = load_scenario("demo")
     bar = _progress(3, "demo: simulate")
     with staged_directory(out) as stage:   # all of the demo's files, or none
@@ -197,6 +217,7 @@ def cmd_track(args) -> int:
     if args.filter is not None and args.filter not in FILTER_NAMES:
         raise _BadInput(f"--filter must be one of {', '.join(FILTER_NAMES)}, got {args.filter!r}")
     out = Path(args.out)
+    _writable("--out", out, directory=True)
     truth = None
     if args.data:
         _within_budget(args, budget.recording(args.data, sc))
@@ -231,15 +252,29 @@ def cmd_check(args) -> int:
 
     from shipsense import budget
     from shipsense.atomic import atomic_write_bytes
+    from shipsense.config import load_scenario
     from shipsense.design.gate import check_layouts, junit_xml, worst
 
     if args.junit is not None and Path(args.junit).suffix != ".xml":
         raise _BadInput(f"--junit must end in .xml, got {args.junit!r}")
     budget.check_limits(args.max_memory, args.max_minutes)
+    if args.junit is not None:
+        _writable("--junit", args.junit)
+    works = []   # the whole run is within the limits, not each file (a file that does not load is its own error)
+    for layout in args.layout:
+        try:
+            works.append(budget.check(load_scenario(layout), args.passages))
+        except (ShipsenseError, OSError):
+            pass
+    if works:
+        total = sum(w.seconds for w in works)
+        _within_budget(args, budget.Work(f"checking {len(works)} layout(s) on {args.passages} passages each",
+                                         max(w.bytes for w in works), total, works[0].fewer + " or files"))
     results = check_layouts(args.layout, passages=args.passages, seed=args.seed,
                             progress=not (args.json or _QUIET["on"]), errors=(ShipsenseError, OSError),
                             admit=lambda sc: _within_budget(args, budget.check(sc, args.passages)))
     if args.junit is not None:
+        Path(args.junit).parent.mkdir(parents=True, exist_ok=True)
         atomic_write_bytes(Path(args.junit), junit_xml(results))
     if args.json:
         docs = [{"layout": r.layout, "verdict": "error", "error": r.detail} if r.verdict == "error"
@@ -318,7 +353,8 @@ def cmd_design(args) -> int:
     sc = load_scenario(args.scenario)
     cands, costs = (None, None) if not args.candidates else _read_candidates(args.candidates, sc.sensors[0].position[2])
     n_cands = len(cands) if cands is not None else len(default_candidates(sc))
-    _within_budget(args, budget.design(sc, n_cands, args.passages if sc.prior is not None else 1))
+    search = args.bb_seconds if args.k <= 3 and np.isfinite(args.bb_seconds) else 0.0   # the branch and bound
+    _within_budget(args, budget.design(sc, n_cands, args.passages if sc.prior is not None else 1, search))
     try:
         result = design_array(sc, args.k, criterion=args.criterion, candidates=cands, costs=costs, budget=args.budget,
                               passages=args.passages, seed=args.seed, solver=args.solver, cuts=not args.no_cuts,
@@ -361,7 +397,7 @@ def cmd_train(args) -> int:
                       f"TRMSE {r['trmse_m']:7.2f} m")
     except RuntimeError as err:
         raise _BadInput(str(err)) from None
-    print(f"wrote the model and {out}/evaluation.json")
+    print(f"wrote {out}/{training.MODEL_FILES[args.task]} (the model) and {out}/evaluation.json")
     return EXIT_OK
 
 
@@ -558,6 +594,15 @@ def main(argv=None) -> int:
     except SystemExit as exit_:   # a bad argument (exit 2, its message printed), --help or --version (0)
         return exit_.code if isinstance(exit_.code, int) else (0 if exit_.code is None else EXIT_BAD_INPUT)
     tune_allocator()   # the command is its own process: reuse freed heap (see shipsense.allocator)
+    import signal
+
+    def terminated(signum, frame):   # a CI cancel or `timeout`: unwind like Ctrl-C, so staged outputs are removed
+        raise KeyboardInterrupt
+
+    import threading
+
+    if threading.current_thread() is threading.main_thread() and signal.getsignal(signal.SIGTERM) is signal.SIG_DFL:
+        signal.signal(signal.SIGTERM, terminated)
     _QUIET["on"] = bool(args.no_progress)
     try:
         return args.func(args)

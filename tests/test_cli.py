@@ -279,6 +279,11 @@ def test_import_shipsense_is_light_and_its_names_arrive_on_use():
     (["check", "S1-P2", "--passages", "10000", "--max-minutes", "10"], "--max-minutes"),
     (["track", "S2", "--max-minutes", "1e-6"], "--max-minutes"),
     (["design", "S1-P2", "--k", "3", "--passages", "10000", "--max-minutes", "1"], "--max-minutes"),
+    (["design", "S1-P2", "--k", "3", "--passages", "2", "--max-minutes", "0.1"], "--max-minutes"),  # B&B 20 s
+    (["check", "S1-P2", "S1-P2", "S1-P2", "--passages", "2000", "--max-minutes", "4"], "--max-minutes"),
+    (["check", "S2", "--junit", f"{__file__}/x.xml"], "--junit"),      # a file as the folder
+    (["simulate", "S2", "--runs", "2", "--out", f"{__file__}/x.npz"], "--out"),
+    (["demo", "--out", __file__], "--out"),
 ])
 def test_bad_counts_and_too_much_work_are_one_line_and_exit_2(argv, field, capsys):
     """Counts and seeds are checked before any work (a negative seed was a numpy error, --passages 0 a division
@@ -396,3 +401,21 @@ def test_a_failing_simulate_plot_leaves_neither_file(tmp_path, monkeypatch):
     assert list(tmp_path.iterdir()) == []
     assert main(["simulate", "S2", "--runs", "2", "--out", str(tmp_path / "m.npz")]) == 0
     assert [p.name for p in tmp_path.iterdir()] == ["m.npz"]
+
+
+def test_a_terminated_demo_leaves_nothing_behind(tmp_path):
+    """SIGTERM (a CI cancel, `timeout`) unwinds like Ctrl-C: the staged files are removed, exit 130."""
+    import signal
+    import time
+
+    proc = subprocess.Popen([sys.executable, "-c", "import sys; from shipsense.cli import main; "
+                             "sys.exit(main(['--quiet', 'demo', '--out', 'D']))"], cwd=tmp_path,
+                            stderr=subprocess.PIPE, text=True)
+    time.sleep(3.0)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    if proc.returncode == 0:   # finished before the signal: everything is there, nothing staged
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["D"]
+    else:
+        assert proc.returncode == 130 and "interrupted" in err, (proc.returncode, err)
+        assert list(tmp_path.iterdir()) == []

@@ -18,6 +18,7 @@ import numpy as np
 
 HELD_OUT = 10_000
 DEFAULT_TIMESTEPS = {"scheduling": 20_000, "placement": 600}
+MODEL_FILES = {"scheduling": "scheduling_ppo.zip", "placement": "placement_maskableppo.zip"}
 
 
 def _require_rl():
