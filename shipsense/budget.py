@@ -15,6 +15,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
 from shipsense.errors import ShipsenseError
 
 MEMORY_LIMIT_GB = 8.0
@@ -62,9 +64,12 @@ class Work:
     seconds: float
     fewer: str
 
-    def __add__(self, other: Work) -> Work:
-        return Work(f"{self.what} and {other.what}", max(self.bytes, other.bytes), self.seconds + other.seconds,
-                    self.fewer if self.fewer == other.fewer else f"{self.fewer} or {other.fewer}")
+
+
+def sequence(works, what: str, fewer: str) -> Work:
+    """Works run one after another: their times add up, the peak memory is the largest one's."""
+    works = list(works)
+    return Work(what, max(w.bytes for w in works), sum(w.seconds for w in works), fewer)
 
 
 def _duration(seconds: float) -> str:
@@ -127,11 +132,8 @@ def study(key: str, runs: int | None) -> Work:
 
     key = key.upper()
     if key == "ALL":
-        works = [study(k, runs) for k in ("S0", "S1", "S2", "WIDE")]
-        total = works[0]
-        for w in works[1:]:
-            total = total + w
-        return Work(f"reproduce all with {runs or 'the default'} runs", total.bytes, total.seconds, "--runs")
+        return sequence((study(k, runs) for k in ("S0", "S1", "S2", "WIDE")),
+                        f"reproduce all with {runs or 'the default'} runs", "--runs")
     n = runs or EXPERIMENTS[key][1]
     if key == "WIDE":
         return Work(f"the wide study with {n} passages per family", WIDE_BYTES_PER_CHUNK,
@@ -150,9 +152,9 @@ def design(scenario, candidates: int, passages: int, search_seconds: float = 0.0
     """``shipsense design``: per-candidate Fisher information over ``passages`` prior passages (the relaxation,
     rounding and check cost less at these sizes; benchmarks/design.py), plus ``search_seconds`` (the branch
     and bound's time limit, when it runs)."""
-    n = scenario.sensors[0]
-    channels = {"vector": 3, "envelope": 3}.get(n.kind, 1)
-    d = 8
+    array = scenario.array()
+    channels = int(np.sum(array.channel_sensor == 0))   # the template sensor's channels
+    d = 8                                               # parameters of a passage, at most
     values = float(candidates) * passages * scenario.steps * channels
     return Work(f"designing from {candidates} candidates and {passages} passages of {scenario.steps} steps",
                 candidates * passages * d * d * 8.0 * 4 + values * d * 8.0 / max(1, scenario.steps),

@@ -32,11 +32,9 @@ class GateResult:
         return self.verdict in ("ambiguous", "degenerate")
 
 
-def check_layouts(layouts, passages=8, seed=0, progress=False, errors=(ValueError, OSError), admit=None):
+def check_layouts(layouts, passages=8, seed=0, progress=False, errors=(ValueError, OSError)):
     """Check each layout file; a file that cannot be loaded or validated is an ``"error"`` result (its
-    message kept), not an exception, so one bad file does not hide the others' verdicts. ``admit(scenario)``,
-    if given, is called before a layout's check and may refuse it by raising one of ``errors`` (the work
-    budget: a layout of a million steps is refused, not run)."""
+    message kept), not an exception, so one bad file does not hide the others' verdicts."""
     from shipsense.config import load_scenario
     from shipsense.design.observability import check_scenario
 
@@ -45,8 +43,6 @@ def check_layouts(layouts, passages=8, seed=0, progress=False, errors=(ValueErro
         t0 = time.perf_counter()
         try:
             sc = load_scenario(layout)
-            if admit is not None:
-                admit(sc)
             v = check_scenario(sc, passages=passages, seed=seed, progress=progress)
             out.append(GateResult(str(layout), v.verdict, time.perf_counter() - t0, v, sc))
         except errors as err:

@@ -114,15 +114,6 @@ MIRROR_REFINE = 24
 """Mirror candidates refined per passage (the closest as they stand; :func:`_search`)."""
 
 
-def lm_fit(model, theta_ref, theta_init, steps, stride=LM_STRIDE, iterations=LM_ITERATIONS):
-    """Passages (B, n) whose predictions best match those of ``theta_ref``; returns ``(theta, chi2)``
-    with chi2 on the full passage."""
-    Ak = _powers(model.A, steps)[::stride]
-    y_ref = model.h(np.einsum("kij,j->ki", Ak, theta_ref))[None]
-    theta, _ = fit_passages(model, y_ref, theta_init, steps, stride, iterations)
-    return theta, discrepancy(model, theta_ref, theta, steps)
-
-
 # -- candidates -------------------------------------------------------------------
 def mirror(model, theta, point, direction):
     """Passages mirrored across the vertical plane through ``point`` along ``direction`` (internal units)."""
