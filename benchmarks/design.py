@@ -46,7 +46,7 @@ def end_to_end(args):
                            cuts=not (args.no_cuts or args.no_check), check=not args.no_check)
         t1 = time.perf_counter()
         with tempfile.TemporaryDirectory() as tmp:
-            write_design(res, Path(tmp) / "layout.toml")
+            write_design(res, Path(tmp) / "design")
         t2 = time.perf_counter()
         t, r = res.timings, res.placement
         verdict = r.verdict.verdict if r.verdict is not None else "-"

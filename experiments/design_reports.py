@@ -30,7 +30,7 @@ def main(argv=None):
     rows = []
     for name in args.scenarios:
         res = design_array(load_scenario(name), args.k, passages=args.passages)
-        write_design(res, Path(args.out) / name / "layout.toml")
+        write_design(res, Path(args.out) / name)
         r, b = res.placement, res.baselines
         bb = r.branch_and_bound
         rows.append(f"| {name} | {res.criterion} | {r.upper_bound:.2f} | {r.value:.2f} | "

@@ -348,6 +348,11 @@ def cmd_design(args) -> int:
     from shipsense.config import load_scenario
     from shipsense.design.designer import default_candidates, design_array, summary_lines, write_design
 
+    out = Path(args.out)
+    if out.suffix.lower() in (".toml", ".json", ".png"):
+        raise _BadInput(f"--out is the report folder (it gets layout.toml, design.json, design.png, bounds.png), "
+                        f"not a file: got {args.out}")
+    _writable("--out", out, directory=True)
     sc = load_scenario(args.scenario)
     cands, costs = (None, None) if not args.candidates else _read_candidates(args.candidates, sc.sensors[0].position[2])
     n_cands = len(cands) if cands is not None else len(default_candidates(sc))
@@ -359,11 +364,11 @@ def cmd_design(args) -> int:
                               prior_floor=args.prior_floor, bb_seconds=args.bb_seconds, progress=not _QUIET["on"])
     except ValueError as err:
         raise _BadInput(str(err)) from None
-    out = Path(args.out)
     paths = write_design(result, out)
     for line in summary_lines(result):
         print(line)
-    print(f"wrote {out} (layout; check it with `shipsense check {out}`), " + ", ".join(map(str, paths[1:])))
+    print(f"wrote {out}/: " + ", ".join(p.name for p in paths) + f" (check the layout with `shipsense check "
+          f"{paths[0]}`)")
     return EXIT_OK
 
 
@@ -521,7 +526,8 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--criterion", default="D", help="D, A or E (default D)")
     g.add_argument("--candidates", default=None, help="candidate positions: CSV x,y[,z] or TOML [candidates] "
                    "polygon, spacing, z, exclusions, min_spacing (default: a grid around the array)")
-    g.add_argument("--out", default="layout.toml", help="layout file to write (default: %(default)s)")
+    g.add_argument("--out", default="shipsense-design",
+                   help="report folder: layout.toml, design.json, design.png, bounds.png (default: %(default)s)")
     g.add_argument("--passages", type=_whole(1, PASSAGES_MAX), default=8,
                    help="prior passages to average over (default 8)")
     g.add_argument("--seed", type=SEED, default=0)

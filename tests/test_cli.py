@@ -205,21 +205,25 @@ def test_check_exit_codes_and_json(capsys):
 
 
 def test_design_writes_a_layout_that_check_accepts(tmp_path, capsys):
-    out = tmp_path / "layout.toml"
+    out = tmp_path / "design"
     assert main(["design", "S1-P2", "--k", "3", "--passages", "4", "--bb-seconds", "1", "--out", str(out)]) == 0
-    assert out.is_file() and out.with_suffix(".png").is_file() and out.with_suffix(".bounds.png").is_file()
+    assert sorted(p.name for p in out.iterdir()) == ["bounds.png", "design.json", "design.png", "layout.toml"]
     import json
 
-    report = json.loads(out.with_suffix(".json").read_text())
+    report = json.loads((out / "design.json").read_text())
     assert report["certified_gap"] >= 0 and report["verdict"] == "observable" and len(report["sensors"]) == 3
-    assert main(["check", str(out), "--passages", "2"]) == 0
+    assert main(["check", str(out / "layout.toml"), "--passages", "2"]) == 0
     cands = tmp_path / "cands.csv"
     cands.write_text("x,y,cost\n" + "\n".join(f"{x},{y},{1 + (x > 0)}" for x in (-20, 0, 20) for y in (-20, 0, 20)))
     assert main(["design", "S1-P2", "--k", "3", "--candidates", str(cands), "--budget", "4", "--passages", "3",
-                 "--out", str(tmp_path / "cheap.toml")]) == 0
-    cheap = json.loads((tmp_path / "cheap.json").read_text())
+                 "--out", str(tmp_path / "cheap")]) == 0
+    cheap = json.loads((tmp_path / "cheap" / "design.json").read_text())
     assert sum(1 + (p[0] > 0) for p in cheap["sensors"]) <= 4
-    assert main(["design", "S1-P2", "--k", "3", "--candidates", str(cands), "--out", str(tmp_path / "x.toml")]) == 2
+    capsys.readouterr()
+    assert main(["design", "S1-P2", "--k", "3", "--candidates", str(cands), "--out", str(tmp_path / "x")]) == 2
+    assert "budget" in capsys.readouterr().err                            # costs without a budget
+    assert main(["design", "S1-P2", "--k", "3", "--out", str(tmp_path / "x.toml")]) == 2   # --out is a folder
+    assert "--out is the report folder" in capsys.readouterr().err
     assert main(["design", "S1-P2", "--k", "0"]) == 2
     assert main(["design", "S1-P2", "--k", "3", "--criterion", "Z"]) == 2
 

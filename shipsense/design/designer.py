@@ -248,25 +248,28 @@ def design_array(scenario, k, *, criterion="D", candidates=None, costs=None, bud
                         baselines, timings)
 
 
-def design_files(result, out):
-    """The output files of a design as ``{path: bytes}`` (nothing written): the layout TOML ``out``, the report
-    (``out`` with ``.json``), the candidates-and-weights plot (``.png``) and the bound map (``.bounds.png``)."""
+#: The files of a design report, inside its output folder.
+DESIGN_FILES = {"layout": "layout.toml", "report": "design.json", "plot": "design.png", "bounds": "bounds.png"}
+
+
+def design_files(result):
+    """The output files of a design as ``{name: bytes}`` (nothing written; names from :data:`DESIGN_FILES`): the
+    layout TOML, the report, the candidates-and-weights plot and the map of the design's position bound."""
     from shipsense.config import to_toml
     from shipsense.design.fisher import bound_map
     from shipsense.plotting import plot_bound_map, plot_design
     from shipsense.trackers.models import subset_model
 
-    out = Path(out)
     r = result.placement
-    files = {out: to_toml(result.layout).encode(),
-             out.with_suffix(".json"): (json.dumps(result.report(), indent=2) + "\n").encode()}
+    files = {DESIGN_FILES["layout"]: to_toml(result.layout).encode(),
+             DESIGN_FILES["report"]: (json.dumps(result.report(), indent=2) + "\n").encode()}
     eff = r.guaranteed_efficiency
     buf = io.BytesIO()
     plot_design(result.candidates, r.weights, r.chosen, result.truth, buf,
                 title=f"{result.criterion}-optimal {result.k} of {len(result.candidates)} candidates: "
                       f"{r.verdict.verdict if r.verdict is not None else 'unchecked'}"
                       + (f", guaranteed efficiency {eff:.3f}" if eff is not None else ""))
-    files[out.with_suffix(".png")] = buf.getvalue()
+    files[DESIGN_FILES["plot"]] = buf.getvalue()
     design_model = subset_model(result.model, r.chosen)
     cands, thetas = result.candidates, result.thetas
     span = np.ptp(cands[:, :2], axis=0).max() / 2 + 40.0
@@ -277,23 +280,23 @@ def design_files(result, out):
     buf = io.BytesIO()
     plot_bound_map(design_model.array, xs, ys, bound, buf,
                    title=f"position CRLB of the design (passage segments at {np.hypot(*thetas[0, 2:4]):.1f} m/s)")
-    files[out.with_suffix(".bounds.png")] = buf.getvalue()
+    files[DESIGN_FILES["bounds"]] = buf.getvalue()
     return files
 
 
 def write_design(result, out):
-    """Write the design's files (see :func:`design_files`) atomically; returns their paths.
+    """Write the design's files (see :func:`design_files`) into the folder ``out``; returns their paths.
 
-    Everything is rendered in memory first; each file goes through a
-    temporary file and a rename, and if any write fails the ones already
-    written are removed, so a failure leaves nothing in the output folder.
+    Everything is rendered in memory, written into a hidden folder beside ``out`` and moved in only when all
+    files are written, so a failure (or Ctrl-C) leaves ``out`` as it was.
     """
-    from shipsense.atomic import atomic_write_files
+    from shipsense.atomic import staged_directory
 
-    files = design_files(result, out)
-    Path(out).parent.mkdir(parents=True, exist_ok=True)
-    atomic_write_files(files)
-    return list(files)
+    files = design_files(result)
+    with staged_directory(out) as stage:
+        for name, data in files.items():
+            (stage / name).write_bytes(data)
+    return [Path(out) / name for name in files]
 
 
 def summary_lines(result):

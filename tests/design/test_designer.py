@@ -52,12 +52,12 @@ def test_the_cli_reports_the_fallback_and_exits_zero(tmp_path, monkeypatch, caps
     monkeypatch.setattr(pl, "solve_convex", _fail)
     cands = tmp_path / "c.csv"
     cands.write_text("x,y\n" + "\n".join(f"{x},{y}" for x in (-20, 0, 20) for y in (-20, 0, 20)))
-    out = tmp_path / "o" / "layout.toml"
+    out = tmp_path / "o"
     assert main(["design", "S1-P2", "--k", "3", "--candidates", str(cands), "--passages", "2", "--solver", "clarabel",
                  "--no-cuts", "--out", str(out)]) == 0
     printed = capsys.readouterr().out
     assert "CLARABEL failed" in printed and "projected-gradient" in printed
-    report = json.loads(out.with_suffix(".json").read_text())
+    report = json.loads((out / "design.json").read_text())
     assert report["solver"] == "projected-gradient" and "fell back" in report["solver_message"]
     assert 0 < report["guaranteed_efficiency"] <= 1 and report["converged"] in (True, False)
     for key in ("method", "solver_status", "relaxation_objective", "upper_bound", "design_objective",
@@ -81,7 +81,7 @@ def test_a_failure_while_writing_leaves_nothing(tmp_path, monkeypatch, small):
 
     monkeypatch.setattr("shipsense.plotting.plot_bound_map", broken)
     with pytest.raises(RuntimeError):
-        designer.write_design(result, tmp_path / "layout.toml")
+        designer.write_design(result, tmp_path / "design")
     assert list(tmp_path.iterdir()) == []
 
 
