@@ -46,7 +46,7 @@ def run(runs=200, out="results/S0", seed=0, progress=True):
     x0[..., 0] += dr * np.cos(ang)
     x0[..., 1] += dr * np.sin(ang)
     x0[..., 4:] = 0.0
-    basin = run_filter(sc.tracker.filter, model, sim.measurements[None], x0, P0)
+    basin = run_filter(sc.tracker.filter, model, sim.measurements[None], x0, P0, store=("means",))
     rows, curves, rates = [], {}, []
     for i, d in enumerate(OFFSETS):
         rate = convergence_rate(basin.means[i], truth)
