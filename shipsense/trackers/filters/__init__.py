@@ -23,7 +23,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from shipsense.trackers.filters import cdkf, ckf, ekf, huber_ukf, puekf, srcdkf, ukf
+from shipsense.trackers.filters import cdkf, ckf, ekf, fused, huber_ukf, puekf, srcdkf, ukf
 from shipsense.trackers.filters._core import Belief, Innovation, predict, safe_cholesky, tria
 
 UPDATES: dict[str, Callable] = {
@@ -41,11 +41,28 @@ class FilterUnit:
     options: dict = field(default_factory=dict)
 
     def predict(self, belief: Belief, model) -> Belief:
-        """Time update (shared; the SR-CDKF propagates its factor by QR)."""
-        return predict(belief, model, square_root=self.name == "srcdkf")
+        """Time update (shared; the SR-CDKF propagates its factor by triangularisation).
+
+        Compiled (:mod:`~shipsense.trackers.filters.fused`) for models with a compiled kernel, numpy otherwise.
+        """
+        square_root = self.name == "srcdkf"
+        if fused.kernel_of(model) is not None:
+            out = fused.predict(belief, model, square_root)
+            if out is not None:
+                return out
+        return predict(belief, model, square_root=square_root)
 
     def update(self, belief: Belief, y, model, mask=None):
-        """Measurement update; returns ``(belief, innovation)``."""
+        """Measurement update; returns ``(belief, innovation)``.
+
+        Compiled (:mod:`~shipsense.trackers.filters.fused`) for models with a compiled kernel; the numpy
+        update of the filter's module otherwise, and for a step in which an element failed numerically.
+        """
+        spec = fused.kernel_of(model)
+        if spec is not None:
+            out = fused.update(self.name, belief, y, model, spec, mask, **self.options)
+            if out is not None:
+                return out
         return UPDATES[self.name](belief, y, model, mask, **self.options)
 
 
