@@ -16,7 +16,7 @@ from numba import njit
 from shipsense.physics.magnetic import MU0_OVER_4PI
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy", inline="always")
 def dipole_point(rx, ry, rz, mx, my, mz, out):
     """Flux density of a dipole ``m`` at separation ``r = s - q`` into ``out`` (3,); NaN where ``r = 0``."""
     r2 = rx * rx + ry * ry + rz * rz
@@ -31,7 +31,7 @@ def dipole_point(rx, ry, rz, mx, my, mz, out):
     out[2] = a * rz - b * mz
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy", inline="always")
 def dipole_point_jacobian(r, m, B, dB_dq, dB_dm):
     """Field ``B`` (3,), ``dB/dq`` (3, 3) (source position) and ``dB/dm`` (3, 3) at separation ``r = s - q``.
 

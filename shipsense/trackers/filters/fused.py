@@ -89,7 +89,7 @@ def _build_kernel(model):
             float(model.source_z))
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy", inline="always")
 def _h(x, spec, out, B):
     """Predicted measurements of one internal state ``x`` into ``out`` (m,); ``B`` (3,) is scratch."""
     kind, sens, orient, code, earth, offs, C, mscale, zsrc = spec
@@ -114,7 +114,7 @@ def _h(x, spec, out, B):
             out[k] = B[0] * earth[0] + B[1] * earth[1] + B[2] * earth[2]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy", inline="always")
 def _h_jac(x, spec, out, J, r, mom, B, dBq, dBm):
     """``h(x)`` into ``out`` (m,) and its Jacobian into ``J`` (m, n); the last five arguments are scratch."""
     kind, sens, orient, code, earth, offs, C, mscale, zsrc = spec
@@ -156,7 +156,7 @@ def _h_jac(x, spec, out, J, r, mom, B, dBq, dBm):
 
 # -- small dense linear algebra, one element at a time ----------------------------------------------------------
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy", inline="always")
 def _chol(A, L):
     """Lower Cholesky factor of the lower triangle of ``A`` into ``L``; False if ``A`` is not positive definite."""
     n = A.shape[0]
@@ -178,7 +178,7 @@ def _chol(A, L):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy", inline="always")
 def _forward(L, b, out):
     """Solve ``L out = b`` (lower triangular) for a vector."""
     for i in range(L.shape[0]):
@@ -188,7 +188,7 @@ def _forward(L, b, out):
         out[i] = t / L[i, i]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy", inline="always")
 def _tria(M, S, A, v):
     """Lower-triangular ``S`` (n, n) with ``S S^T = M M^T`` for ``M`` (n, k), k >= n, non-negative diagonal.
 
@@ -235,7 +235,7 @@ def _tria(M, S, A, v):
     return ok
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy", inline="always")
 def _gain(x, P, eps, Pxy, S, n, m, Ls, W, w, mean, Pout):
     """Kalman update ``x+ = x + Pxy S^-1 eps``, ``P+ = P - Pxy S^-1 Pxy^T`` into ``mean``, ``Pout``.
 
@@ -275,7 +275,7 @@ def _gain(x, P, eps, Pxy, S, n, m, Ls, W, w, mean, Pout):
 
 # -- the filters' statistics ----------------------------------------------------------------------------------
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy", inline="always")
 def _sigma_stats(x, L, present, spec, spread, Wm, Wc, center, pt, Y, yhat, dY, Pxy, Pyy, B):
     """Unscented/cubature ``yhat``, ``Pxy``, ``Pyy`` (no R) of the points ``[x,] x +- spread L_i``."""
     n = x.shape[0]
@@ -314,7 +314,7 @@ def _sigma_stats(x, L, present, spec, spread, Wm, Wc, center, pt, Y, yhat, dY, P
             Pxy[a, j] = spread * t
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy", inline="always")
 def _difference_stats(x, L, present, spec, h, pt, Y, yhat, Y1, Y2, Pxy, B):
     """Central-difference ``yhat``, first and second-order rows ``Y1``, ``Y2`` (n, m) and ``Pxy = L Y1``."""
     n = x.shape[0]
@@ -352,7 +352,7 @@ def _difference_stats(x, L, present, spec, h, pt, Y, yhat, Y1, Y2, Pxy, B):
 UKF, CDKF, HUBER, EKF, PUEKF, SRCDKF = range(6)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _update_kernel(filt, X, Ls_in, P_in, Yobs, mask, Rm, spec, spread, center, Wm, Wc, h, gamma, iterations, n_pu,
                    mean_out, P_out, eps_out, S_out, loglik, nis_out, m_out, ok_out):
     """One measurement update of every batch element (``filt``: UKF/CKF, CDKF, HUBER, EKF, PUEKF, SRCDKF)."""
@@ -596,7 +596,7 @@ def _update_kernel(filt, X, Ls_in, P_in, Yobs, mask, Rm, spec, spread, center, W
         ok_out[b] = ok
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _predict_kernel(X, P_in, A, Q, sqQ, square_root, mean_out, P_out, L_out, ok_out):
     """``x = A x``; ``P = A P A^T + Q`` and its factor, or (``square_root``) the factor ``tria([A L, Q^(1/2)])``.
 
@@ -675,9 +675,7 @@ def predict(belief: Belief, model, square_root: bool = False):
         src = belief.chol
         Q = np.asarray(model.Q, dtype=float)
         if Q.ndim == 2:
-            sq = _sqrt_psd(Q)
-            sq = sq[:, np.abs(sq).max(axis=0) > 0]
-            sqQ = np.ascontiguousarray(sq).reshape(1, n, -1)
+            sqQ = _shared_sqrt(n, np.ascontiguousarray(Q).tobytes())
         else:
             w, V = np.linalg.eigh(np.broadcast_to(Q, batch + (n, n)))
             sqQ = _flat(V * np.sqrt(np.clip(w, 0.0, None))[..., None, :], batch, (n, n))
@@ -768,6 +766,13 @@ def update(name, belief: Belief, y, model, spec, mask=None, **options):
 
 _NO_WEIGHTS = np.zeros(1)
 _NO_COV = np.zeros((1, 1, 1))
+
+
+@lru_cache(maxsize=64)
+def _shared_sqrt(n, data):
+    """The square root of a shared Q (the columns of :func:`_sqrt_psd` that are not zero) as (1, n, k)."""
+    sq = _sqrt_psd(np.frombuffer(data, dtype=float).reshape(n, n))
+    return np.ascontiguousarray(sq[:, np.abs(sq).max(axis=0) > 0]).reshape(1, n, -1)
 
 
 @lru_cache(maxsize=64)
