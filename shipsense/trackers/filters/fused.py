@@ -13,8 +13,8 @@ kernel (:func:`kernel_of`):
 Every other model (electrodes, bearings, user models with a Python ``h``)
 runs the generic numpy steps of the filter modules (``ukf.update`` and so on),
 which are also the independent reference the tests compare these steps with.
-An element whose step fails numerically here (an innovation covariance that is
-not positive definite, a non-finite result) makes the whole step rerun on the
+An element whose step fails numerically here (an innovation or posterior
+covariance that is not positive definite, a non-finite result) makes the whole step rerun on the
 numpy path, which flags and repairs such elements.
 
 One step per batch element, with no Python objects and no temporaries in the
@@ -38,7 +38,6 @@ from shipsense.trackers.filters._core import (
     Belief,
     Innovation,
     _BeliefWithCov,
-    _Posterior,
     _sqrt_psd,
     prior_health,
 )
@@ -354,8 +353,12 @@ UKF, CDKF, HUBER, EKF, PUEKF, SRCDKF = range(6)
 
 @njit(cache=True, error_model="numpy")
 def _update_kernel(filt, X, Ls_in, P_in, Yobs, mask, Rm, spec, spread, center, Wm, Wc, h, gamma, iterations, n_pu,
-                   mean_out, P_out, eps_out, S_out, loglik, nis_out, m_out, ok_out):
-    """One measurement update of every batch element (``filt``: UKF/CKF, CDKF, HUBER, EKF, PUEKF, SRCDKF)."""
+                   mean_out, P_out, L_out, eps_out, S_out, loglik, nis_out, m_out, ok_out):
+    """One measurement update of every batch element (``filt``: UKF/CKF, CDKF, HUBER, EKF, PUEKF, SRCDKF).
+
+    The covariance-form filters also write the posterior's factor into ``L_out`` (the SR-CDKF's factor is
+    ``P_out``); ``ok_out`` is False where a factorisation failed or a result is not finite.
+    """
     nb, n = X.shape
     m = Yobs.shape[1]
     k = 2 * n + m
@@ -593,6 +596,8 @@ def _update_kernel(filt, X, Ls_in, P_in, Yobs, mask, Rm, spec, spread, center, W
                     S_out[b, i, j] = S[i, j]
         nis_out[b] = nis
         loglik[b] = -0.5 * (cnt * LOG_2PI + logdet + nis)
+        if ok and filt != SRCDKF:
+            ok = _chol(P_out[b], L_out[b])
         ok_out[b] = ok
 
 
@@ -743,6 +748,7 @@ def update(name, belief: Belief, y, model, spec, mask=None, **options):
         mask_f = np.ascontiguousarray(np.broadcast_to(mask_f, (nb, m)))
     mean_out = np.empty((nb, n))
     P_out = np.empty((nb, n, n))
+    L_out = np.zeros((nb, n, n)) if cov_form else _NO_COV
     eps = np.empty((nb, m))
     S = np.empty((nb, m, m))
     loglik = np.empty(nb)
@@ -752,7 +758,7 @@ def update(name, belief: Belief, y, model, spec, mask=None, **options):
     L = belief.chol if filt not in (EKF, PUEKF) else P   # the linearised filters do not read the factor
     _update_kernel(filt, X, _flat(L, batch, (n, n)), _flat(P, batch, (n, n)) if cov_form else _NO_COV,
                    _flat(y, batch, (m,)), mask_f, np.array(model.R, dtype=float), spec, spread, center,
-                   Wm, Wc, h, gamma, iterations, n_pu, mean_out, P_out, eps, S, loglik, nis, cnt, ok)
+                   Wm, Wc, h, gamma, iterations, n_pu, mean_out, P_out, L_out, eps, S, loglik, nis, cnt, ok)
     if not ok.all():
         return None
     inn = Innovation(eps.reshape(batch + (m,)), S.reshape(batch + (m, m)), loglik.reshape(batch),
@@ -761,7 +767,8 @@ def update(name, belief: Belief, y, model, spec, mask=None, **options):
     P_out = P_out.reshape(batch + (n, n))
     if filt == SRCDKF:
         return Belief(mean_out, P_out, np.broadcast_to(belief.ok, batch).copy()), inn
-    return _Posterior.pending(mean_out, np.broadcast_to(prior_health(belief), batch).copy(), P_out), inn
+    return _BeliefWithCov.with_cov(mean_out, L_out.reshape(batch + (n, n)),
+                                   np.broadcast_to(prior_health(belief), batch).copy(), P_out), inn
 
 
 _NO_WEIGHTS = np.zeros(1)
