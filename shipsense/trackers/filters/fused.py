@@ -5,17 +5,24 @@ Who gets which implementation.  :class:`~shipsense.trackers.filters.FilterUnit`
 call) runs these compiled steps whenever the model has a compiled measurement
 kernel (:func:`kernel_of`):
 
-* a :class:`~shipsense.trackers.models.FieldModel` whose sensors are all
-  magnetometers (vector, magnitude or tmi readings; the S0 model), also with
-  per-element transitions (:meth:`~shipsense.trackers.models.FieldModel.stepped`);
+* a :class:`~shipsense.trackers.models.FieldModel` without electrodes:
+  magnetometers (vector, magnitude or tmi readings; the S0 model) and seismic
+  bearings (S2), also with per-element transitions
+  (:meth:`~shipsense.trackers.models.FieldModel.stepped`);
 * a :class:`~shipsense.trackers.models.LinearModel`.
 
-Every other model (electrodes, bearings, user models with a Python ``h``)
+Every other model (electrodes: the HED field and its envelope; user models with a Python ``h``)
 runs the generic numpy steps of the filter modules (``ukf.update`` and so on),
 which are also the independent reference the tests compare these steps with.
 An element whose step fails numerically here (an innovation or posterior
 covariance that is not positive definite, a non-finite result) makes the whole step rerun on the
 numpy path, which flags and repairs such elements.
+
+The results equal the numpy steps' to rounding (tests/trackers/test_fused.py), with one difference by
+design: the Huber update's reweighting stops for each element when its weights settle, where the numpy
+update iterates until the whole batch has settled (an element that settled moves by less than 1e-9 of
+its noise variances per further iteration), so a compiled element equals the numpy update of that
+element alone.
 
 One step per batch element, with no Python objects and no temporaries in the
 loop: the per-step cost is a few microseconds of call overhead plus the
@@ -70,28 +77,33 @@ def _build_kernel(model):
     from shipsense.trackers.models import CHANNEL_UNIT, FieldModel, LinearModel
 
     if isinstance(model, LinearModel):
-        C = np.ascontiguousarray(model.C, dtype=float)
-        z = np.zeros((1, 3))
-        return (LINEAR, z, np.zeros((1, 3, 3)), np.zeros(1, np.int64), np.zeros(3), np.zeros(1, np.int64), C,
-                0.0, 0.0)
+        C = np.array(model.C, dtype=float)
+        return (LINEAR, np.zeros((1, 3)), np.zeros((1, 3, 3)), np.zeros(1, np.int64), np.zeros(3),
+                np.zeros(1, np.int64), C, 0.0, 0.0, np.zeros(C.shape[0], np.int64))
     if not isinstance(model, FieldModel):
         return None
     a = model.array
-    if set(a.types) != {"magnetometer"} or model.labels != ("x", "y", "vx", "vy", "mx", "my", "mz"):
+    if "electrode" in a.types or model.labels not in (("x", "y", "vx", "vy", "mx", "my", "mz"), ("x", "y", "vx", "vy")):
         return None
-    code = np.array([{"vector": 0, "magnitude": 1, "tmi": 2}[k] for k in a.kinds], dtype=np.int64)
+    code = np.array([{"vector": 0, "magnitude": 1, "tmi": 2, "bearing": 3}[k] for k in a.kinds], dtype=np.int64)
     width = np.where(code == 0, 3, 1)
     offs = np.concatenate([[0], np.cumsum(width)[:-1]]).astype(np.int64)
     earth = np.zeros(3) if a.earth_direction is None else np.asarray(a.earth_direction, dtype=float)
     return (FIELD, np.array(a.positions, dtype=float), np.array(a.orientations, dtype=float),
             code, earth, offs, np.zeros((1, 1)), model.moment_unit / CHANNEL_UNIT["magnetometer"],
-            float(model.source_z))
+            float(model.source_z), np.array(a.axial, dtype=np.int64))
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _wrap(a):
+    """An axial angle (defined modulo pi) wrapped into [-pi/2, pi/2) (:func:`~shipsense.physics.seismic.wrap_axial`)."""
+    return a - math.pi * math.floor((a + 0.5 * math.pi) / math.pi)
 
 
 @njit(cache=True, error_model="numpy", inline="always")
 def _h(x, spec, out, B):
     """Predicted measurements of one internal state ``x`` into ``out`` (m,); ``B`` (3,) is scratch."""
-    kind, sens, orient, code, earth, offs, C, mscale, zsrc = spec
+    kind, sens, orient, code, earth, offs, C, mscale, zsrc, axial = spec
     if kind == LINEAR:
         for i in range(C.shape[0]):
             acc = 0.0
@@ -99,11 +111,14 @@ def _h(x, spec, out, B):
                 acc += C[i, j] * x[j]
             out[i] = acc
         return
-    mx, my, mz = x[4] * mscale, x[5] * mscale, x[6] * mscale
     for s in range(sens.shape[0]):
-        dipole_point(sens[s, 0] - x[0], sens[s, 1] - x[1], sens[s, 2] - zsrc, mx, my, mz, B)
         k = offs[s]
         c = code[s]
+        if c == 3:
+            out[k] = _wrap(math.atan2(x[1] - sens[s, 1], x[0] - sens[s, 0]))
+            continue
+        dipole_point(sens[s, 0] - x[0], sens[s, 1] - x[1], sens[s, 2] - zsrc, x[4] * mscale, x[5] * mscale,
+                     x[6] * mscale, B)
         if c == 0:
             for i in range(3):
                 out[k + i] = orient[s, 0, i] * B[0] + orient[s, 1, i] * B[1] + orient[s, 2, i] * B[2]
@@ -116,7 +131,7 @@ def _h(x, spec, out, B):
 @njit(cache=True, error_model="numpy", inline="always")
 def _h_jac(x, spec, out, J, r, mom, B, dBq, dBm):
     """``h(x)`` into ``out`` (m,) and its Jacobian into ``J`` (m, n); the last five arguments are scratch."""
-    kind, sens, orient, code, earth, offs, C, mscale, zsrc = spec
+    kind, sens, orient, code, earth, offs, C, mscale, zsrc, axial = spec
     if kind == LINEAR:
         _h(x, spec, out, B)
         for i in range(C.shape[0]):
@@ -124,12 +139,19 @@ def _h_jac(x, spec, out, J, r, mom, B, dBq, dBm):
                 J[i, j] = C[i, j]
         return
     J[:, :] = 0.0
-    mom[0], mom[1], mom[2] = x[4] * mscale, x[5] * mscale, x[6] * mscale
     for s in range(sens.shape[0]):
-        r[0], r[1], r[2] = sens[s, 0] - x[0], sens[s, 1] - x[1], sens[s, 2] - zsrc
-        dipole_point_jacobian(r, mom, B, dBq, dBm)
         k = offs[s]
         c = code[s]
+        if c == 3:      # d atan2(dy, dx) / d(x, y) = (-dy, dx) / (dx^2 + dy^2)
+            dx, dy = x[0] - sens[s, 0], x[1] - sens[s, 1]
+            out[k] = _wrap(math.atan2(dy, dx))
+            r2 = dx * dx + dy * dy
+            J[k, 0] = -dy / r2
+            J[k, 1] = dx / r2
+            continue
+        mom[0], mom[1], mom[2] = x[4] * mscale, x[5] * mscale, x[6] * mscale
+        r[0], r[1], r[2] = sens[s, 0] - x[0], sens[s, 1] - x[1], sens[s, 2] - zsrc
+        dipole_point_jacobian(r, mom, B, dBq, dBm)
         if c == 0:
             for i in range(3):
                 out[k + i] = orient[s, 0, i] * B[0] + orient[s, 1, i] * B[1] + orient[s, 2, i] * B[2]
@@ -154,6 +176,12 @@ def _h_jac(x, spec, out, J, r, mom, B, dBq, dBm):
 
 
 # -- small dense linear algebra, one element at a time ----------------------------------------------------------
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _residual(a, b, axial):
+    """``a - b``, wrapped modulo pi on an axial channel."""
+    return _wrap(a - b) if axial else a - b
+
 
 @njit(cache=True, error_model="numpy", inline="always")
 def _chol(A, L):
@@ -290,14 +318,21 @@ def _sigma_stats(x, L, present, spec, spread, Wm, Wc, center, pt, Y, yhat, dY, P
             for a in range(n):
                 pt[a] = x[a] + sg * spread * L[a, i]
         _h(pt, spec, Y[p], B)
+    axial = spec[9]
     for j in range(m):
         t = 0.0
-        for p in range(N):
-            t += Wm[p] * Y[p, j]
-        yhat[j] = t
+        if axial[j]:    # angles averaged as residuals about the first point's prediction
+            for p in range(N):
+                t += Wm[p] * _wrap(Y[p, j] - Y[0, j])
+            yhat[j] = Y[0, j] + t
+        else:
+            for p in range(N):
+                t += Wm[p] * Y[p, j]
+            yhat[j] = t
     for p in range(N):
         for j in range(m):
-            dY[p, j] = (Y[p, j] - yhat[j]) if present[j] else 0.0
+            d = Y[p, j] - yhat[j]
+            dY[p, j] = (_wrap(d) if axial[j] else d) if present[j] else 0.0
     for i in range(m):
         for j in range(i + 1):
             t = 0.0
@@ -330,11 +365,15 @@ def _difference_stats(x, L, present, spec, h, pt, Y, yhat, Y1, Y2, Pxy, B):
         _h(pt, spec, Y[p], B)
     c1 = 1.0 / (2.0 * h)
     c2 = math.sqrt(h * h - 1.0) / (2.0 * h * h)
+    axial = spec[9]
     for j in range(m):
         t = 0.0
         for i in range(n):
             dp = Y[1 + i, j] - Y[0, j]
             dm = Y[1 + n + i, j] - Y[0, j]
+            if axial[j]:
+                dp = _wrap(dp)
+                dm = _wrap(dm)
             t += dp + dm
             keep = 1.0 if present[j] else 0.0
             Y1[i, j] = (dp - dm) * c1 * keep
@@ -362,6 +401,7 @@ def _update_kernel(filt, X, Ls_in, P_in, Yobs, mask, Rm, spec, spread, center, W
     nb, n = X.shape
     m = Yobs.shape[1]
     k = 2 * n + m
+    axial = spec[9]
     present = np.empty(m, np.bool_)
     y = np.empty(m)
     R = np.empty(m)
@@ -411,7 +451,7 @@ def _update_kernel(filt, X, Ls_in, P_in, Yobs, mask, Rm, spec, spread, center, W
         if filt == UKF or filt == HUBER:
             _sigma_stats(x, L, present, spec, spread, Wm, Wc, center, pt, Y, yhat, dY, Pxy, Pyy, B)
             for j in range(m):
-                eps[j] = y[j] - yhat[j] if present[j] else 0.0
+                eps[j] = _residual(y[j], yhat[j], axial[j]) if present[j] else 0.0
             for i in range(m):
                 for j in range(m):
                     S[i, j] = Pyy[i, j]
@@ -466,7 +506,7 @@ def _update_kernel(filt, X, Ls_in, P_in, Yobs, mask, Rm, spec, spread, center, W
         elif filt == CDKF or filt == SRCDKF:
             _difference_stats(x, L, present, spec, h, pt, Y, yhat, Y1, Y2, Pxy, B)
             for j in range(m):
-                eps[j] = y[j] - yhat[j] if present[j] else 0.0
+                eps[j] = _residual(y[j], yhat[j], axial[j]) if present[j] else 0.0
             if filt == CDKF:
                 for i in range(m):
                     for j in range(i + 1):
@@ -543,7 +583,7 @@ def _update_kernel(filt, X, Ls_in, P_in, Yobs, mask, Rm, spec, spread, center, W
             for sub in range(subs):
                 _h_jac(xc, spec, yhat, H, r3, m3, B, dBq, dBm)
                 for j in range(m):
-                    eps[j] = y[j] - yhat[j] if present[j] else 0.0
+                    eps[j] = _residual(y[j], yhat[j], axial[j]) if present[j] else 0.0
                     if not present[j]:
                         H[j, :] = 0.0
                 for a in range(n):          # Pxy = P H^T
