@@ -194,3 +194,12 @@ def test_compiled_steps_equal_the_numpy_steps_with_bearings(name):
     ref = [numpy_run(name, model, y[r:r + 1], x0[r:r + 1], P0, options) for r in range(2)]
     ref = [np.concatenate(parts) for parts in zip(*ref)]
     assert_same(fused_run(name, model, y, x0, P0, options), ref, 5e-10, nats=1e-7)
+
+
+def test_an_option_a_unit_does_not_take_is_refused_by_name():
+    """The compiled steps read only the options they know: get_filter refuses the others (a typo would be ignored)."""
+    with pytest.raises(ValueError, match="ukf: unknown option 'gama'; it takes: alpha, beta, kappa"):
+        get_filter("ukf", gama=2.0)
+    with pytest.raises(ValueError, match="ekf: unknown option 'n_pu'"):
+        get_filter("ekf", n_pu=3)
+    assert get_filter("huber_ukf", gamma=2.0, iterations=3).options == {"gamma": 2.0, "iterations": 3}

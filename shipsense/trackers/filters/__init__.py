@@ -70,7 +70,18 @@ def get_filter(name: str, **options) -> FilterUnit:
     """The filter unit called ``name`` with keyword ``options`` for its update."""
     if name not in UPDATES:
         raise ValueError(f"unknown filter {name!r}; choose one of: {', '.join(FILTER_NAMES)}")
+    allowed = _options_of(name)
+    for key in options:   # checked here: the compiled steps read only the options they know
+        if key not in allowed:
+            raise ValueError(f"{name}: unknown option {key!r}; it takes: {', '.join(allowed) or 'no options'}")
     return FilterUnit(name, dict(options))
+
+
+def _options_of(name):
+    """The keyword options of a unit's update (its parameters after ``belief, y, model, mask``)."""
+    import inspect
+
+    return tuple(inspect.signature(UPDATES[name]).parameters)[4:]
 
 
 __all__ = ["FILTER_NAMES", "Belief", "FilterUnit", "Innovation", "get_filter", "predict", "safe_cholesky", "tria"]
