@@ -1,24 +1,36 @@
-"""Filter-unit benchmark: microseconds per filter-step on the S0 magnetic model.
+"""Filter-unit benchmark: microseconds per filter-step on the S0 magnetic model, against FilterPy, in one run.
 
-Run:  python benchmarks/filters.py [--steps 20] [--batches 1 12 240 2400]
+Run:  PYTHONPATH=. python benchmarks/filters.py [--steps 20] [--batches 1 24 2400] [--no-numpy] [--no-compile]
+                                                [--no-reproduce] [--allocator tuned|default]
 
 A filter-step is one predict plus one update of one hypothesis.  Every unit
-runs as one batch of B hypotheses; the baseline is FilterPy's
+runs as one batch of B hypotheses, through ``FilterUnit`` (the compiled steps
+of :mod:`shipsense.trackers.filters.fused` on this model) and, for comparison,
+through the numpy steps of the filter modules (the generic path every model
+without a compiled kernel runs).  The baseline is FilterPy's
 UnscentedKalmanFilter looped over filters (one Python object per hypothesis),
-timed in the same process on the same measurements.  The table prints
-microseconds per filter-step and the speed-up over the FilterPy loop.
+timed in the same process on the same measurements; every cell prints
+microseconds per filter-step and the speed-up over that loop.
+
+Then, each in a fresh process: the compiled steps' first-call time with an
+empty numba cache (compilation) and with the cache this checkout keeps
+(loading), and ``shipsense reproduce S0`` (200 runs) wall time and peak memory.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
+import subprocess
+import sys
+import tempfile
 import time
 
 import numpy as np
 from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
 
 from shipsense import simulate, tune_allocator
-from shipsense.trackers.filters import FILTER_NAMES, Belief, get_filter
+from shipsense.trackers.filters import FILTER_NAMES, UPDATES, Belief, get_filter, predict
 from shipsense.trackers.models import model_from_scenario
 
 
@@ -33,9 +45,21 @@ def setup(batch):
     return model, y, x0, P0
 
 
-def time_batched(name, batch, steps, repeats=3):
+class NumpyUnit:
+    """A filter unit that always runs the numpy steps (what models without a compiled kernel get)."""
+
+    def __init__(self, name):
+        self.name = name
+
+    def predict(self, belief, model):
+        return predict(belief, model, square_root=self.name == "srcdkf")
+
+    def update(self, belief, y, model):
+        return UPDATES[self.name](belief, y, model, None)
+
+
+def time_batched(unit, batch, steps, repeats=3):
     model, y, x0, P0 = setup(batch)
-    unit = get_filter(name)
     best = np.inf
     for _ in range(repeats):
         belief = Belief.from_cov(x0, np.broadcast_to(P0, (batch, model.n, model.n)))
@@ -48,7 +72,7 @@ def time_batched(name, batch, steps, repeats=3):
     return 1e6 * best / (steps * batch)
 
 
-def time_filterpy(n_filters, steps):
+def time_filterpy(n_filters, steps, repeats=3):
     model, y, x0, P0 = setup(n_filters)
     points = MerweScaledSigmaPoints(model.n, alpha=1.0, beta=2.0, kappa=0.0)
     sensor = model.array.positions[0]
@@ -61,41 +85,105 @@ def time_filterpy(n_filters, steps):
         return 1e-7 * (3.0 * (m @ r) * r - r2 * m) / r2**2.5 / 1e-9
 
     A = model.A
-    filters = []
-    for i in range(n_filters):
-        f = UnscentedKalmanFilter(model.n, model.m, model.period, hx=hx, fx=lambda x, dt: A @ x, points=points)
-        f.x, f.P, f.Q, f.R = x0[i].copy(), P0.copy(), model.Q.copy(), np.diag(model.R)
-        filters.append(f)
-    t0 = time.perf_counter()
-    for k in range(1, steps + 1):
-        for f in filters:
-            f.predict()
-            f.update(y[k])
-    return 1e6 * (time.perf_counter() - t0) / (steps * n_filters)
+    best = np.inf
+    for _ in range(repeats):
+        filters = []
+        for i in range(n_filters):
+            f = UnscentedKalmanFilter(model.n, model.m, model.period, hx=hx, fx=lambda x, dt: A @ x, points=points)
+            f.x, f.P, f.Q, f.R = x0[i].copy(), P0.copy(), model.Q.copy(), np.diag(model.R)
+            filters.append(f)
+        t0 = time.perf_counter()
+        for k in range(1, steps + 1):
+            for f in filters:
+                f.predict()
+                f.update(y[k])
+        best = min(best, time.perf_counter() - t0)
+    return 1e6 * best / (steps * n_filters)
+
+
+FIRST_CALL = """
+import time
+t0 = time.perf_counter()
+import numpy as np
+from shipsense.trackers.filters import FILTER_NAMES, Belief, get_filter
+from shipsense.trackers.models import model_from_scenario
+model = model_from_scenario("S0")
+t1 = time.perf_counter()
+b = Belief.from_cov(np.ones((2, 7)), np.eye(7))
+for name in FILTER_NAMES:
+    u = get_filter(name)
+    u.update(u.predict(b, model), np.ones((2, 3)), model)
+print(time.perf_counter() - t1)
+"""
+
+
+def first_call_seconds(cache_dir=None):
+    """Seconds of the first predict + update of every unit in a fresh process (imports excluded)."""
+    env = dict(os.environ)
+    if cache_dir is not None:
+        env["NUMBA_CACHE_DIR"] = cache_dir
+    out = subprocess.run([sys.executable, "-c", FIRST_CALL], env=env, capture_output=True, text=True, check=True)
+    return float(out.stdout.strip().splitlines()[-1])
+
+
+REPRODUCE = """
+import resource, sys, time
+from shipsense.cli import main
+t0 = time.perf_counter()
+code = main(["reproduce", "S0", "--out", sys.argv[1]])
+print(time.perf_counter() - t0, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, code)
+"""
+
+
+def reproduce_s0():
+    """``shipsense reproduce S0`` in a fresh process: (wall seconds, peak resident MB)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        out = subprocess.run([sys.executable, "-c", REPRODUCE, os.path.join(tmp, "S0")], capture_output=True,
+                             text=True, check=True)
+    seconds, mb, code = out.stdout.strip().splitlines()[-1].split()
+    if code != "0":
+        raise RuntimeError(f"reproduce S0 exited {code}")
+    return float(seconds), float(mb)
 
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=20)
-    ap.add_argument("--batches", type=int, nargs="+", default=[1, 12, 240, 2400])
+    ap.add_argument("--batches", type=int, nargs="+", default=[1, 24, 2400])
     ap.add_argument("--allocator", choices=("tuned", "default"), default="tuned",
                     help="tuned: shipsense.tune_allocator() as the shipsense command does; default: glibc's")
     ap.add_argument("--filterpy-filters", type=int, default=24, help="filters in the FilterPy loop")
+    ap.add_argument("--no-numpy", action="store_true", help="skip the numpy-path rows")
+    ap.add_argument("--no-compile", action="store_true", help="skip the first-call (compile) measurement")
+    ap.add_argument("--no-reproduce", action="store_true", help="skip `reproduce S0`")
     args = ap.parse_args(argv)
     tuned = args.allocator == "tuned" and tune_allocator()
     print(f"allocator: {'tuned (shipsense.tune_allocator)' if tuned else 'default'}")
+    for name in FILTER_NAMES:      # compile or load the compiled steps before timing
+        time_batched(get_filter(name), 2, 1, repeats=1)
     base = time_filterpy(args.filterpy_filters, args.steps)
     print(f"S0 model (n=7, m=3); FilterPy UKF loop: {base:.1f} us per filter-step "
-          f"({args.filterpy_filters} filters x {args.steps} steps)\n")
+          f"({args.filterpy_filters} filters x {args.steps} steps, best of 3)\n")
     head = "".join(f"{f'B={b}':>18}" for b in args.batches)
-    print(f"{'filter':<10}{head}")
+    print(f"{'filter':<10}{'path':<10}{head}")
     for name in FILTER_NAMES:
-        cells = []
-        for b in args.batches:
-            us = time_batched(name, b, args.steps)
-            cells.append(f"{us:>9.2f} ({base / us:>5.0f}x)")
-        print(f"{name:<10}" + "".join(f"{c:>18}" for c in cells))
-    print("\ncells: microseconds per filter-step (speed-up over the FilterPy loop)")
+        paths = [("compiled", get_filter(name))] + ([] if args.no_numpy else [("numpy", NumpyUnit(name))])
+        for label, unit in paths:
+            cells = []
+            for b in args.batches:
+                us = time_batched(unit, b, args.steps)
+                cells.append(f"{us:>9.2f} ({base / us:>5.0f}x)")
+            print(f"{name:<10}{label:<10}" + "".join(f"{c:>18}" for c in cells))
+    print("\ncells: microseconds per filter-step (speed-up over the FilterPy loop); puekf with N_pu = 5")
+    if not args.no_compile:
+        with tempfile.TemporaryDirectory() as tmp:
+            cold = first_call_seconds(tmp)
+        warm = first_call_seconds()
+        print(f"\nfirst predict + update of all 7 units in a fresh process: {cold:.1f} s with an empty numba cache "
+              f"(compilation), {warm:.2f} s with this checkout's cache")
+    if not args.no_reproduce:
+        seconds, mb = reproduce_s0()
+        print(f"\nshipsense reproduce S0 (200 runs, fresh process): {seconds:.1f} s wall, peak memory {mb:.0f} MB")
 
 
 if __name__ == "__main__":

@@ -46,7 +46,7 @@ def run(runs=200, out="results/S0", seed=0, progress=True):
     x0[..., 0] += dr * np.cos(ang)
     x0[..., 1] += dr * np.sin(ang)
     x0[..., 4:] = 0.0
-    basin = run_filter(sc.tracker.filter, model, sim.measurements[None], x0, P0)
+    basin = run_filter(sc.tracker.filter, model, sim.measurements[None], x0, P0, store=("means",))
     rows, curves, rates = [], {}, []
     for i, d in enumerate(OFFSETS):
         rate = convergence_rate(basin.means[i], truth)
@@ -90,8 +90,10 @@ def run(runs=200, out="results/S0", seed=0, progress=True):
         cbank = bank.model_copy(update={"bearing_convention": conv})
         cseeds, _ = seed_hypotheses(model, sim.measurements[:, 0], cbank)
         cb = run_bank(sc.tracker.filter, model, sim.measurements, cseeds, P0)
-        readings[conv] = (cb, *bank_summary(cb, truth), _reading(conv, cb, cseeds, truth, basin_radius))
-    b, summ, tr, main = readings[bank.bearing_convention]
+        # a bank's per-hypothesis record is ~80 MB at 200 runs: keep only what later stages read
+        readings[conv] = (cb.selected_means, *bank_summary(cb, truth), _reading(conv, cb, cseeds, truth, basin_radius))
+        del cb
+    selected, summ, tr, main = readings[bank.bearing_convention]
     bar_charts(o, "selection_bars.png", f"S0 exp. 3: {seeds.shape[1]} hypotheses, {runs} runs, bearings from "
                f"{bank.bearing_convention}", summ["hypotheses"], labels=[str(h + 1) for h in range(seeds.shape[1])])
     o.csv("top3_mrmse.csv", ["bearing_convention", "rank", "hypothesis", "mrmse_x_m", "mrmse_y_m", "mrmse_r_m",
@@ -113,6 +115,7 @@ def run(runs=200, out="results/S0", seed=0, progress=True):
         units[name] = {"mrmse_r_m": mrmse(bu.selected_means, truth)["r"],
                        "convergence_rate": convergence_rate(bu.selected_means, truth), "us_per_filter_step": us}
         curves[name] = rmse_k(bu.selected_means, truth)
+        del bu
     rmse_plot(o, "units_rmse.png", "S0 exp. 4: selected estimate of the bank per filter unit", times, curves)
     o.csv("filter_units.csv", ["filter", "mrmse_r_m", "convergence_rate", "us_per_filter_step"],
           [[k, v["mrmse_r_m"], v["convergence_rate"], v["us_per_filter_step"]] for k, v in units.items()])
@@ -130,8 +133,9 @@ def run(runs=200, out="results/S0", seed=0, progress=True):
              "convergence_rate": dsumm["convergence_rate"],
              "final_error_median_m": float(np.median(position_error(bd.selected_means, truth)[:, -1]))}
     rmse_plot(o, "bank_rmse.png", "S0: selected estimate, spec bank vs dense bank", times,
-              {"spec bank (12 hyp.)": rmse_k(b.selected_means, truth),
+              {"spec bank (12 hyp.)": rmse_k(selected, truth),
                f"dense bank ({dseeds.shape[1]} hyp.)": rmse_k(bd.selected_means, truth)})
+    del bd
     st.done()
     # beyond the source: the project's tracker, the global initialiser seeding the same unit and process noise
     st.step("global initialiser")

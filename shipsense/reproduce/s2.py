@@ -55,7 +55,7 @@ def _track(sc, sim, sensors, unit, r, seed):
     model = model_from_scenario(sc, sensors=sensors)
     truth = model.state_from_truth(sim.truth)
     x0, P0 = _start(truth, r, np.random.default_rng(seed + 17))
-    run = run_filter(unit, model, sim.measurements[..., _columns(sim, sensors)], x0, P0)
+    run = run_filter(unit, model, sim.measurements[..., _columns(sim, sensors)], x0, P0, store=("means",))
     return run, truth
 
 

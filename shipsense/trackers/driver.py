@@ -20,16 +20,21 @@ class FilterRun:
     Attributes
     ----------
     means : (..., steps, n)         posterior means
-    chols : (..., steps, n, n)      lower Cholesky factors of the posterior covariances
+    covs : (..., steps, n, n)       posterior covariances
+    chols : (..., steps, n, n)      their lower Cholesky factors
     eps : (..., steps, m)           innovations (internal measurement units)
     nis : (..., steps)              normalised innovation squared
     loglik : (..., steps)           innovation log-likelihoods ``ln N(eps; 0, S)``
     ok : (..., steps)               False once an element lost positive definiteness
     labels : tuple of str           state component names
+
+    ``means``, ``covs`` and ``chols`` are None unless asked for (``run_filter(store=...)``; by default
+    means and covariances).
     """
 
-    means: np.ndarray
-    chols: np.ndarray
+    means: np.ndarray | None
+    covs: np.ndarray | None
+    chols: np.ndarray | None
     eps: np.ndarray
     nis: np.ndarray
     loglik: np.ndarray
@@ -37,15 +42,15 @@ class FilterRun:
     labels: tuple
 
     @property
-    def covs(self) -> np.ndarray:
-        return self.chols @ np.swapaxes(self.chols, -1, -2)
-
-    @property
     def cumulative_loglik(self) -> np.ndarray:
         return np.cumsum(self.loglik, axis=-1)
 
 
-def run_filter(unit, model, measurements, x0, P0, mask=None, progress=False) -> FilterRun:
+STORABLE = ("means", "covs", "chols")
+"""What :func:`run_filter` can keep per step besides the innovations (``store``)."""
+
+
+def run_filter(unit, model, measurements, x0, P0, mask=None, progress=False, store=("means", "covs")) -> FilterRun:
     """Filter passages with one filter unit.
 
     Parameters
@@ -63,12 +68,21 @@ def run_filter(unit, model, measurements, x0, P0, mask=None, progress=False) -> 
         False where a component is to be ignored.
     progress : bool
         Show a progress bar over the steps.
+    store : sequence of str
+        Which of ``"means"``, ``"covs"``, ``"chols"`` to keep per step (the others are None in the result);
+        the innovations, log-likelihoods and health flags are always kept.  A factor per step costs a
+        Cholesky factorisation (the filters' posteriors are in covariance form) and as much memory as the
+        covariances: ask for what you use.
 
     The leading axes of ``measurements``, ``x0`` and ``P0`` broadcast: a bank
     of H hypotheses over R runs takes ``measurements[:, None]`` (R, 1, steps,
     m) and ``x0`` (R, H, n).  Step 0 is an update of the prior; later steps
     predict, then update.
     """
+    store = (store,) if isinstance(store, str) else tuple(store)
+    unknown = [s for s in store if s not in STORABLE]
+    if unknown:
+        raise ValueError(f"store: unknown {unknown[0]!r}; choose from {', '.join(STORABLE)}")
     if isinstance(unit, str):
         unit = get_filter(unit)
     if not isinstance(unit, FilterUnit):
@@ -86,8 +100,9 @@ def run_filter(unit, model, measurements, x0, P0, mask=None, progress=False) -> 
     belief = Belief.from_cov(np.broadcast_to(x0, batch + x0.shape[-1:]).copy(),
                              np.broadcast_to(P0, batch + P0.shape[-2:]))
     n, m = model.n, model.m
-    means = np.empty(batch + (steps, n))
-    chols = np.empty(batch + (steps, n, n))
+    means = np.empty(batch + (steps, n)) if "means" in store else None
+    covs = np.empty(batch + (steps, n, n)) if "covs" in store else None
+    chols = np.empty(batch + (steps, n, n)) if "chols" in store else None
     eps = np.empty(batch + (steps, m))
     nis = np.empty(batch + (steps,))
     loglik = np.empty(batch + (steps,))
@@ -102,11 +117,20 @@ def run_filter(unit, model, measurements, x0, P0, mask=None, progress=False) -> 
             belief = unit.predict(belief, model)
         mk = None if mask is None else mask[..., k, :]
         belief, inn = unit.update(belief, y[..., k, :], model, mk)
-        means[..., k, :] = belief.mean
-        chols[..., k, :, :] = belief.chol
+        if means is not None:
+            means[..., k, :] = belief.mean
+        if covs is not None:
+            covs[..., k, :, :] = belief.cov
+        if chols is not None:
+            chols[..., k, :, :] = belief.chol
         eps[..., k, :] = inn.eps
         nis[..., k] = inn.nis
         loglik[..., k] = inn.loglik
         ok[..., k] = belief.ok
-    return FilterRun(means * scale_x, chols * scale_x[:, None], eps, nis, loglik, ok,
-                     tuple(getattr(model, "labels", ())))
+    if means is not None:
+        means *= scale_x
+    if covs is not None:
+        covs *= np.outer(scale_x, scale_x)
+    if chols is not None:
+        chols *= scale_x[:, None]
+    return FilterRun(means, covs, chols, eps, nis, loglik, ok, tuple(getattr(model, "labels", ())))

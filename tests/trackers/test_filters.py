@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
-from scaled import assert_factor_close, assert_loglik_close
+from scaled import assert_cov_close, assert_factor_close, assert_loglik_close
 
 from shipsense import load_scenario, simulate
 from shipsense.trackers.driver import run_filter
@@ -158,8 +158,9 @@ def test_a_batch_element_equals_the_filter_run_alone(name, s0):
 def test_large_batches_give_the_small_batch_results(name, s0):
     """Above a few hundred elements the factorisations take vectorised paths; results must not change."""
     sim, model, _, x0, P0 = s0
-    small = run_filter(name, model, sim.measurements[:, :40], x0, P0)
-    big = run_filter(name, model, np.repeat(sim.measurements[:, :40], 200, axis=0), np.repeat(x0, 200, axis=0), P0)
+    small = run_filter(name, model, sim.measurements[:, :40], x0, P0, store=("means", "chols"))
+    big = run_filter(name, model, np.repeat(sim.measurements[:, :40], 200, axis=0), np.repeat(x0, 200, axis=0), P0,
+                     store=("means", "chols"))
     np.testing.assert_allclose(big.means[::200], small.means, rtol=1e-9, atol=1e-7)
     assert_loglik_close(big.loglik[::200], small.loglik, nats=1e-6)
     assert_factor_close(big.chols[::200], small.chols, 1e-7)
@@ -178,7 +179,7 @@ def test_masked_update_equals_the_model_without_those_rows(name):
     P0 = np.diag([25.0, 25.0, 2.0, 2.0, 1e8, 1e8, 1e8])
     y_nan = y.copy()
     y_nan[:, 10:40, 3:] = np.nan        # M2 silent for 30 steps
-    masked = run_filter(name, full, y_nan, x0, P0)
+    masked = run_filter(name, full, y_nan, x0, P0, store=("means", "chols"))
     # from the same belief at step 9, each masked step equals the one-sensor model's step
     b = Belief(masked.means[:, 9] / full.x_scale, masked.chols[:, 9] / full.x_scale[:, None], np.ones(2, bool))
     unit = get_filter(name)
@@ -222,3 +223,19 @@ def test_loss_of_positive_definiteness_is_flagged_per_element(name, s0):
     assert out.ok.tolist() == [True, False, True]
     assert np.isfinite(out.mean).all() and np.isfinite(out.chol).all()
     np.testing.assert_allclose(out.mean[[0, 2]], ref.mean[[0, 2]])
+
+
+def test_run_filter_stores_what_it_is_asked_for(s0):
+    sim, model, _, x0, P0 = s0
+    y = sim.measurements[:, :30]
+    default = run_filter("ukf", model, y, x0, P0)
+    assert default.chols is None and default.means.shape == y.shape[:-1] + (model.n,)
+    full = run_filter("ukf", model, y, x0, P0, store=("means", "covs", "chols"))
+    only = run_filter("ukf", model, y, x0, P0, store="means")
+    assert only.covs is None and only.chols is None
+    np.testing.assert_array_equal(only.means, default.means)
+    np.testing.assert_array_equal(full.covs, default.covs)
+    # the factors are the covariances' (scaled to SI like them)
+    assert_cov_close(full.chols @ np.swapaxes(full.chols, -1, -2), full.covs, 1e-10)
+    with pytest.raises(ValueError, match="store: unknown 'factors'"):
+        run_filter("ukf", model, y, x0, P0, store=("means", "factors"))

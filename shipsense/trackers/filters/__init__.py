@@ -23,7 +23,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from shipsense.trackers.filters import cdkf, ckf, ekf, huber_ukf, puekf, srcdkf, ukf
+from shipsense.trackers.filters import cdkf, ckf, ekf, fused, huber_ukf, puekf, srcdkf, ukf
 from shipsense.trackers.filters._core import Belief, Innovation, predict, safe_cholesky, tria
 
 UPDATES: dict[str, Callable] = {
@@ -41,11 +41,28 @@ class FilterUnit:
     options: dict = field(default_factory=dict)
 
     def predict(self, belief: Belief, model) -> Belief:
-        """Time update (shared; the SR-CDKF propagates its factor by QR)."""
-        return predict(belief, model, square_root=self.name == "srcdkf")
+        """Time update (shared; the SR-CDKF propagates its factor by triangularisation).
+
+        Compiled (:mod:`~shipsense.trackers.filters.fused`) for models with a compiled kernel, numpy otherwise.
+        """
+        square_root = self.name == "srcdkf"
+        if fused.kernel_of(model) is not None:
+            out = fused.predict(belief, model, square_root)
+            if out is not None:
+                return out
+        return predict(belief, model, square_root=square_root)
 
     def update(self, belief: Belief, y, model, mask=None):
-        """Measurement update; returns ``(belief, innovation)``."""
+        """Measurement update; returns ``(belief, innovation)``.
+
+        Compiled (:mod:`~shipsense.trackers.filters.fused`) for models with a compiled kernel; the numpy
+        update of the filter's module otherwise, and for a step in which an element failed numerically.
+        """
+        spec = fused.kernel_of(model)
+        if spec is not None:
+            out = fused.update(self.name, belief, y, model, spec, mask, **self.options)
+            if out is not None:
+                return out
         return UPDATES[self.name](belief, y, model, mask, **self.options)
 
 
@@ -53,7 +70,18 @@ def get_filter(name: str, **options) -> FilterUnit:
     """The filter unit called ``name`` with keyword ``options`` for its update."""
     if name not in UPDATES:
         raise ValueError(f"unknown filter {name!r}; choose one of: {', '.join(FILTER_NAMES)}")
+    allowed = _options_of(name)
+    for key in options:   # checked here: the compiled steps read only the options they know
+        if key not in allowed:
+            raise ValueError(f"{name}: unknown option {key!r}; it takes: {', '.join(allowed) or 'no options'}")
     return FilterUnit(name, dict(options))
+
+
+def _options_of(name):
+    """The keyword options of a unit's update (its parameters after ``belief, y, model, mask``)."""
+    import inspect
+
+    return tuple(inspect.signature(UPDATES[name]).parameters)[4:]
 
 
 __all__ = ["FILTER_NAMES", "Belief", "FilterUnit", "Innovation", "get_filter", "predict", "safe_cholesky", "tria"]

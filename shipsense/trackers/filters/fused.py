@@ -1,0 +1,834 @@
+r"""Compiled filter steps: each filter's predict and update fused into one numba loop over the batch.
+
+Who gets which implementation.  :class:`~shipsense.trackers.filters.FilterUnit`
+(what :func:`~shipsense.trackers.driver.run_filter`, the bank and the tracker
+call) runs these compiled steps whenever the model has a compiled measurement
+kernel (:func:`kernel_of`):
+
+* a :class:`~shipsense.trackers.models.FieldModel` without electrodes:
+  magnetometers (vector, magnitude or tmi readings; the S0 model) and seismic
+  bearings (S2), also with per-element transitions
+  (:meth:`~shipsense.trackers.models.FieldModel.stepped`);
+* a :class:`~shipsense.trackers.models.LinearModel`.
+
+Every other model (electrodes: the HED field and its envelope; user models with a Python ``h``)
+runs the generic numpy steps of the filter modules (``ukf.update`` and so on),
+which are also the independent reference the tests compare these steps with.
+An element whose step fails numerically here (an innovation or posterior
+covariance that is not positive definite, a non-finite result) makes the whole step rerun on the
+numpy path, which flags and repairs such elements.
+
+The results equal the numpy steps' to rounding (tests/trackers/test_fused.py), with one difference by
+design: the Huber update's reweighting stops for each element when its weights settle, where the numpy
+update iterates until the whole batch has settled (an element that settled moves by less than 1e-9 of
+its noise variances per further iteration), so a compiled element equals the numpy update of that
+element alone.
+
+One step per batch element, with no Python objects and no temporaries in the
+loop: the per-step cost is a few microseconds of call overhead plus the
+arithmetic.  The first call compiles (``cache=True``: once per machine, the
+compiled code is kept next to this file and reused by later processes).
+"""
+
+from __future__ import annotations
+
+import math
+import weakref
+from functools import lru_cache
+
+import numpy as np
+from numba import njit
+
+from shipsense.physics.kernels import dipole_point, dipole_point_jacobian
+from shipsense.trackers.filters._core import (
+    LOG_2PI,
+    Belief,
+    Innovation,
+    _BeliefWithCov,
+    _sqrt_psd,
+    prior_health,
+)
+
+# -- the model's compiled measurement function ------------------------------------------------------------------
+
+FIELD, LINEAR = 0, 1
+_KERNELS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def kernel_of(model):
+    """The compiled measurement kernel's description of ``model`` (a tuple of arrays and numbers), or None.
+
+    None means the model has no compiled kernel and the filters run their numpy steps.
+    """
+    base = getattr(model, "_model", model)    # a stepped model measures as its base model
+    try:
+        return _KERNELS[base]
+    except (KeyError, TypeError):
+        pass
+    spec = _build_kernel(base)
+    try:
+        _KERNELS[base] = spec
+    except TypeError:
+        pass
+    return spec
+
+
+def _build_kernel(model):
+    from shipsense.trackers.models import CHANNEL_UNIT, FieldModel, LinearModel
+
+    if isinstance(model, LinearModel):
+        C = np.array(model.C, dtype=float)
+        return (LINEAR, np.zeros((1, 3)), np.zeros((1, 3, 3)), np.zeros(1, np.int64), np.zeros(3),
+                np.zeros(1, np.int64), C, 0.0, 0.0, np.zeros(C.shape[0], np.int64))
+    if not isinstance(model, FieldModel):
+        return None
+    a = model.array
+    if "electrode" in a.types or model.labels not in (("x", "y", "vx", "vy", "mx", "my", "mz"), ("x", "y", "vx", "vy")):
+        return None
+    code = np.array([{"vector": 0, "magnitude": 1, "tmi": 2, "bearing": 3}[k] for k in a.kinds], dtype=np.int64)
+    width = np.where(code == 0, 3, 1)
+    offs = np.concatenate([[0], np.cumsum(width)[:-1]]).astype(np.int64)
+    earth = np.zeros(3) if a.earth_direction is None else np.asarray(a.earth_direction, dtype=float)
+    return (FIELD, np.array(a.positions, dtype=float), np.array(a.orientations, dtype=float),
+            code, earth, offs, np.zeros((1, 1)), model.moment_unit / CHANNEL_UNIT["magnetometer"],
+            float(model.source_z), np.array(a.axial, dtype=np.int64))
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _wrap(a):
+    """An axial angle (defined modulo pi) wrapped into [-pi/2, pi/2) (:func:`~shipsense.physics.seismic.wrap_axial`)."""
+    return a - math.pi * math.floor((a + 0.5 * math.pi) / math.pi)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _h(x, spec, out, B):
+    """Predicted measurements of one internal state ``x`` into ``out`` (m,); ``B`` (3,) is scratch."""
+    kind, sens, orient, code, earth, offs, C, mscale, zsrc, axial = spec
+    if kind == LINEAR:
+        for i in range(C.shape[0]):
+            acc = 0.0
+            for j in range(C.shape[1]):
+                acc += C[i, j] * x[j]
+            out[i] = acc
+        return
+    for s in range(sens.shape[0]):
+        k = offs[s]
+        c = code[s]
+        if c == 3:
+            out[k] = _wrap(math.atan2(x[1] - sens[s, 1], x[0] - sens[s, 0]))
+            continue
+        dipole_point(sens[s, 0] - x[0], sens[s, 1] - x[1], sens[s, 2] - zsrc, x[4] * mscale, x[5] * mscale,
+                     x[6] * mscale, B)
+        if c == 0:
+            for i in range(3):
+                out[k + i] = orient[s, 0, i] * B[0] + orient[s, 1, i] * B[1] + orient[s, 2, i] * B[2]
+        elif c == 1:
+            out[k] = math.sqrt(B[0] * B[0] + B[1] * B[1] + B[2] * B[2])
+        else:
+            out[k] = B[0] * earth[0] + B[1] * earth[1] + B[2] * earth[2]
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _h_jac(x, spec, out, J, r, mom, B, dBq, dBm):
+    """``h(x)`` into ``out`` (m,) and its Jacobian into ``J`` (m, n); the last five arguments are scratch."""
+    kind, sens, orient, code, earth, offs, C, mscale, zsrc, axial = spec
+    if kind == LINEAR:
+        _h(x, spec, out, B)
+        for i in range(C.shape[0]):
+            for j in range(C.shape[1]):
+                J[i, j] = C[i, j]
+        return
+    J[:, :] = 0.0
+    for s in range(sens.shape[0]):
+        k = offs[s]
+        c = code[s]
+        if c == 3:      # d atan2(dy, dx) / d(x, y) = (-dy, dx) / (dx^2 + dy^2)
+            dx, dy = x[0] - sens[s, 0], x[1] - sens[s, 1]
+            out[k] = _wrap(math.atan2(dy, dx))
+            r2 = dx * dx + dy * dy
+            J[k, 0] = -dy / r2
+            J[k, 1] = dx / r2
+            continue
+        mom[0], mom[1], mom[2] = x[4] * mscale, x[5] * mscale, x[6] * mscale
+        r[0], r[1], r[2] = sens[s, 0] - x[0], sens[s, 1] - x[1], sens[s, 2] - zsrc
+        dipole_point_jacobian(r, mom, B, dBq, dBm)
+        if c == 0:
+            for i in range(3):
+                out[k + i] = orient[s, 0, i] * B[0] + orient[s, 1, i] * B[1] + orient[s, 2, i] * B[2]
+                for j in range(2):
+                    J[k + i, j] = (orient[s, 0, i] * dBq[0, j] + orient[s, 1, i] * dBq[1, j]
+                                   + orient[s, 2, i] * dBq[2, j])
+                for j in range(3):
+                    J[k + i, 4 + j] = mscale * (orient[s, 0, i] * dBm[0, j] + orient[s, 1, i] * dBm[1, j]
+                                                + orient[s, 2, i] * dBm[2, j])
+        else:
+            if c == 1:
+                nb = math.sqrt(B[0] * B[0] + B[1] * B[1] + B[2] * B[2])
+                d = nb if nb > 0 else 1.0
+                w0, w1, w2 = B[0] / d, B[1] / d, B[2] / d
+            else:
+                w0, w1, w2 = earth[0], earth[1], earth[2]
+            out[k] = w0 * B[0] + w1 * B[1] + w2 * B[2]
+            for j in range(2):
+                J[k, j] = w0 * dBq[0, j] + w1 * dBq[1, j] + w2 * dBq[2, j]
+            for j in range(3):
+                J[k, 4 + j] = mscale * (w0 * dBm[0, j] + w1 * dBm[1, j] + w2 * dBm[2, j])
+
+
+# -- small dense linear algebra, one element at a time ----------------------------------------------------------
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _residual(a, b, axial):
+    """``a - b``, wrapped modulo pi on an axial channel."""
+    return _wrap(a - b) if axial else a - b
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _chol(A, L):
+    """Lower Cholesky factor of the lower triangle of ``A`` into ``L``; False if ``A`` is not positive definite."""
+    n = A.shape[0]
+    for j in range(n):
+        s = A[j, j]
+        for k in range(j):
+            s -= L[j, k] * L[j, k]
+        if not (s > 0.0 and s < math.inf):
+            return False
+        d = math.sqrt(s)
+        L[j, j] = d
+        for i in range(j + 1, n):
+            t = A[i, j]
+            for k in range(j):
+                t -= L[i, k] * L[j, k]
+            L[i, j] = t / d
+        for i in range(j):
+            L[i, j] = 0.0
+    return True
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _forward(L, b, out):
+    """Solve ``L out = b`` (lower triangular) for a vector."""
+    for i in range(L.shape[0]):
+        t = b[i]
+        for k in range(i):
+            t -= L[i, k] * out[k]
+        out[i] = t / L[i, i]
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _tria(M, S, A, v):
+    """Lower-triangular ``S`` (n, n) with ``S S^T = M M^T`` for ``M`` (n, k), k >= n, non-negative diagonal.
+
+    Householder triangularisation of ``M^T`` specialised to one small matrix (the numpy path calls a
+    batched LAPACK QR); ``A`` (k, n) and ``v`` (k,) are scratch.  False if the result is not finite.
+    """
+    n, k = M.shape
+    for i in range(k):
+        for j in range(n):
+            A[i, j] = M[j, i]
+    for j in range(n):
+        norm2 = 0.0
+        for i in range(j, k):
+            norm2 += A[i, j] * A[i, j]
+        if norm2 == 0.0:
+            continue
+        norm = math.sqrt(norm2)
+        alpha = -norm if A[j, j] >= 0 else norm
+        vn2 = 0.0
+        for i in range(j, k):
+            v[i] = A[i, j]
+        v[j] -= alpha
+        for i in range(j, k):
+            vn2 += v[i] * v[i]
+        if vn2 == 0.0:
+            continue
+        A[j, j] = alpha
+        for i in range(j + 1, k):
+            A[i, j] = 0.0
+        for c in range(j + 1, n):
+            t = 0.0
+            for i in range(j, k):
+                t += v[i] * A[i, c]
+            t *= 2.0 / vn2
+            for i in range(j, k):
+                A[i, c] -= t * v[i]
+    ok = True
+    for j in range(n):
+        sgn = -1.0 if A[j, j] < 0 else 1.0
+        for i in range(n):
+            S[i, j] = sgn * A[j, i] if i >= j else 0.0
+            if not math.isfinite(S[i, j]):
+                ok = False
+    return ok
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _gain(x, P, eps, Pxy, S, n, m, Ls, W, w, mean, Pout):
+    """Kalman update ``x+ = x + Pxy S^-1 eps``, ``P+ = P - Pxy S^-1 Pxy^T`` into ``mean``, ``Pout``.
+
+    Returns ``(ok, nis, log det S)``; with ``S = Ls Ls^T`` and ``[W | w] = Ls^-1 [Pxy^T | eps]``.
+    """
+    if not _chol(S, Ls):
+        return False, 0.0, 0.0
+    for i in range(m):
+        for a in range(n):
+            t = Pxy[a, i]
+            for k in range(i):
+                t -= Ls[i, k] * W[k, a]
+            W[i, a] = t / Ls[i, i]
+    _forward(Ls, eps, w)
+    nis = 0.0
+    logdet = 0.0
+    for i in range(m):
+        nis += w[i] * w[i]
+        logdet += 2.0 * math.log(Ls[i, i])
+    for a in range(n):
+        t = x[a]
+        for i in range(m):
+            t += W[i, a] * w[i]
+        mean[a] = t
+        for b in range(a + 1):
+            t = 0.0
+            for i in range(m):
+                t += W[i, a] * W[i, b]
+            Pout[a, b] = P[a, b] - t
+            Pout[b, a] = P[b, a] - t
+    ok = True
+    for a in range(n):
+        if not math.isfinite(mean[a]):
+            ok = False
+    return ok, nis, logdet
+
+
+# -- the filters' statistics ----------------------------------------------------------------------------------
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _sigma_stats(x, L, present, spec, spread, Wm, Wc, center, pt, Y, yhat, dY, Pxy, Pyy, B):
+    """Unscented/cubature ``yhat``, ``Pxy``, ``Pyy`` (no R) of the points ``[x,] x +- spread L_i``."""
+    n = x.shape[0]
+    m = yhat.shape[0]
+    N = 2 * n + center
+    for p in range(N):
+        if center and p == 0:
+            for a in range(n):
+                pt[a] = x[a]
+        else:
+            i = (p - center) % n
+            sg = 1.0 if p - center < n else -1.0
+            for a in range(n):
+                pt[a] = x[a] + sg * spread * L[a, i]
+        _h(pt, spec, Y[p], B)
+    axial = spec[9]
+    for j in range(m):
+        t = 0.0
+        if axial[j]:    # angles averaged as residuals about the first point's prediction
+            for p in range(N):
+                t += Wm[p] * _wrap(Y[p, j] - Y[0, j])
+            yhat[j] = Y[0, j] + t
+        else:
+            for p in range(N):
+                t += Wm[p] * Y[p, j]
+            yhat[j] = t
+    for p in range(N):
+        for j in range(m):
+            d = Y[p, j] - yhat[j]
+            dY[p, j] = (_wrap(d) if axial[j] else d) if present[j] else 0.0
+    for i in range(m):
+        for j in range(i + 1):
+            t = 0.0
+            for p in range(N):
+                t += Wc[p] * dY[p, i] * dY[p, j]
+            Pyy[i, j] = t
+            Pyy[j, i] = t
+    for a in range(n):
+        for j in range(m):
+            t = 0.0
+            for i in range(n):
+                t += L[a, i] * Wc[center + i] * (dY[center + i, j] - dY[center + n + i, j])
+            Pxy[a, j] = spread * t
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _difference_stats(x, L, present, spec, h, pt, Y, yhat, Y1, Y2, Pxy, B):
+    """Central-difference ``yhat``, first and second-order rows ``Y1``, ``Y2`` (n, m) and ``Pxy = L Y1``."""
+    n = x.shape[0]
+    m = yhat.shape[0]
+    for p in range(2 * n + 1):
+        if p == 0:
+            for a in range(n):
+                pt[a] = x[a]
+        else:
+            i = (p - 1) % n
+            sg = 1.0 if p - 1 < n else -1.0
+            for a in range(n):
+                pt[a] = x[a] + sg * h * L[a, i]
+        _h(pt, spec, Y[p], B)
+    c1 = 1.0 / (2.0 * h)
+    c2 = math.sqrt(h * h - 1.0) / (2.0 * h * h)
+    axial = spec[9]
+    for j in range(m):
+        t = 0.0
+        for i in range(n):
+            dp = Y[1 + i, j] - Y[0, j]
+            dm = Y[1 + n + i, j] - Y[0, j]
+            if axial[j]:
+                dp = _wrap(dp)
+                dm = _wrap(dm)
+            t += dp + dm
+            keep = 1.0 if present[j] else 0.0
+            Y1[i, j] = (dp - dm) * c1 * keep
+            Y2[i, j] = c2 * (dp + dm) * keep
+        yhat[j] = Y[0, j] + t / (2.0 * h * h)
+    for a in range(n):
+        for j in range(m):
+            t = 0.0
+            for i in range(n):
+                t += L[a, i] * Y1[i, j]
+            Pxy[a, j] = t
+
+
+UKF, CDKF, HUBER, EKF, PUEKF, SRCDKF = range(6)
+
+
+@njit(cache=True, error_model="numpy")
+def _update_kernel(filt, X, Ls_in, P_in, Yobs, mask, Rm, spec, spread, center, Wm, Wc, h, gamma, iterations, n_pu,
+                   mean_out, P_out, L_out, eps_out, S_out, loglik, nis_out, m_out, ok_out):
+    """One measurement update of every batch element (``filt``: UKF/CKF, CDKF, HUBER, EKF, PUEKF, SRCDKF).
+
+    The covariance-form filters also write the posterior's factor into ``L_out`` (the SR-CDKF's factor is
+    ``P_out``); ``ok_out`` is False where a factorisation failed or a result is not finite.
+    """
+    nb, n = X.shape
+    m = Yobs.shape[1]
+    k = 2 * n + m
+    axial = spec[9]
+    present = np.empty(m, np.bool_)
+    y = np.empty(m)
+    R = np.empty(m)
+    pt = np.empty(n)
+    Y = np.empty((2 * n + 1, m))
+    dY = np.empty((2 * n + 1, m))
+    yhat = np.empty(m)
+    eps = np.empty(m)
+    Pxy = np.empty((n, m))
+    Pyy = np.empty((m, m))
+    S = np.empty((m, m))
+    Ls = np.zeros((m, m))
+    W = np.empty((m, n))
+    w = np.empty(m)
+    Y1 = np.empty((n, m))
+    Y2 = np.empty((n, m))
+    H = np.empty((m, n))
+    P = np.empty((n, n))
+    Pn = np.empty((n, n))
+    xc = np.empty(n)
+    Ht = np.empty((n, m))
+    Reff = np.empty(m)
+    new = np.empty(m)
+    dx = np.empty(n)
+    My = np.zeros((m, k))
+    Mx = np.empty((n, k))
+    Asc = np.empty((k, max(n, m)))
+    vsc = np.empty(k)
+    r3 = np.empty(3)
+    m3 = np.empty(3)
+    B = np.empty(3)
+    dBq = np.empty((3, 3))
+    dBm = np.empty((3, 3))
+    for b in range(nb):
+        x = X[b]
+        L = Ls_in[b]
+        cnt = 0
+        for j in range(m):
+            present[j] = math.isfinite(Yobs[b, j]) and mask[b, j]
+            y[j] = Yobs[b, j] if present[j] else 0.0
+            R[j] = Rm[j] if present[j] else 1.0
+            cnt += present[j]
+        m_out[b] = cnt
+        ok = True
+        nis = 0.0
+        logdet = 0.0
+        if filt == UKF or filt == HUBER:
+            _sigma_stats(x, L, present, spec, spread, Wm, Wc, center, pt, Y, yhat, dY, Pxy, Pyy, B)
+            for j in range(m):
+                eps[j] = _residual(y[j], yhat[j], axial[j]) if present[j] else 0.0
+            for i in range(m):
+                for j in range(m):
+                    S[i, j] = Pyy[i, j]
+                S[i, i] += R[i]
+            if filt == HUBER:
+                # H^T = P^-1 Pxy through the prior's factor
+                for j in range(m):
+                    for a in range(n):
+                        t = Pxy[a, j]
+                        for q in range(a):
+                            t -= L[a, q] * Ht[q, j]
+                        Ht[a, j] = t / L[a, a]
+                    for a in range(n - 1, -1, -1):
+                        t = Ht[a, j]
+                        for q in range(a + 1, n):
+                            t -= L[q, a] * Ht[q, j]
+                        Ht[a, j] = t / L[a, a]
+                for j in range(m):
+                    Reff[j] = R[j]
+                for _ in range(iterations):
+                    if not _chol(S, Ls):
+                        ok = False
+                        break
+                    # dx = K eps = Pxy S^-1 eps
+                    _forward(Ls, eps, w)
+                    for i in range(m - 1, -1, -1):
+                        t = w[i]
+                        for q in range(i + 1, m):
+                            t -= Ls[q, i] * w[q]
+                        w[i] = t / Ls[i, i]
+                    for a in range(n):
+                        t = 0.0
+                        for j in range(m):
+                            t += Pxy[a, j] * w[j]
+                        dx[a] = t
+                    same = True
+                    for j in range(m):
+                        t = eps[j]
+                        for a in range(n):
+                            t -= Ht[a, j] * dx[a]
+                        e = abs(t) / math.sqrt(R[j])
+                        new[j] = R[j] * (e / gamma if present[j] and e > gamma else 1.0)
+                        if not abs(new[j] - Reff[j]) <= 1e-9 * abs(Reff[j]):
+                            same = False
+                    if same:
+                        break
+                    for j in range(m):
+                        Reff[j] = new[j]
+                        S[j, j] = Pyy[j, j] + Reff[j]
+            if ok:
+                ok, nis, logdet = _gain(x, P_in[b], eps, Pxy, S, n, m, Ls, W, w, mean_out[b], P_out[b])
+        elif filt == CDKF or filt == SRCDKF:
+            _difference_stats(x, L, present, spec, h, pt, Y, yhat, Y1, Y2, Pxy, B)
+            for j in range(m):
+                eps[j] = _residual(y[j], yhat[j], axial[j]) if present[j] else 0.0
+            if filt == CDKF:
+                for i in range(m):
+                    for j in range(i + 1):
+                        t = 0.0
+                        for a in range(n):
+                            t += Y1[a, i] * Y1[a, j] + Y2[a, i] * Y2[a, j]
+                        S[i, j] = t
+                        S[j, i] = t
+                    S[i, i] += R[i]
+                ok, nis, logdet = _gain(x, P_in[b], eps, Pxy, S, n, m, Ls, W, w, mean_out[b], P_out[b])
+            else:
+                # Sy = tria([Y1^T, Y2^T, R^(1/2)]), K = Pxy Sy^-T Sy^-1, Sx = tria([L - K Y1^T, K Y2^T, K R^(1/2)])
+                for i in range(m):
+                    for a in range(n):
+                        My[i, a] = Y1[a, i]
+                        My[i, n + a] = Y2[a, i]
+                    My[i, 2 * n + i] = math.sqrt(R[i])
+                ok = _tria(My, Ls, Asc, vsc)
+                for i in range(m):
+                    if not Ls[i, i] > 0.0:
+                        ok = False
+                if ok:
+                    for i in range(m):      # W = Sy^-1 Pxy^T, then K^T = Sy^-T W
+                        for a in range(n):
+                            t = Pxy[a, i]
+                            for q in range(i):
+                                t -= Ls[i, q] * W[q, a]
+                            W[i, a] = t / Ls[i, i]
+                    for i in range(m - 1, -1, -1):
+                        for a in range(n):
+                            t = W[i, a]
+                            for q in range(i + 1, m):
+                                t -= Ls[q, i] * W[q, a]
+                            W[i, a] = t / Ls[i, i]
+                    mean = mean_out[b]
+                    for a in range(n):
+                        t = x[a]
+                        for i in range(m):
+                            t += W[i, a] * eps[i]
+                        mean[a] = t
+                        if not math.isfinite(t):
+                            ok = False
+                        for c in range(n):
+                            t1 = 0.0
+                            t2 = 0.0
+                            for i in range(m):
+                                t1 += W[i, a] * Y1[c, i]
+                                t2 += W[i, a] * Y2[c, i]
+                            Mx[a, c] = L[a, c] - t1
+                            Mx[a, n + c] = t2
+                        for i in range(m):
+                            Mx[a, 2 * n + i] = W[i, a] * My[i, 2 * n + i]
+                    ok = ok and _tria(Mx, P_out[b], Asc, vsc)
+                    for a in range(n):
+                        if not P_out[b, a, a] > 0.0:
+                            ok = False
+                    _forward(Ls, eps, w)
+                    for i in range(m):
+                        nis += w[i] * w[i]
+                        logdet += 2.0 * math.log(Ls[i, i])
+                    for i in range(m):
+                        for j in range(i + 1):
+                            t = 0.0
+                            for q in range(j + 1):
+                                t += Ls[i, q] * Ls[j, q]
+                            S[i, j] = t
+                            S[j, i] = t
+        else:   # EKF, PUEKF: n_pu sub-updates with R n_pu, re-linearised; the innovation is the first one's
+            for a in range(n):
+                xc[a] = x[a]
+                for c in range(n):
+                    P[a, c] = P_in[b, a, c]
+            subs = 1 if filt == EKF else n_pu
+            for sub in range(subs):
+                _h_jac(xc, spec, yhat, H, r3, m3, B, dBq, dBm)
+                for j in range(m):
+                    eps[j] = _residual(y[j], yhat[j], axial[j]) if present[j] else 0.0
+                    if not present[j]:
+                        H[j, :] = 0.0
+                for a in range(n):          # Pxy = P H^T
+                    for j in range(m):
+                        t = 0.0
+                        for c in range(n):
+                            t += P[a, c] * H[j, c]
+                        Pxy[a, j] = t
+                for i in range(m):          # H P H^T
+                    for j in range(m):
+                        t = 0.0
+                        for c in range(n):
+                            t += H[i, c] * Pxy[c, j]
+                        Pyy[i, j] = t
+                if sub == 0:
+                    for i in range(m):
+                        for j in range(m):
+                            S_out[b, i, j] = Pyy[i, j]
+                        S_out[b, i, i] += R[i]
+                        eps_out[b, i] = eps[i]
+                for i in range(m):
+                    for j in range(m):
+                        S[i, j] = Pyy[i, j]
+                    S[i, i] += R[i] * subs if present[i] else 1.0
+                ok, nis, logdet = _gain(xc, P, eps, Pxy, S, n, m, Ls, W, w, mean_out[b], Pn)
+                if not ok:
+                    break
+                for a in range(n):
+                    xc[a] = mean_out[b, a]
+                    for c in range(n):
+                        P[a, c] = Pn[a, c]
+                        P_out[b, a, c] = Pn[a, c]
+            if ok and filt == PUEKF:
+                for i in range(m):
+                    for j in range(m):
+                        S[i, j] = S_out[b, i, j]
+                    eps[i] = eps_out[b, i]
+                ok = _chol(S, Ls)
+                if ok:
+                    _forward(Ls, eps, w)
+                    nis = 0.0
+                    logdet = 0.0
+                    for i in range(m):
+                        nis += w[i] * w[i]
+                        logdet += 2.0 * math.log(Ls[i, i])
+        if filt != EKF and filt != PUEKF:
+            for i in range(m):
+                eps_out[b, i] = eps[i]
+                for j in range(m):
+                    S_out[b, i, j] = S[i, j]
+        nis_out[b] = nis
+        loglik[b] = -0.5 * (cnt * LOG_2PI + logdet + nis)
+        if ok and filt != SRCDKF:
+            ok = _chol(P_out[b], L_out[b])
+        ok_out[b] = ok
+
+
+@njit(cache=True, error_model="numpy")
+def _predict_kernel(X, P_in, A, Q, sqQ, square_root, mean_out, P_out, L_out, ok_out):
+    """``x = A x``; ``P = A P A^T + Q`` and its factor, or (``square_root``) the factor ``tria([A L, Q^(1/2)])``.
+
+    ``A``, ``Q`` and ``sqQ`` have a leading axis of 1 (shared) or of the batch.  ``P_in`` is the covariance, or
+    with ``square_root`` the factor.
+    """
+    nb, n = X.shape
+    kq = sqQ.shape[2]
+    AP = np.empty((n, n))
+    M = np.empty((n, n + kq))
+    Asc = np.empty((n + kq, n))
+    vsc = np.empty(n + kq)
+    for b in range(nb):
+        ia = b if A.shape[0] > 1 else 0
+        iq = b if Q.shape[0] > 1 else 0
+        Ab = A[ia]
+        for i in range(n):
+            t = 0.0
+            for j in range(n):
+                t += Ab[i, j] * X[b, j]
+            mean_out[b, i] = t
+        Pb = P_in[b]
+        for i in range(n):
+            for j in range(n):
+                t = 0.0
+                for c in range(n):
+                    t += Ab[i, c] * Pb[c, j]
+                AP[i, j] = t
+        if square_root:
+            for i in range(n):
+                for j in range(n):
+                    M[i, j] = AP[i, j]
+                for j in range(kq):
+                    M[i, n + j] = sqQ[b if sqQ.shape[0] > 1 else 0, i, j]
+            ok_out[b] = _tria(M, L_out[b], Asc, vsc)
+        else:
+            Pout = P_out[b]
+            for i in range(n):
+                for j in range(i + 1):
+                    t = 0.0
+                    for c in range(n):
+                        t += AP[i, c] * Ab[j, c]
+                    Pout[i, j] = t + Q[iq, i, j]
+                    Pout[j, i] = t + Q[iq, j, i]
+            ok_out[b] = _chol(Pout, L_out[b])
+
+
+# -- numpy-facing steps ---------------------------------------------------------------------------------------
+
+def _flat(a, batch, tail):
+    """``a`` broadcast to ``batch + tail`` as a writable C-contiguous (B, *tail) array (one compiled signature)."""
+    a = np.asarray(a)
+    if a.shape != batch + tail:
+        a = np.broadcast_to(a, batch + tail).copy()
+    elif not (a.flags.c_contiguous and a.flags.writeable):
+        a = a.copy()
+    return a.reshape((-1,) + tail)
+
+
+def _per_element(a, batch, n):
+    """A transition matrix (n, n) or per-element (..., n, n) as (1 or B, n, n)."""
+    a = np.asarray(a, dtype=float)
+    if a.ndim == 2:
+        return np.ascontiguousarray(a).reshape(1, n, n)
+    return _flat(a, batch, (n, n))
+
+
+def predict(belief: Belief, model, square_root: bool = False):
+    """The compiled time update (same result as :func:`~shipsense.trackers.filters._core.predict`); None if an
+    element failed (the caller then runs the numpy step)."""
+    mean = np.asarray(belief.mean, dtype=float)
+    n = mean.shape[-1]
+    A = np.asarray(model.A, dtype=float)
+    batch = np.broadcast_shapes(mean.shape[:-1], A.shape[:-2])
+    if square_root:
+        src = belief.chol
+        Q = np.asarray(model.Q, dtype=float)
+        if Q.ndim == 2:
+            sqQ = _shared_sqrt(n, np.ascontiguousarray(Q).tobytes())
+        else:
+            w, V = np.linalg.eigh(np.broadcast_to(Q, batch + (n, n)))
+            sqQ = _flat(V * np.sqrt(np.clip(w, 0.0, None))[..., None, :], batch, (n, n))
+        Qf = np.zeros((1, 1, 1))
+    else:
+        cached = getattr(belief, "_cov", None)
+        src = cached if cached is not None else belief.chol @ np.swapaxes(belief.chol, -1, -2)
+        Qf = _per_element(model.Q, batch, n)
+        sqQ = np.zeros((1, n, 0))
+    X = _flat(mean, batch, (n,))
+    B = X.shape[0]
+    mean_out = np.empty((B, n))
+    P_out = np.empty((B, n, n)) if not square_root else np.empty((1, n, n))
+    L_out = np.zeros((B, n, n))
+    ok = np.empty(B, dtype=bool)
+    _predict_kernel(X, _flat(src, batch, (n, n)), _per_element(A, batch, n), Qf, sqQ, square_root,
+                    mean_out, P_out, L_out, ok)
+    if not ok.all():
+        return None
+    mean_out = mean_out.reshape(batch + (n,))
+    L_out = L_out.reshape(batch + (n, n))
+    if square_root:
+        return Belief(mean_out, L_out, np.broadcast_to(belief.ok, batch).copy())
+    return _BeliefWithCov.with_cov(mean_out, L_out, np.broadcast_to(prior_health(belief), batch).copy(),
+                                   P_out.reshape(batch + (n, n)))
+
+
+def update(name, belief: Belief, y, model, spec, mask=None, **options):
+    """The compiled measurement update of filter ``name`` (same result as its module's ``update``); None if an
+    element failed numerically (the caller then runs the numpy step, which flags and repairs it)."""
+    from shipsense.trackers.filters.cdkf import H_STIRLING
+    from shipsense.trackers.filters.huber_ukf import GAMMA
+    from shipsense.trackers.filters.ukf import merwe_weights
+
+    mean = np.asarray(belief.mean, dtype=float)
+    y = np.asarray(y, dtype=float)
+    n, m = mean.shape[-1], y.shape[-1]
+    batch = np.broadcast_shapes(mean.shape[:-1], y.shape[:-1], np.shape(mask)[:-1] if mask is not None else ())
+    spread, center, Wm, Wc = 1.0, 1, _NO_WEIGHTS, _NO_WEIGHTS
+    h, gamma, iterations, n_pu = H_STIRLING, GAMMA, 10, 1
+    if name in ("ukf", "huber_ukf"):
+        spread, Wm, Wc = _merwe(merwe_weights, n, options.get("alpha", 1.0), options.get("beta", 2.0),
+                                options.get("kappa", 0.0))
+        filt = UKF if name == "ukf" else HUBER
+        gamma = float(options.get("gamma", GAMMA))
+        iterations = int(options.get("iterations", 10))
+    elif name == "ckf":
+        filt, center, spread = UKF, 0, float(np.sqrt(n))
+        Wm = Wc = _ckf_weights(n)
+    elif name in ("cdkf", "srcdkf"):
+        filt = CDKF if name == "cdkf" else SRCDKF
+        h = float(options.get("h", H_STIRLING))
+    elif name == "ekf":
+        filt = EKF
+    else:
+        filt, n_pu = PUEKF, int(options.get("n_pu", 5))
+        if n_pu < 1:
+            raise ValueError(f"n_pu must be >= 1, got {n_pu}")
+    cov_form = filt != SRCDKF
+    P = belief.cov if cov_form else _NO_COV
+    X = _flat(mean, batch, (n,))
+    nb = X.shape[0]
+    mask_f = np.ones((1, m), dtype=bool) if mask is None else _flat(np.asarray(mask, dtype=bool), batch, (m,))
+    if mask_f.shape[0] != nb:
+        mask_f = np.ascontiguousarray(np.broadcast_to(mask_f, (nb, m)))
+    mean_out = np.empty((nb, n))
+    P_out = np.empty((nb, n, n))
+    L_out = np.zeros((nb, n, n)) if cov_form else _NO_COV
+    eps = np.empty((nb, m))
+    S = np.empty((nb, m, m))
+    loglik = np.empty(nb)
+    nis = np.empty(nb)
+    cnt = np.empty(nb, dtype=np.int64)
+    ok = np.empty(nb, dtype=bool)
+    L = belief.chol if filt not in (EKF, PUEKF) else P   # the linearised filters do not read the factor
+    _update_kernel(filt, X, _flat(L, batch, (n, n)), _flat(P, batch, (n, n)) if cov_form else _NO_COV,
+                   _flat(y, batch, (m,)), mask_f, np.array(model.R, dtype=float), spec, spread, center,
+                   Wm, Wc, h, gamma, iterations, n_pu, mean_out, P_out, L_out, eps, S, loglik, nis, cnt, ok)
+    if not ok.all():
+        return None
+    inn = Innovation(eps.reshape(batch + (m,)), S.reshape(batch + (m, m)), loglik.reshape(batch),
+                     nis.reshape(batch), cnt.reshape(batch))
+    mean_out = mean_out.reshape(batch + (n,))
+    P_out = P_out.reshape(batch + (n, n))
+    if filt == SRCDKF:
+        return Belief(mean_out, P_out, np.broadcast_to(belief.ok, batch).copy()), inn
+    return _BeliefWithCov.with_cov(mean_out, L_out.reshape(batch + (n, n)),
+                                   np.broadcast_to(prior_health(belief), batch).copy(), P_out), inn
+
+
+_NO_WEIGHTS = np.zeros(1)
+_NO_COV = np.zeros((1, 1, 1))
+
+
+@lru_cache(maxsize=64)
+def _shared_sqrt(n, data):
+    """The square root of a shared Q (the columns of :func:`_sqrt_psd` that are not zero) as (1, n, k)."""
+    sq = _sqrt_psd(np.frombuffer(data, dtype=float).reshape(n, n))
+    return np.ascontiguousarray(sq[:, np.abs(sq).max(axis=0) > 0]).reshape(1, n, -1)
+
+
+@lru_cache(maxsize=64)
+def _ckf_weights(n):
+    return np.full(2 * n, 0.5 / n)
+
+
+@lru_cache(maxsize=64)
+def _merwe(weights, n, alpha, beta, kappa):
+    """The unscented weights as writable arrays (a read-only array is another compiled signature)."""
+    spread, Wm, Wc = weights(n, alpha, beta, kappa)
+    return spread, Wm.copy(), Wc.copy()
