@@ -60,6 +60,11 @@ def make_vector_env(env_id, n_envs, env_kwargs=None):
                         vector_kwargs={"autoreset_mode": AutoresetMode.SAME_STEP}, **kwargs)
 
 
+def rollout_steps(timesteps, n_envs):
+    """Steps per environment in one PPO rollout: 1024 steps in all, fewer when the whole run is shorter."""
+    return max(8, min(1024 // n_envs, -(-timesteps // n_envs)))
+
+
 def _check(kind, env_id, timesteps, seed, n_envs, eval_every, eval_episodes, env_kwargs):
     import gymnasium as gym
 
@@ -74,8 +79,9 @@ def _check(kind, env_id, timesteps, seed, n_envs, eval_every, eval_episodes, env
     timesteps = number("timesteps", timesteps, 64, 10**9, integer=True)
     seed = number("seed", seed, 0, 2**31 - 1, integer=True)
     n_envs = number("n_envs", n_envs, 1, 256, integer=True)
+    rollout = rollout_steps(timesteps, n_envs) * n_envs
     eval_every = number("eval_every", eval_every, 1, 10**9, integer=True) if eval_every is not None else \
-        max(timesteps // 10, 1)
+        max(timesteps // 10, rollout)
     eval_episodes = number("eval_episodes", eval_episodes, 1, 10**5, integer=True)
     if env_kwargs is not None and not isinstance(env_kwargs, dict):
         raise ValueError(f"env_kwargs must be a dict, got {type(env_kwargs).__name__}")
@@ -173,7 +179,7 @@ def train(kind, env_id=None, timesteps=None, out=None, seed=0, n_envs=8, eval_ev
         from sb3_contrib import MaskablePPO as Algo
     else:
         from stable_baselines3 import PPO as Algo
-    n_steps = max(8, 1024 // n_envs)
+    n_steps = rollout_steps(timesteps, n_envs)
     model = Algo("MlpPolicy", venv, n_steps=n_steps, batch_size=min(256, n_steps * n_envs), seed=seed,
                  device="cpu", verbose=0, tensorboard_log=str(out / "tensorboard"))
     callback = _eval_callback(env_id, env_kwargs, out, eval_every, eval_episodes, masked, progress)
