@@ -113,8 +113,9 @@ def evaluate(env_id, policy, episodes, seed, env_kwargs=None, progress=False):
     -------
     dict
         ``env``, ``policy``, ``episodes``, ``seed``, ``env_kwargs``, ``return`` (``mean``, ``stderr``),
-        ``length`` (mean steps), ``metrics`` (``{name: {"mean", "stderr"}}`` of ``info["episode_metrics"]``)
-        and ``seconds`` (wall time of the evaluation).
+        ``length`` (mean steps), ``metrics`` (``{name: {"mean", "stderr"}}`` of ``info["episode_metrics"]``),
+        ``seconds`` (wall time of the evaluation) and ``per_episode`` (``{"return": [...], name: [...]}``, in
+        seed order: paired comparisons between policies evaluated on the same seeds).
     """
     import gymnasium as gym
 
@@ -140,7 +141,8 @@ def evaluate(env_id, policy, episodes, seed, env_kwargs=None, progress=False):
     finally:
         env.close()
     return {"env": env_id, "policy": str(policy), "episodes": episodes, "seed": seed, "env_kwargs": env_kwargs or {},
-            **summarise(returns, metrics), "length": float(np.mean(lengths)), "seconds": seconds}
+            **summarise(returns, metrics), "length": float(np.mean(lengths)), "seconds": seconds,
+            "per_episode": {"return": returns, **metrics}}
 
 
 def summary_lines(result):

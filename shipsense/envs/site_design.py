@@ -43,15 +43,19 @@ index                  meaning
 9                      water depth / 30 m
 10 .. 10+N-1           1 where the candidate is free of exclusions
 10+N .. 10+2N-1        1 where a sensor stands
-10+2N .. 10+3N-1       the candidate's own score as a single sensor, divided by
-                       the best free candidate's (0 on excluded candidates)
+10+2N .. 10+3N-1       the candidate's gain: how much the score would rise if it
+                       were placed next, divided by the largest gain (0 on
+                       excluded and taken candidates; greedy picks the 1)
 10+3N                  fraction of the k sensors placed
 =====================  ==========================================================
 
 ## Rewards
 
 0 per valid placement, -1 per invalid pick; at the end ``score -
-ambiguity_penalty x ambiguous``.  ``score`` is the D-criterion in nats per
+ambiguity_penalty x ambiguous``.  With ``reward="incremental"`` a valid
+placement earns the rise of the score it brings instead, and the end only
+the penalty: the undiscounted return is the same (the rises telescope to the
+score), the credit comes at each step.  ``score`` is the D-criterion in nats per
 state component, ``mean_s log det(I + sum_i D J_si D) / n`` (J: Fisher
 information of passage s at candidate i; D: the prior standard deviations;
 the information gained over the prior), a function of the set of chosen
@@ -86,7 +90,7 @@ the last step: the time the policy took to produce the design) and
 ``scenario`` ("S1-P2"; it needs a ``[prior]``), ``k`` (4), ``half_width`` (m,
 30), ``spacing`` (m, 7.5), ``passages`` (4), ``stride`` (4: every 4th sample
 enters the Fisher matrices), ``ambiguity_penalty`` (2.0), ``ambiguity``
-("mirror" or "full"), ``max_steps`` (None: 2 k), ``site`` (None: drawn; or a
+("mirror" or "full"), ``reward`` ("terminal" or "incremental"), ``max_steps`` (None: 2 k), ``site`` (None: drawn; or a
 fixed site as a dict of :class:`~shipsense.envs.sites.Site` fields),
 ``render_mode`` (``"rgb_array"`` or ``"human"``).  Bad values raise one
 ``ValueError`` naming the argument.
@@ -126,7 +130,8 @@ SEED_HIGH = 2**31 - 1
 SCREEN_PASSAGES = 2
 
 
-def _check_kwargs(scenario, k, half_width, spacing, passages, stride, ambiguity_penalty, ambiguity, max_steps, site):
+def _check_kwargs(scenario, k, half_width, spacing, passages, stride, ambiguity_penalty, ambiguity, max_steps, site,
+                  reward):
     from shipsense.config import load_scenario
     from shipsense.design.placement import grid_candidates
 
@@ -146,6 +151,8 @@ def _check_kwargs(scenario, k, half_width, spacing, passages, stride, ambiguity_
     penalty = number("ambiguity_penalty", ambiguity_penalty, 0.0, 1e6)
     if ambiguity not in ("mirror", "full"):
         raise ValueError(f"ambiguity must be 'mirror' or 'full', got {ambiguity!r}")
+    if reward not in ("terminal", "incremental"):
+        raise ValueError(f"reward must be 'terminal' or 'incremental', got {reward!r}")
     max_steps = 2 * k if max_steps is None else number("max_steps", max_steps, k, 10**6, integer=True)
     if site is not None:
         site = Site.from_dict(site)
@@ -165,10 +172,11 @@ class DesignCore:
     """
 
     def __init__(self, num_envs, scenario="S1-P2", k=4, half_width=30.0, spacing=7.5, passages=4, stride=4,
-                 ambiguity_penalty=2.0, ambiguity="mirror", max_steps=None, site=None):
+                 ambiguity_penalty=2.0, ambiguity="mirror", max_steps=None, site=None, reward="terminal"):
         (self.base, self.xy, self.k, self.P, self.stride, self.penalty, self.max_steps,
          self.fixed_site) = _check_kwargs(scenario, k, half_width, spacing, passages, stride, ambiguity_penalty,
-                                          ambiguity, max_steps, site)
+                                          ambiguity, max_steps, site, reward)
+        self.incremental = reward == "incremental"
         self.E, self.N = int(num_envs), len(self.xy)
         self.half_width, self.ambiguity = float(half_width), ambiguity
         from shipsense.trackers.models import model_from_scenario
@@ -182,7 +190,8 @@ class DesignCore:
         self.placed = np.zeros((E, N), dtype=bool)
         self.count = np.zeros(E, dtype=int)
         self.t = np.zeros(E, dtype=int)
-        self.single = np.zeros((E, N), dtype=np.float32)
+        self.gain = np.zeros((E, N))                   # score rise of each candidate placed next (-inf: not free)
+        self.current = np.zeros(E)                     # score of the placed set
         self.features = np.zeros((E, SITE_FEATURES), dtype=np.float32)
         self.started = np.zeros(E)
         self.sites = [None] * E
@@ -222,11 +231,31 @@ class DesignCore:
             self.count[e] = self.t[e] = 0
             self.sites[e], self.scenarios[e], self.models[e], self.thetas[e] = site, sc, model, thetas
             self.truth[e], self.passage_seeds[e] = truth, seed
-            single = self._scores(np.full(1, e), np.eye(self.N, dtype=bool)[None])[0]     # (N,)
-            best = single[self.free[e]].max()
-            self.single[e] = np.where(self.free[e], single / best if best > 0 else 0.0, 0.0)
             self.features[e] = site.features(self.half_width)
             self.started[e] = time.perf_counter()
+        envs = np.asarray(list(envs), dtype=int)
+        self.current[envs] = 0.0
+        self._update_gain(envs)
+
+    def _update_gain(self, envs):
+        """The score rise of every free candidate placed next, for the environments ``envs``: one batch of
+        (N x P) log-determinants per environment."""
+        if not len(envs):
+            return
+        J = self.J[envs]                                                        # (e, P, N, n, n)
+        base = self.eps[envs, None, None, None] * np.eye(self.n) + np.einsum("epnij,en->epij", J,
+                                                                               self.placed[envs].astype(float))
+        T = base[:, None] + np.swapaxes(J, 1, 2)                                # (e, N, P, n, n)
+        sign, logdet = np.linalg.slogdet(T)
+        scores = (np.where(sign > 0, logdet, -np.inf).mean(axis=-1) + self.n * self.logc[envs, None]) / self.n
+        self.gain[envs] = np.where(self.masks()[envs], scores - self.current[envs, None], -np.inf)
+
+    def gain_feature(self):
+        """The gains divided by the largest one per environment, 0 where not free (the observation's block)."""
+        ok = np.isfinite(self.gain)
+        top = np.where(ok, self.gain, -np.inf).max(axis=1, keepdims=True)
+        top = np.where(np.isfinite(top) & (top > 0), top, 1.0)
+        return np.where(ok, np.clip(self.gain / top, -2.0, 2.0), 0.0).astype(np.float32)
 
     def _scores(self, envs, sets):
         """Scores of boolean layouts ``sets`` (len(envs), B, N): mean log det(I + sum D J D) / n per layout."""
@@ -248,7 +277,7 @@ class DesignCore:
 
     def observe(self):
         return np.concatenate([self.features, self.free.astype(np.float32), self.placed.astype(np.float32),
-                               self.single, (self.count / self.k).astype(np.float32)[:, None]], axis=1)
+                               self.gain_feature(), (self.count / self.k).astype(np.float32)[:, None]], axis=1)
 
     def _ambiguous(self, e):
         from shipsense.design.observability import DEFAULT_CHI2, check_array, mirror_screen
@@ -274,17 +303,20 @@ class DesignCore:
         self.placed[rows[valid], a[valid]] = True
         self.count += valid
         self.t += 1
-        rewards = np.where(valid, 0.0, -1.0)
+        before = self.current.copy()
+        self.current = self._scores(rows, self.placed[:, None])[:, 0]
+        rewards = np.where(valid, self.current - before if self.incremental else 0.0, -1.0)
         terminated = self.count >= self.k
         truncated = ~terminated & (self.t >= self.max_steps)
         infos = [{"invalid": not bool(v), "placed": int(c)} for v, c in zip(valid, self.count)]
         done = np.flatnonzero(terminated | truncated)
+        self._update_gain(rows)
         if done.size:
-            scores = self._scores(done, self.placed[done][:, None])[:, 0]
             now = time.perf_counter()
-            for e, s in zip(done, scores):
+            for e in done:
+                s = self.current[e]
                 ambiguous = self._ambiguous(e)
-                rewards[e] += s - self.penalty * ambiguous
+                rewards[e] += (0.0 if self.incremental else s) - self.penalty * ambiguous
                 infos[e]["episode_metrics"] = {"score": float(s), "ambiguous": float(ambiguous),
                                                "seconds": float(now - self.started[e])}
                 infos[e]["layout"] = np.column_stack(
@@ -309,7 +341,9 @@ class DesignCore:
         for x0, y0, vx, vy in truth[:, :4]:
             ax.plot([x0, x0 + vx * steps], [y0, y0 + vy * steps], color="tab:blue", lw=0.6, alpha=0.5)
         free = self.free[e] & ~self.placed[e]
-        ax.scatter(*self.xy[free].T, s=4 + 40 * self.single[e][free], color="0.5", label="free (size: own score)")
+        gain = self.gain_feature()[e]
+        ax.scatter(*self.xy[free].T, s=4 + 40 * np.clip(gain[free], 0, 1), color="0.5",
+                   label="free (size: gain if placed next)")
         ax.scatter(*self.xy[self.placed[e]].T, s=70, color="tab:orange", edgecolor="k", label="placed")
         ax.set_xlim(-1.6 * hw, 1.6 * hw)
         ax.set_ylim(-1.6 * hw, 1.6 * hw)
@@ -330,11 +364,12 @@ class SiteDesignEnv(gym.Env):
     BASELINES = ("random", "greedy", "convex")
 
     def __init__(self, scenario="S1-P2", k=4, half_width=30.0, spacing=7.5, passages=4, stride=4,
-                 ambiguity_penalty=2.0, ambiguity="mirror", max_steps=None, site=None, render_mode=None):
+                 ambiguity_penalty=2.0, ambiguity="mirror", max_steps=None, site=None, reward="terminal",
+                 render_mode=None):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
         self.core = DesignCore(1, scenario, k, half_width, spacing, passages, stride, ambiguity_penalty, ambiguity,
-                               max_steps, site)
+                               max_steps, site, reward)
         self.observation_space, self.action_space = _spaces(self.core)
         self.render_mode = render_mode
         self._started = False
@@ -423,11 +458,7 @@ class GreedyPolicy:
         self.env = env
 
     def __call__(self, obs):
-        core = self.env.core
-        mask = core.masks()[0]
-        sets = core.placed[0][None] | np.eye(core.N, dtype=bool)[mask]            # (free, N)
-        vals = core._scores(np.zeros(1, dtype=int), sets[None])[0]
-        return int(np.flatnonzero(mask)[int(np.argmax(vals))])
+        return int(np.argmax(self.env.core.gain[0]))      # -inf where not free
 
 
 class ConvexPolicy:
@@ -469,13 +500,14 @@ class SiteDesignVectorEnv(VectorEnv):
     metadata = {"render_modes": ["rgb_array"], "autoreset_mode": AutoresetMode.SAME_STEP}
 
     def __init__(self, num_envs=1, scenario="S1-P2", k=4, half_width=30.0, spacing=7.5, passages=4, stride=4,
-                 ambiguity_penalty=2.0, ambiguity="mirror", max_steps=None, site=None, render_mode=None):
+                 ambiguity_penalty=2.0, ambiguity="mirror", max_steps=None, site=None, reward="terminal",
+                 render_mode=None):
         num_envs = number("num_envs", num_envs, 1, 4096, integer=True)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
         self.num_envs = num_envs
         self.core = DesignCore(num_envs, scenario, k, half_width, spacing, passages, stride, ambiguity_penalty,
-                               ambiguity, max_steps, site)
+                               ambiguity, max_steps, site, reward)
         self.single_observation_space, self.single_action_space = _spaces(self.core)
         self.observation_space = batch_space(self.single_observation_space, num_envs)
         self.action_space = batch_space(self.single_action_space, num_envs)

@@ -36,6 +36,7 @@ def _require_rl():
     try:
         import sb3_contrib  # noqa: F401
         import stable_baselines3  # noqa: F401
+        import tensorboard  # noqa: F401  (the training logs)
         import torch
     except ImportError as err:
         raise RuntimeError("training needs the rl extra: pip install 'shipsense[rl]' "

@@ -115,12 +115,33 @@ def test_invalid_picks_are_penalised_no_ops_and_the_time_limit_ends_the_episode(
         env.step(1)
 
 
-def test_greedy_first_picks_the_best_single_candidate_of_the_observation():
+def test_greedy_picks_the_largest_gain_of_the_observation_and_gains_are_score_rises():
     env = SiteDesignEnv(**SMALL)
     obs, _ = env.reset(seed=0)
     N = env.core.N
-    single = obs[SITE_FEATURES + 2 * N:SITE_FEATURES + 3 * N]
-    assert env.baseline("greedy")(obs) == int(np.argmax(single)) and single.max() == 1.0
+    greedy = env.baseline("greedy")
+    chosen = []
+    for _ in range(3):
+        gain = obs[SITE_FEATURES + 2 * N:SITE_FEATURES + 3 * N]
+        a = greedy(obs)
+        assert a == int(np.argmax(gain)) and gain.max() == 1.0
+        best = max(env.score(chosen + [i]) for i in np.flatnonzero(env.action_masks()))   # brute force
+        assert env.score(chosen + [a]) == pytest.approx(best, rel=1e-12)
+        chosen.append(a)
+        obs, *_ = env.step(a)
+
+
+def test_incremental_rewards_sum_to_the_terminal_reward():
+    picks = [3, 17, 9]
+    returns = {}
+    for mode in ("terminal", "incremental"):
+        env = SiteDesignEnv(**SMALL, reward=mode)
+        env.reset(seed=4)
+        rewards = [env.step(a)[1] for a in [3, 3] + picks[1:]]          # one invalid pick in between
+        returns[mode] = sum(rewards)
+        if mode == "incremental":
+            assert rewards[0] == pytest.approx(env.score([3])) and rewards[1] == -1.0
+    assert returns["incremental"] == pytest.approx(returns["terminal"], rel=1e-9)
 
 
 def test_greedy_beats_random_on_average():
@@ -148,7 +169,7 @@ def test_an_unknown_baseline_is_refused_naming_the_offered_ones():
     ({"passages": 0}, "passages"), ({"spacing": "x"}, "spacing"), ({"ambiguity": "some"}, "ambiguity"),
     ({"max_steps": 2}, "max_steps"), ({"site": {**SITE, "exclusions": [[0.0, 0.0, 100.0]]}}, "site"),
     ({"site": {**SITE, "depth": 3}}, "site"), ({"site": {**SITE, "speed_mps": [8.0, 5.0]}}, "site.speed_mps"),
-    ({"render_mode": "text"}, "render_mode"), ({"scenario": "no-such-scenario"}, "scenario"),
+    ({"render_mode": "text"}, "render_mode"), ({"reward": "dense"}, "reward"), ({"scenario": "no-such-scenario"}, "scenario"),
 ])
 def test_bad_arguments_raise_one_value_error_naming_the_argument(kwargs, name):
     with pytest.raises(ValueError, match=name):
