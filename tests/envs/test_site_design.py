@@ -169,7 +169,8 @@ def test_an_unknown_baseline_is_refused_naming_the_offered_ones():
     ({"passages": 0}, "passages"), ({"spacing": "x"}, "spacing"), ({"ambiguity": "some"}, "ambiguity"),
     ({"max_steps": 2}, "max_steps"), ({"site": {**SITE, "exclusions": [[0.0, 0.0, 100.0]]}}, "site"),
     ({"site": {**SITE, "depth": 3}}, "site"), ({"site": {**SITE, "speed_mps": [8.0, 5.0]}}, "site.speed_mps"),
-    ({"render_mode": "text"}, "render_mode"), ({"reward": "dense"}, "reward"), ({"scenario": "no-such-scenario"}, "scenario"),
+    ({"render_mode": "text"}, "render_mode"), ({"reward": "dense"}, "reward"),
+    ({"scenario": "no-such-scenario"}, "scenario"),
 ])
 def test_bad_arguments_raise_one_value_error_naming_the_argument(kwargs, name):
     with pytest.raises(ValueError, match=name):
