@@ -2,13 +2,13 @@
 
 :func:`train` serves both kinds: ``scheduling`` trains PPO, ``placement`` MaskablePPO (with the env's
 ``action_masks``), each on the environment's vector version through :class:`~shipsense.envs.sb3.VectorEnvAdapter`
-(the native ``vector_entry_point`` when it autoresets in the same step, else gymnasium's ``SyncVectorEnv`` in
-that mode), with TensorBoard logs in ``OUT/tensorboard``.  Every ``eval_every`` steps the deterministic agent
-plays ``eval_episodes`` held-out episodes (seeds :data:`HELD_OUT_SEED` + i; training environments are seeded
-from ``seed``); the best one so far is saved as ``OUT/best_model.zip``.  At the end: ``OUT/final_model.zip``,
-``OUT/learning_curve.json`` and ``OUT/learning_curve.png`` (the held-out mean return with its standard error
-against the steps), and ``OUT/evaluation.json`` (the summary).  Compare the saved model with the baselines on
-other seeds with ``shipsense evaluate ENV --policy OUT/best_model.zip``.
+(the native ``vector_entry_point`` when it autoresets in the same step, else gymnasium's ``SyncVectorEnv`` in that
+mode; the defaults: :data:`DEFAULT_ENVS`), with TensorBoard logs in ``OUT/tensorboard``. Every ``eval_every`` steps
+the deterministic agent plays ``eval_episodes`` held-out episodes (seeds :data:`HELD_OUT_SEED` + i; training
+environments are seeded from ``seed``); the best one so far is saved as ``OUT/best_model.zip``. At the end:
+``OUT/final_model.zip``, ``OUT/learning_curve.json`` and ``OUT/learning_curve.png`` (the held-out mean return with
+its standard error against the steps), and ``OUT/evaluation.json`` (the summary). Compare the saved model with the
+baselines on other seeds with ``shipsense evaluate ENV --policy OUT/best_model.zip``.
 """
 
 from __future__ import annotations
@@ -22,9 +22,9 @@ import numpy as np
 from shipsense.envs.arguments import number
 
 ALGORITHMS = {"scheduling": "PPO", "placement": "MaskablePPO"}
-DEFAULT_ENVS = {
-    "scheduling": "shipsense/Passage-v0",        # becomes shipsense/Passage-v1 when that environment is merged
-    "placement": "shipsense/ArrayDesign-v1",
+DEFAULT_ENVS = {   # kind: (env id, its arguments when --env is not given)
+    "scheduling": ("shipsense/Passage-v0", {"max_reads": 1, "energy_cost": 0.01}),   # -> Passage-v1 when merged
+    "placement": ("shipsense/ArrayDesign-v1", {}),
 }
 DEFAULT_TIMESTEPS = {"scheduling": 20_000, "placement": 20_000}
 HELD_OUT_SEED = 1_000_000
@@ -73,7 +73,11 @@ def _check(kind, env_id, timesteps, seed, n_envs, eval_every, eval_episodes, env
 
     if kind not in ALGORITHMS:
         raise ValueError(f"kind must be one of {', '.join(ALGORITHMS)}, got {kind!r}")
-    env_id = DEFAULT_ENVS[kind] if env_id is None else env_id
+    if env_kwargs is not None and not isinstance(env_kwargs, dict):
+        raise ValueError(f"env_kwargs must be a dict, got {type(env_kwargs).__name__}")
+    if env_id is None:
+        env_id, defaults = DEFAULT_ENVS[kind]
+        env_kwargs = {**defaults, **(env_kwargs or {})}
     if env_id not in gym.registry:
         known = sorted(k for k in gym.registry if k.startswith("shipsense/"))
         raise ValueError(f"env_id {env_id!r} is not registered (shipsense's: {', '.join(known)})")
@@ -84,9 +88,7 @@ def _check(kind, env_id, timesteps, seed, n_envs, eval_every, eval_episodes, env
     eval_every = number("eval_every", eval_every, 1, 10**9, integer=True) if eval_every is not None else \
         max(timesteps // 10, rollout)
     eval_episodes = number("eval_episodes", eval_episodes, 1, 10**5, integer=True)
-    if env_kwargs is not None and not isinstance(env_kwargs, dict):
-        raise ValueError(f"env_kwargs must be a dict, got {type(env_kwargs).__name__}")
-    return env_id, timesteps, seed, n_envs, eval_every, eval_episodes
+    return env_id, timesteps, seed, n_envs, eval_every, eval_episodes, env_kwargs or None
 
 
 def _eval_callback(env_id, env_kwargs, out, every, episodes, masked, progress):
@@ -164,7 +166,7 @@ def train(kind, env_id=None, timesteps=None, out=None, seed=0, n_envs=8, eval_ev
     ``out/evaluation.json``.
     """
     timesteps = DEFAULT_TIMESTEPS.get(kind, 0) if timesteps is None else timesteps
-    env_id, timesteps, seed, n_envs, eval_every, eval_episodes = _check(
+    env_id, timesteps, seed, n_envs, eval_every, eval_episodes, env_kwargs = _check(
         kind, env_id, timesteps, seed, n_envs, eval_every, eval_episodes, env_kwargs)
     _require_rl()
     from stable_baselines3.common.vec_env import VecMonitor
