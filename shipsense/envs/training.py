@@ -29,6 +29,9 @@ DEFAULT_ENVS = {   # kind: (env id, its arguments when --env is not given)
 DEFAULT_TIMESTEPS = {"scheduling": 20_000, "placement": 20_000}
 HELD_OUT_SEED = 1_000_000
 """Seeds of the periodic held-out evaluation (training environments are seeded from ``seed``, 0 by default)."""
+POLICY_KWARGS = {"net_arch": {"pi": [256, 256], "vf": [256, 256]}}
+"""Two hidden layers of 256 for the policy and the value (SB3's default 64 is a bottleneck for ArrayDesign-v1's
+one logit per candidate, 81 of them, each to be read off its own gain feature)."""
 MODEL_FILES = {"best": "best_model.zip", "final": "final_model.zip"}
 
 
@@ -184,7 +187,7 @@ def train(kind, env_id=None, timesteps=None, out=None, seed=0, n_envs=8, eval_ev
         from stable_baselines3 import PPO as Algo
     n_steps = rollout_steps(timesteps, n_envs)
     model = Algo("MlpPolicy", venv, n_steps=n_steps, batch_size=min(256, n_steps * n_envs), seed=seed,
-                 device="cpu", verbose=0, tensorboard_log=str(out / "tensorboard"))
+                 device="cpu", verbose=0, tensorboard_log=str(out / "tensorboard"), policy_kwargs=POLICY_KWARGS)
     callback = _eval_callback(env_id, env_kwargs, out, eval_every, eval_episodes, masked, progress)
     t0 = time.perf_counter()
     model.learn(total_timesteps=timesteps, callback=callback, tb_log_name=ALGORITHMS[kind])
