@@ -1,8 +1,11 @@
 """Environment benchmark: steps per second of Passage-v0 (single and native vector, 64 envs) with the
 project's tracker as observer (what users get; ``--observer bank``: the studies' 12-hypothesis bank),
-with CartPole-v1 measured in the same run as the reference.
+and of ArrayDesign-v1 (single and native vector, 16 envs; random valid picks, whole episodes: every
+episode's site set-up, i.e. its Fisher matrices, is included) against ArrayDesign-v0 (a few steps: its
+terminal judge tracks 8 passages), with CartPole-v1 measured in the same run as the reference.
 
-Run:  python benchmarks/envs.py [--steps 2000] [--num-envs 64] [--observer tracker|bank] [--allocator tuned|default]
+Run:  PYTHONPATH=. python benchmarks/envs.py [--steps 2000] [--num-envs 64] [--observer tracker|bank]
+      [--allocator tuned|default] [--design-steps 400] [--design-envs 16] [--skip-passage]
 
 Actions are all-ones (read every sensor) so that every step runs the full
 update; autoresets are included.  Every rate is the best of three timed runs.  PPO frames per second are reported by
@@ -67,6 +70,9 @@ def main(argv=None):
                     help="tuned: shipsense.tune_allocator() as the shipsense command does; default: glibc's")
     ap.add_argument("--observer", choices=("tracker", "bank"), default="tracker",
                     help="the environment's observer (default: the tracker, as users get it)")
+    ap.add_argument("--design-steps", type=int, default=400, help="ArrayDesign-v1 single-env steps per timed run")
+    ap.add_argument("--design-envs", type=int, default=16, help="ArrayDesign-v1 vector envs")
+    ap.add_argument("--skip-passage", action="store_true", help="measure only CartPole and ArrayDesign")
     args = ap.parse_args(argv)
     kwargs = {"observer": args.observer} | ({"overrides": TWELVE} if args.observer == "bank" else {})
     tuned = args.allocator == "tuned" and shipsense.tune_allocator()
@@ -75,18 +81,59 @@ def main(argv=None):
     cart = single_rate(gym.make("CartPole-v1"), args.steps, 1)
     cart_vec = vector_rate(gym.make_vec("CartPole-v1", num_envs=n, vectorization_mode="vector_entry_point"),
                            args.steps // 10, np.ones(n, dtype=np.int64))
-    env = gym.make("shipsense/Passage-v0", **kwargs)
-    print(f"observer: {args.observer}")
-    single = single_rate(env, args.steps, np.ones(3, dtype=np.int8))
-    venv = gym.make_vec("shipsense/Passage-v0", num_envs=n, vectorization_mode="vector_entry_point", **kwargs)
-    vec = vector_rate(venv, max(args.steps // 10, 20), np.ones((n, 3), dtype=np.int8))
-    print(f"{'environment':<40}{'steps/s':>12}")
-    print(f"{'CartPole-v1 (single)':<40}{cart:>12,.0f}")
-    print(f"{f'CartPole-v1 (native vector, {n} envs)':<40}{cart_vec:>12,.0f}")
-    print(f"{f'shipsense/Passage-v0 (single, {args.observer})':<40}{single:>12,.0f}")
-    print(f"{f'shipsense/Passage-v0 (vector, {n} envs)':<40}{vec:>12,.0f}")
-    print(f"\nPassage-v0 / CartPole-v1: single {single / cart:.3f}, vector {vec / cart_vec:.3f}")
+    print(f"{'environment':<44}{'steps/s':>12}")
+    print(f"{'CartPole-v1 (single)':<44}{cart:>12,.0f}")
+    print(f"{f'CartPole-v1 (native vector, {n} envs)':<44}{cart_vec:>12,.0f}")
+    if not args.skip_passage:
+        env = gym.make("shipsense/Passage-v0", **kwargs)
+        single = single_rate(env, args.steps, np.ones(3, dtype=np.int8))
+        venv = gym.make_vec("shipsense/Passage-v0", num_envs=n, vectorization_mode="vector_entry_point", **kwargs)
+        vec = vector_rate(venv, max(args.steps // 10, 20), np.ones((n, 3), dtype=np.int8))
+        print(f"{f'shipsense/Passage-v0 (single, {args.observer})':<44}{single:>12,.0f}")
+        print(f"{f'shipsense/Passage-v0 (vector, {n} envs)':<44}{vec:>12,.0f}")
+        print(f"Passage-v0 / CartPole-v1: single {single / cart:.3f}, vector {vec / cart_vec:.3f}")
+    d = design_rates(args.design_steps, args.design_envs)
+    for name, rate in d.items():
+        print(f"{name:<44}{rate:>12,.1f}")
+    v1 = d["shipsense/ArrayDesign-v1 (single)"]
+    print(f"ArrayDesign-v1 / v0: {v1 / d['shipsense/ArrayDesign-v0 (single)']:.0f}x; "
+          f"ArrayDesign-v1 / CartPole-v1: {v1 / cart:.4f}")
 
+
+def design_rates(steps, num_envs):
+    """Steps per second of ArrayDesign-v1 (single, vector; random valid picks) and of ArrayDesign-v0."""
+    rng = np.random.default_rng(0)
+    env = gym.make("shipsense/ArrayDesign-v1")
+    masks = env.get_wrapper_attr("action_masks")
+    for s in range(10):          # the electric kernel of each of the sites' five depths is built once per process
+        env.reset(seed=s)
+
+    def single():
+        for _ in range(steps):
+            _, _, term, trunc, _ = env.step(int(rng.choice(np.flatnonzero(masks()))))
+            if term or trunc:
+                env.reset()
+
+    out = {"shipsense/ArrayDesign-v1 (single)": best_rate(lambda: env.reset(seed=0), single, steps)}
+    venv = gym.make_vec("shipsense/ArrayDesign-v1", num_envs=num_envs, vectorization_mode="vector_entry_point")
+    vsteps = max(steps // num_envs, 8)
+
+    def vector():
+        for _ in range(vsteps):
+            venv.step(np.array([rng.choice(np.flatnonzero(m)) for m in venv.unwrapped.action_masks()]))
+
+    out[f"shipsense/ArrayDesign-v1 (vector, {num_envs} envs)"] = best_rate(lambda: venv.reset(seed=0), vector,
+                                                                           vsteps * num_envs)
+    old = gym.make("shipsense/ArrayDesign-v0")
+    old_masks = old.get_wrapper_attr("action_masks")
+    k = old.unwrapped.k
+
+    def v0():
+        for _ in range(k):
+            old.step(int(rng.choice(np.flatnonzero(old_masks()))))
+
+    out["shipsense/ArrayDesign-v0 (single)"] = best_rate(lambda: old.reset(seed=0), v0, k)
+    return out
 
 if __name__ == "__main__":
     main()

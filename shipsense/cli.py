@@ -372,6 +372,20 @@ def cmd_design(args) -> int:
     return EXIT_OK
 
 
+def _json_kwargs(flag, text):
+    import json
+
+    if text is None:
+        return None
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError as err:
+        raise _BadInput(f"{flag} must be a JSON object, e.g. '{{\"k\": 3}}': {err}") from None
+    if not isinstance(value, dict):
+        raise _BadInput(f"{flag} must be a JSON object, got {text!r}")
+    return value
+
+
 def cmd_train(args) -> int:
     from shipsense import budget
     from shipsense.atomic import staged_directory
@@ -380,27 +394,48 @@ def cmd_train(args) -> int:
     if args.timesteps is not None and args.timesteps < 64:
         raise _BadInput(f"--timesteps must be >= 64, got {args.timesteps}")
     timesteps = args.timesteps or training.DEFAULT_TIMESTEPS[args.task]
-    _within_budget(args, budget.training(args.task, timesteps))
+    evaluations = max(1, timesteps // args.eval_every) if args.eval_every else 10
+    _within_budget(args, budget.training(args.task, timesteps, evaluations, args.eval_episodes))
+    env_kwargs = _json_kwargs("--env-kwargs", args.env_kwargs)
     out = args.out or f"results/train-{args.task}"
     try:
-        with staged_directory(out) as stage:   # the model and its evaluation, or nothing
-            summary = (training.train_scheduling if args.task == "scheduling" else training.train_placement)(
-                timesteps, stage, args.seed, progress=not _QUIET["on"])
-        if args.task == "scheduling":
-            print(f"scheduling (Passage-v0, S2, one read per step): PPO {summary['timesteps']} steps at "
-                  f"{summary['ppo_fps']:.0f} frames/s; held-out episodes: {summary['held_out_episodes']}")
-            for name, r in summary["results"].items():
-                print(f"  {name:<26} mean error {r['mean_error_m']:8.2f} m  median {r['median_error_m']:7.2f} m  "
-                      f"reads/step {r['reads_per_step']:.2f}")
-        else:
-            print(f"placement (ArrayDesign-v0, S1-P2, k = 3): MaskablePPO {summary['timesteps']} steps at "
-                  f"{summary['ppo_fps']:.1f} frames/s; held-out passages: {summary['held_out_passages']}")
-            for name, r in summary["results"].items():
-                print(f"  {name:<22} {r['verdict']:<11} converged {r['convergence_rate']:.2f}  "
-                      f"TRMSE {r['trmse_m']:7.2f} m")
-    except RuntimeError as err:
+        with staged_directory(out) as stage:   # the models, logs, curve and summary, or nothing
+            s = training.train(args.task, args.env, timesteps, stage, args.seed, args.n_envs, args.eval_every,
+                               args.eval_episodes, env_kwargs, progress=not _QUIET["on"])
+    except (RuntimeError, ValueError) as err:
         raise _BadInput(str(err)) from None
-    print(f"wrote {out}/{training.MODEL_FILES[args.task]} (the model) and {out}/evaluation.json")
+    best, final = s["best"], s["final"]
+    print(f"{s['algorithm']} on {s['env']}: {s['timesteps']} steps in {s['seconds']:.0f} s "
+          f"({s['frames_per_second']:.0f} frames/s, {s['n_envs']} envs)")
+    for name, p in (("best", best), ("final", final)):
+        r = p["return"]
+        metrics = ", ".join(f"{k} {m['mean']:.4g}" for k, m in p["metrics"].items())
+        print(f"  {name:<5} at {p['timesteps']:>8} steps: held-out return {r['mean']:.4g} +- {r['stderr']:.2g}"
+              + (f" ({metrics})" if metrics else ""))
+    print(f"wrote {out}/{s['files']['best_model']} (best on held-out seeds {s['held_out_seed']}+), "
+          f"{out}/{s['files']['final_model']}, {out}/learning_curve.png, {out}/evaluation.json and "
+          f"{out}/tensorboard")
+    return EXIT_OK
+
+
+def cmd_evaluate(args) -> int:
+    import json
+
+    from shipsense import budget
+    from shipsense.envs.evaluation import evaluate, summary_lines
+
+    _within_budget(args, budget.evaluation(args.env_id, args.policy, args.episodes))
+    env_kwargs = _json_kwargs("--env-kwargs", args.env_kwargs)
+    try:
+        result = evaluate(args.env_id, args.policy, args.episodes, args.seed, env_kwargs,
+                          progress=not _QUIET["on"])
+    except ValueError as err:
+        raise _BadInput(str(err)) from None
+    if args.json:
+        print(json.dumps(result, indent=2))
+    else:
+        for line in summary_lines(result):
+            print(line)
     return EXIT_OK
 
 
@@ -546,13 +581,37 @@ def build_parser() -> argparse.ArgumentParser:
     g.set_defaults(func=cmd_design)
 
     tr = sub.add_parser("train", parents=[limits],
-                        help="train a sensor-scheduling or placement agent (needs the rl extra)")
+                        help="train a sensor-scheduling (PPO) or placement (MaskablePPO) agent (needs the rl extra)")
     tr.add_argument("task", choices=["placement", "scheduling"])
     tr.add_argument("--timesteps", type=_whole(1, TIMESTEPS_MAX), default=None,
-                    help="environment steps (default: 20000 scheduling, 600 placement)")
+                    help="environment steps (default: 20000)")
+    tr.add_argument("--env", default=None, metavar="ID",
+                    help="environment id (default: shipsense/ArrayDesign-v1 for placement; shipsense/Passage-v0 "
+                         "with max_reads 1 and energy_cost 0.01 for scheduling)")
+    tr.add_argument("--env-kwargs", default=None, metavar="JSON", help="the environment's arguments, a JSON object")
+    tr.add_argument("--n-envs", type=_whole(1, 256), default=8, help="parallel environments (default: %(default)s)")
+    tr.add_argument("--eval-every", type=_whole(1, TIMESTEPS_MAX), default=None, metavar="STEPS",
+                    help="held-out evaluation every this many steps (default: a tenth of --timesteps)")
+    tr.add_argument("--eval-episodes", type=_whole(1, 100_000), default=20,
+                    help="held-out episodes per evaluation (default: %(default)s)")
     tr.add_argument("--out", default=None, help="output directory (default: results/train-TASK)")
     tr.add_argument("--seed", type=SEED, default=0)
     tr.set_defaults(func=cmd_train)
+
+    ev = sub.add_parser("evaluate", parents=[limits],
+                        help="evaluate a baseline or a trained model on seeded episodes of an environment",
+                        description="Mean return +- standard error and the environment's task metrics over "
+                        "episodes reset with seeds S, S+1, ...")
+    ev.add_argument("env_id", metavar="ENV_ID", help="e.g. shipsense/ArrayDesign-v1")
+    ev.add_argument("--policy", required=True, metavar="NAME|PATH.zip",
+                    help="a baseline the environment offers (random, round-robin, greedy, convex) or a "
+                         "stable-baselines3 model file")
+    ev.add_argument("--episodes", type=_whole(1, 10**6), default=50, help="episodes (default: %(default)s)")
+    ev.add_argument("--seed", type=_whole(0, 2**31 - 1, "a non-negative whole number"), default=2_000_000,
+                    help="seed of the first episode (default: %(default)s, away from training's seeds)")
+    ev.add_argument("--env-kwargs", default=None, metavar="JSON", help="the environment's arguments, a JSON object")
+    ev.add_argument("--json", action="store_true", help="print the result as JSON")
+    ev.set_defaults(func=cmd_evaluate)
 
     w = sub.add_parser("sweep", help="a layout study: layouts x site conditions x passages, on Dask, resumable",
                        description="Run the cells of SWEEP.toml (layouts x site conditions) in chunks of passages "

@@ -70,7 +70,10 @@ def _valid(command, flag, text):
 ENV_ARGS = {"PassageEnv": {"max_reads": (1, 3, True), "energy_cost": (0.0, 1e6, False),
                            "error_scale": (1e-3, 1e6, False)},
             "ArrayDesignEnv": {"k": (1, 81, True), "half_width": (0.5, 1e5, False),
-                               "passages": (1, 10_000, True), "shaping": (0.0, 1e6, False)}}
+                               "passages": (1, 10_000, True), "shaping": (0.0, 1e6, False)},
+            "SiteDesignEnv": {"k": (1, 81, True), "half_width": (5.0, 1e4, False), "passages": (1, 1000, True),
+                              "stride": (1, 100, True), "ambiguity_penalty": (0.0, 1e6, False),
+                              "max_steps": (4, 10**6, True)}}
 BAD_ARG = st.one_of(st.sampled_from(["x", "", "3", None, True, [], math.nan, math.inf, -math.inf, -1, 0, 0.0, 2.5,
                                      1e308, -1e308, 10**30]), st.floats(allow_nan=True), st.integers())
 
@@ -90,11 +93,12 @@ def test_a_bad_environment_argument_is_one_error_naming_it(env, data):
     ValueError naming the argument, before any passage is simulated."""
     from shipsense.envs.array_design import ArrayDesignEnv
     from shipsense.envs.passage import PassageEnv
+    from shipsense.envs.site_design import SiteDesignEnv
 
     name = data.draw(st.sampled_from(sorted(ENV_ARGS[env])))
     lo, hi, integer = ENV_ARGS[env][name]
     value = data.draw(BAD_ARG.filter(lambda v: not _accepted(v, lo, hi, integer) and v is not None))
-    cls = {"PassageEnv": PassageEnv, "ArrayDesignEnv": ArrayDesignEnv}[env]
+    cls = {"PassageEnv": PassageEnv, "ArrayDesignEnv": ArrayDesignEnv, "SiteDesignEnv": SiteDesignEnv}[env]
     try:
         cls(**{name: value})
     except ValueError as err:

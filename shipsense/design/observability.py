@@ -286,6 +286,24 @@ def check_array(model, thetas, steps, *, far=DEFAULT_FAR, chi2_threshold=DEFAULT
     return Verdict(verdict, best, pairs, rank, cond, len(thetas), tuple(model.labels))
 
 
+def mirror_screen(model, thetas, steps, *, far=DEFAULT_FAR, stride=2, lines=None):
+    """The smallest discrepancy (chi-square units) of a far-apart mirror image of passages ``thetas`` (P, n)
+    across the array's own symmetry lines (:func:`mirror_lines`), unrefined: the first stage of
+    :func:`check_array` without its least-squares refinement and random starts, in milliseconds.
+
+    A layout with an exact mirror symmetry for the passages -- e.g. collinear sensors -- scores 0 (exactly
+    ambiguous); a value below the threshold is an ambiguity :func:`check_array` would report too, but a value
+    above it does not prove the layout observable (the refinement can find closer alternatives).
+    Returns ``inf`` when no mirror image is farther than ``far`` from its passage.
+    """
+    thetas = np.atleast_2d(np.asarray(thetas, dtype=float))
+    alts = mirror_candidates(model, thetas, lines=lines)                      # (L, P, n)
+    d = discrepancy(model, thetas[None], alts, steps, stride)
+    dist = track_distance(model, thetas[None], alts, steps)
+    d = np.where(dist > far, d, np.inf)
+    return float(d.min()) if d.size else float("inf")
+
+
 def _ambiguity(model, theta, alt, chi2, dist, source):
     return Ambiguity(model.to_si(theta), model.to_si(alt), chi2, dist, source)
 

@@ -1,4 +1,5 @@
-"""``shipsense/ArrayDesign-v0``: place k sensors one by one on a candidate set.
+"""``shipsense/ArrayDesign-v0`` (the old version, kept registered; use ``shipsense/ArrayDesign-v1``,
+:mod:`shipsense.envs.site_design`): place k sensors one by one on a candidate set.
 
 ## Description
 

@@ -1,11 +1,14 @@
 """Training agents on the environments (stable-baselines3, the ``rl`` extra): ``shipsense train``.
 
-* ``scheduling``: PPO on ``shipsense/Passage-v0`` (S2, at most one sensor read per step), evaluated
-  against reading the first sensor every step ("read-all", trimmed to the budget) and round-robin,
-  at equal energy, on the same held-out passages.
-* ``placement``: MaskablePPO on ``shipsense/ArrayDesign-v0`` (S1-P2 envelope electrodes), its
-  deterministic layout evaluated against random, line, greedy and the convex design with
-  :func:`shipsense.design.evaluate.evaluate_layout` on the same held-out passages.
+:func:`train` serves both kinds: ``scheduling`` trains PPO, ``placement`` MaskablePPO (with the env's
+``action_masks``), each on the environment's vector version through :class:`~shipsense.envs.sb3.VectorEnvAdapter`
+(the native ``vector_entry_point`` when it autoresets in the same step, else gymnasium's ``SyncVectorEnv`` in that
+mode; the defaults: :data:`DEFAULT_ENVS`), with TensorBoard logs in ``OUT/tensorboard``. Every ``eval_every`` steps
+the deterministic agent plays ``eval_episodes`` held-out episodes (seeds :data:`HELD_OUT_SEED` + i; training
+environments are seeded from ``seed``); the best one so far is saved as ``OUT/best_model.zip``. At the end:
+``OUT/final_model.zip``, ``OUT/learning_curve.json`` and ``OUT/learning_curve.png`` (the held-out mean return with
+its standard error against the steps), and ``OUT/evaluation.json`` (the summary). Compare the saved model with the
+baselines on other seeds with ``shipsense evaluate ENV --policy OUT/best_model.zip``.
 """
 
 from __future__ import annotations
@@ -16,14 +19,27 @@ from pathlib import Path
 
 import numpy as np
 
-HELD_OUT = 10_000
-DEFAULT_TIMESTEPS = {"scheduling": 20_000, "placement": 600}
-MODEL_FILES = {"scheduling": "scheduling_ppo.zip", "placement": "placement_maskableppo.zip"}
+from shipsense.envs.arguments import number
+
+ALGORITHMS = {"scheduling": "PPO", "placement": "MaskablePPO"}
+DEFAULT_ENVS = {   # kind: (env id, its arguments when --env is not given)
+    "scheduling": ("shipsense/Passage-v0", {"max_reads": 1, "energy_cost": 0.01}),   # -> Passage-v1 when merged
+    "placement": ("shipsense/ArrayDesign-v1", {}),
+}
+DEFAULT_TIMESTEPS = {"scheduling": 20_000, "placement": 20_000}
+HELD_OUT_SEED = 1_000_000
+"""Seeds of the periodic held-out evaluation (training environments are seeded from ``seed``, 0 by default)."""
+POLICY_KWARGS = {"net_arch": {"pi": [256, 256], "vf": [256, 256]}}
+"""Two hidden layers of 256 for the policy and the value (SB3's default 64 is a bottleneck for ArrayDesign-v1's
+one logit per candidate, 81 of them, each to be read off its own gain feature)."""
+MODEL_FILES = {"best": "best_model.zip", "final": "final_model.zip"}
 
 
 def _require_rl():
     try:
+        import sb3_contrib  # noqa: F401
         import stable_baselines3  # noqa: F401
+        import tensorboard  # noqa: F401  (the training logs)
         import torch
     except ImportError as err:
         raise RuntimeError("training needs the rl extra: pip install 'shipsense[rl]' "
@@ -31,124 +47,163 @@ def _require_rl():
     torch.set_num_threads(1)
 
 
-def _progress_callback(total, desc, progress=True):
+def make_vector_env(env_id, n_envs, env_kwargs=None):
+    """The gymnasium vector env training uses: the native one when it autoresets in the same step, else
+    ``SyncVectorEnv`` with same-step autoreset."""
+    import gymnasium as gym
+    from gymnasium.envs.registration import load_env_creator
+    from gymnasium.vector import AutoresetMode
+
+    spec = gym.spec(env_id)
+    kwargs = env_kwargs or {}
+    if spec.vector_entry_point is not None:
+        cls = load_env_creator(spec.vector_entry_point)
+        if getattr(cls, "metadata", {}).get("autoreset_mode") == AutoresetMode.SAME_STEP:
+            return gym.make_vec(env_id, num_envs=n_envs, vectorization_mode="vector_entry_point", **kwargs)
+    return gym.make_vec(env_id, num_envs=n_envs, vectorization_mode="sync",
+                        vector_kwargs={"autoreset_mode": AutoresetMode.SAME_STEP}, **kwargs)
+
+
+def rollout_steps(timesteps, n_envs):
+    """Steps per environment in one PPO rollout: 1024 steps in all, fewer when the whole run is shorter."""
+    return max(8, min(1024 // n_envs, -(-timesteps // n_envs)))
+
+
+def _check(kind, env_id, timesteps, seed, n_envs, eval_every, eval_episodes, env_kwargs):
+    import gymnasium as gym
+
+    import shipsense  # noqa: F401  (registers the environments)
+
+    if kind not in ALGORITHMS:
+        raise ValueError(f"kind must be one of {', '.join(ALGORITHMS)}, got {kind!r}")
+    if env_kwargs is not None and not isinstance(env_kwargs, dict):
+        raise ValueError(f"env_kwargs must be a dict, got {type(env_kwargs).__name__}")
+    if env_id is None:
+        env_id, defaults = DEFAULT_ENVS[kind]
+        env_kwargs = {**defaults, **(env_kwargs or {})}
+    if env_id not in gym.registry:
+        known = sorted(k for k in gym.registry if k.startswith("shipsense/"))
+        raise ValueError(f"env_id {env_id!r} is not registered (shipsense's: {', '.join(known)})")
+    timesteps = number("timesteps", timesteps, 64, 10**9, integer=True)
+    seed = number("seed", seed, 0, 2**31 - 1, integer=True)
+    n_envs = number("n_envs", n_envs, 1, 256, integer=True)
+    rollout = rollout_steps(timesteps, n_envs) * n_envs
+    eval_every = number("eval_every", eval_every, 1, 10**9, integer=True) if eval_every is not None else \
+        max(timesteps // 10, rollout)
+    eval_episodes = number("eval_episodes", eval_episodes, 1, 10**5, integer=True)
+    return env_id, timesteps, seed, n_envs, eval_every, eval_episodes, env_kwargs or None
+
+
+def _eval_callback(env_id, env_kwargs, out, every, episodes, masked, progress):
+    import gymnasium as gym
     from stable_baselines3.common.callbacks import BaseCallback
     from tqdm import tqdm
 
-    class Bar(BaseCallback):
+    from shipsense.envs.evaluation import run_episodes, summarise
+
+    class HeldOut(BaseCallback):
+        """Periodic evaluation of the deterministic agent on held-out seeds; keeps the best model."""
+
         def _on_training_start(self):
-            self.bar = tqdm(total=total, desc=desc, unit="step", leave=False,
-                            disable=None if progress else True)   # None: a bar only on a terminal
+            self.env = gym.make(env_id, **(env_kwargs or {}))
+            self.curve, self.best, self.next = [], -np.inf, every
+            self.bar = tqdm(total=self.locals["total_timesteps"], desc=f"train {env_id}", unit="step", leave=False,
+                            disable=None if progress else True)
+
+        def _agent(self, obs):
+            kw = {"action_masks": self.env.unwrapped.action_masks()} if masked else {}
+            return self.model.predict(obs, deterministic=True, **kw)[0]
+
+        def evaluate(self):
+            returns, _, metrics = run_episodes(self.env, self._agent, HELD_OUT_SEED, range(episodes))
+            s = summarise(returns, metrics)
+            point = {"timesteps": int(self.num_timesteps), **s}
+            self.curve.append(point)
+            self.logger.record("eval/mean_return", s["return"]["mean"])
+            for key, m in s["metrics"].items():
+                self.logger.record(f"eval/{key}", m["mean"])
+            if s["return"]["mean"] > self.best:
+                self.best = s["return"]["mean"]
+                self.model.save(Path(out) / MODEL_FILES["best"])
 
         def _on_step(self):
             self.bar.update(self.training_env.num_envs)
+            if self.num_timesteps >= self.next:
+                self.next += every
+                self.evaluate()
             return True
 
         def _on_training_end(self):
+            if not self.curve or self.curve[-1]["timesteps"] != self.num_timesteps:
+                self.evaluate()
             self.bar.close()
+            self.env.close()
 
-    return Bar()
-
-
-def _run_policy(env, policy, episodes, seed):
-    """Mean position error and reads per step of a policy(obs, t) over held-out episodes."""
-    errors, reads = [], []
-    for e in range(episodes):
-        obs, _ = env.reset(seed=seed + e)
-        t = 0
-        while True:
-            obs, _, term, trunc, info = env.step(policy(obs, t))
-            errors.append(info["error"])
-            reads.append(info["reads"])
-            t += 1
-            if term or trunc:
-                break
-    return {"mean_error_m": float(np.mean(errors)), "median_error_m": float(np.median(errors)),
-            "reads_per_step": float(np.mean(reads))}
+    return HeldOut()
 
 
-def train_scheduling(timesteps=DEFAULT_TIMESTEPS["scheduling"], out="results/train-scheduling", seed=0, episodes=20,
-                     progress=True):
+def plot_learning_curve(curve, path, title):
+    """The held-out mean return (with its standard error) against the training steps, as a PNG."""
+    from shipsense.plotting import plt
+
+    t = [p["timesteps"] for p in curve]
+    m = np.array([p["return"]["mean"] for p in curve])
+    se = np.array([p["return"]["stderr"] for p in curve])
+    fig, ax = plt.subplots(figsize=(6, 4), dpi=100)
+    ax.plot(t, m, marker="o", label="agent (deterministic), held-out episodes")
+    ax.fill_between(t, m - se, m + se, alpha=0.25)
+    ax.set_xlabel("training steps")
+    ax.set_ylabel("mean return")
+    ax.set_title(title, fontsize=9)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def train(kind, env_id=None, timesteps=None, out=None, seed=0, n_envs=8, eval_every=None, eval_episodes=20,
+          env_kwargs=None, progress=True):
+    """Train the ``kind``'s agent on ``env_id`` (default :data:`DEFAULT_ENVS`) and write its files to ``out``.
+
+    Bad arguments raise one ``ValueError`` naming the argument.  Returns the summary written to
+    ``out/evaluation.json``.
+    """
+    timesteps = DEFAULT_TIMESTEPS.get(kind, 0) if timesteps is None else timesteps
+    env_id, timesteps, seed, n_envs, eval_every, eval_episodes, env_kwargs = _check(
+        kind, env_id, timesteps, seed, n_envs, eval_every, eval_episodes, env_kwargs)
     _require_rl()
-    from stable_baselines3 import PPO
+    from stable_baselines3.common.vec_env import VecMonitor
 
-    from shipsense.envs.passage import PassageEnv
+    from shipsense.envs.sb3 import VectorEnvAdapter
 
-    out = Path(out)
+    out = Path(out if out is not None else f"results/train-{kind}")
     out.mkdir(parents=True, exist_ok=True)
-    kwargs = {"scenario": "S2", "max_reads": 1, "energy_cost": 0.01}
-    env = PassageEnv(**kwargs)
+    venv = VecMonitor(VectorEnvAdapter(make_vector_env(env_id, n_envs, env_kwargs)))
+    venv.seed(seed)
+    masked = kind == "placement"
+    if masked:
+        from sb3_contrib import MaskablePPO as Algo
+    else:
+        from stable_baselines3 import PPO as Algo
+    n_steps = rollout_steps(timesteps, n_envs)
+    model = Algo("MlpPolicy", venv, n_steps=n_steps, batch_size=min(256, n_steps * n_envs), seed=seed,
+                 device="cpu", verbose=0, tensorboard_log=str(out / "tensorboard"), policy_kwargs=POLICY_KWARGS)
+    callback = _eval_callback(env_id, env_kwargs, out, eval_every, eval_episodes, masked, progress)
     t0 = time.perf_counter()
-    model = PPO("MlpPolicy", env, n_steps=1024, batch_size=128, seed=seed, device="cpu", verbose=0)
-    model.learn(total_timesteps=int(timesteps),
-                callback=_progress_callback(int(timesteps), "train scheduling", progress))
-    fps = timesteps / (time.perf_counter() - t0)
-    model.save(out / "scheduling_ppo")
-    S = env.action_space.n
-    policies = {
-        "agent (PPO)": lambda o, t: model.predict(o, deterministic=True)[0],
-        "read-all (trimmed to 1)": lambda o, t: np.ones(S, dtype=np.int8),
-        "round-robin": lambda o, t: np.eye(S, dtype=np.int8)[t % S],
-    }
-    results = {name: _run_policy(PassageEnv(**kwargs), p, episodes, HELD_OUT) for name, p in policies.items()}
-    summary = {"task": "scheduling", "env": "shipsense/Passage-v0", "env_kwargs": kwargs,
-               "timesteps": int(timesteps), "ppo_fps": fps, "held_out_episodes": episodes, "results": results}
-    (out / "evaluation.json").write_text(json.dumps(summary, indent=2) + "\n")
-    return summary
-
-
-def train_placement(timesteps=DEFAULT_TIMESTEPS["placement"], out="results/train-placement", seed=0, passages=20,
-                    progress=True):
-    _require_rl()
-    from sb3_contrib import MaskablePPO
-
-    from shipsense.config import load_scenario
-    from shipsense.design import placement as pl
-    from shipsense.design.evaluate import evaluate_layout
-    from shipsense.envs.array_design import ArrayDesignEnv
-    from shipsense.simulator import sample_passages
-    from shipsense.trackers.models import candidate_model
-
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    kwargs = {"scenario": "S1-P2", "k": 3, "half_width": 30.0, "spacing": 15.0, "passages": 4,
-              "check_ambiguity": False}
-    env = ArrayDesignEnv(**kwargs)
-    t0 = time.perf_counter()
-    model = MaskablePPO("MlpPolicy", env, n_steps=96, batch_size=32, seed=seed, device="cpu", verbose=0)
-    model.learn(total_timesteps=int(timesteps),
-                callback=_progress_callback(int(timesteps), "train placement", progress))
-    fps = timesteps / (time.perf_counter() - t0)
-    model.save(out / "placement_maskableppo")
-    obs, _ = env.reset(seed=0)
-    while True:
-        a, _ = model.predict(obs, action_masks=env.action_masks(), deterministic=True)
-        obs, _, term, _, _ = env.step(int(a))
-        if term:
-            break
-    cands = env.candidates
-    agent = list(env.chosen)
-    sc = load_scenario(kwargs["scenario"])
-    cmodel = candidate_model(sc, cands)
-    thetas = cmodel.to_internal(cmodel.state_from_truth(sample_passages(sc, 8, seed=seed)))
-    prior = cmodel.to_internal(np.array([30.0, 30.0, 2.0, 2.0, 1.0, 50.0]))
-    problem = pl.build_problem(cmodel, thetas, sc.steps, kwargs["k"], prior)
-    on_line = sorted(np.flatnonzero(np.isclose(cands[:, 0], env.centre[0])), key=lambda i: cands[i, 1])
-    layouts = {
-        "agent (MaskablePPO)": agent,
-        "random": list(np.random.default_rng(seed).choice(len(cands), kwargs["k"], replace=False)),
-        "line": [on_line[i] for i in np.linspace(0, len(on_line) - 1, kwargs["k"]).round().astype(int)],
-        "greedy": list(pl.swap_refine(problem, pl.greedy(problem, "D"), "D")[0]),
-        "convex": list(pl.place(problem, "D").chosen),
-    }
-    template = sc.sensors[0]
-    results = {}
-    for name, chosen in layouts.items():
-        sensors = [template.model_copy(update={"id": f"L{i + 1}", "position": tuple(map(float, cands[c]))})
-                   for i, c in enumerate(chosen)]
-        ev = evaluate_layout(sc.model_copy(update={"sensors": sensors}), passages=passages)
-        results[name] = {**ev.to_json(), "sensors": cands[chosen].tolist()}
-    summary = {"task": "placement", "env": "shipsense/ArrayDesign-v0", "env_kwargs": kwargs,
-               "timesteps": int(timesteps), "ppo_fps": fps, "held_out_passages": passages, "results": results}
+    model.learn(total_timesteps=timesteps, callback=callback, tb_log_name=ALGORITHMS[kind])
+    seconds = time.perf_counter() - t0
+    model.save(out / MODEL_FILES["final"])
+    venv.close()
+    curve = callback.curve
+    best = max(curve, key=lambda p: p["return"]["mean"])
+    (out / "learning_curve.json").write_text(json.dumps(curve, indent=2) + "\n")
+    plot_learning_curve(curve, out / "learning_curve.png",
+                        f"{ALGORITHMS[kind]} on {env_id}: {eval_episodes} held-out episodes (seeds {HELD_OUT_SEED}+)")
+    summary = {"kind": kind, "algorithm": ALGORITHMS[kind], "env": env_id, "env_kwargs": env_kwargs or {},
+               "timesteps": int(model.num_timesteps), "n_envs": n_envs, "seed": seed, "seconds": seconds,
+               "frames_per_second": model.num_timesteps / seconds, "held_out_seed": HELD_OUT_SEED,
+               "eval_episodes": eval_episodes, "best": best, "final": curve[-1],
+               "files": {"best_model": MODEL_FILES["best"], "final_model": MODEL_FILES["final"],
+                         "learning_curve": "learning_curve.png", "tensorboard": "tensorboard"}}
     (out / "evaluation.json").write_text(json.dumps(summary, indent=2) + "\n")
     return summary

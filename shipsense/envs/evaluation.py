@@ -1,0 +1,156 @@
+"""Evaluate a policy on an environment over seeded episodes: ``shipsense evaluate``.
+
+A policy is a baseline the environment offers (its unwrapped class lists them in ``BASELINES`` and builds
+them with ``baseline(name)``: a callable ``obs -> action`` that may read the environment's internal state) or
+a stable-baselines3 model file ``PATH.zip`` (PPO, or MaskablePPO, predicting with the environment's
+``action_masks`` when it has them).  Episode ``i`` is reset with ``seed + i``, so every policy meets the same
+episodes.  Returned: the mean return and its standard error, and each task metric the environment reports
+at the end of an episode (``info["episode_metrics"]``) averaged the same way.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from shipsense.envs.arguments import number
+
+
+def _mean_stderr(values):
+    x = np.asarray(values, dtype=float)
+    stderr = float(x.std(ddof=1) / math.sqrt(len(x))) if len(x) > 1 else float("nan")
+    return {"mean": float(x.mean()), "stderr": stderr}
+
+
+def _is_maskable(path):
+    """Whether an SB3 model file holds a MaskablePPO (its saved policy class is sb3-contrib's maskable one)."""
+    import zipfile
+
+    try:
+        with zipfile.ZipFile(path) as z:
+            data = z.read("data").decode("utf-8", "replace")
+    except (zipfile.BadZipFile, KeyError) as err:
+        raise ValueError(f"policy: {path} is not a stable-baselines3 model file ({err})") from None
+    return "maskable" in data.lower()
+
+
+def load_policy(env, name_or_path):
+    """A callable ``obs -> action`` for ``env``: one of its baselines by name, or an SB3 model ``PATH.zip``.
+
+    A name the environment does not offer, a missing file or a model for other observations raises one
+    ``ValueError`` naming the policy.
+    """
+    base = env.unwrapped
+    name = str(name_or_path)
+    if name.endswith(".zip"):
+        path = Path(name)
+        if not path.is_file():
+            raise ValueError(f"policy: no model file {path}")
+        try:
+            import torch
+
+            torch.set_num_threads(1)
+            if _is_maskable(path):
+                from sb3_contrib import MaskablePPO as Algo
+            else:
+                from stable_baselines3 import PPO as Algo
+        except ImportError as err:
+            raise ValueError(f"policy {name}: loading a model needs the rl extra (pip install 'shipsense[rl]'): "
+                             f"{err}") from None
+        model = Algo.load(path, device="cpu")
+        if model.observation_space.shape != env.observation_space.shape:
+            raise ValueError(f"policy {name}: the model observes {model.observation_space.shape}, the environment "
+                             f"{env.observation_space.shape}: it was trained on another environment")
+        masked = hasattr(base, "action_masks") and "maskable" in type(model).__name__.lower()
+
+        def agent(obs):
+            kw = {"action_masks": base.action_masks()} if masked else {}
+            action, _ = model.predict(obs, deterministic=True, **kw)
+            return action.item() if np.ndim(action) == 0 else action
+
+        return agent
+    offered = tuple(getattr(type(base), "BASELINES", ()))
+    spec = getattr(env, "spec", None)
+    env_id = spec.id if spec is not None else type(base).__name__
+    if name not in offered:
+        raise ValueError(f"policy {name!r} is not offered by {env_id} (offered: "
+                         f"{', '.join(offered) if offered else 'none'}; or a model PATH.zip)")
+    return base.baseline(name)
+
+
+def run_episodes(env, act, seed, episodes):
+    """Run ``act`` on ``env`` for the episodes ``episodes`` (an iterable of indices; episode ``i`` reset with
+    ``seed + i``): lists of returns and lengths, and ``{metric: list}`` of ``info["episode_metrics"]``."""
+    returns, lengths, metrics = [], [], {}
+    for e in episodes:
+        obs, _ = env.reset(seed=seed + e)
+        total, steps = 0.0, 0
+        while True:
+            obs, reward, terminated, truncated, info = env.step(act(obs))
+            total += float(reward)
+            steps += 1
+            if terminated or truncated:
+                break
+        returns.append(total)
+        lengths.append(steps)
+        for key, value in info.get("episode_metrics", {}).items():
+            metrics.setdefault(key, []).append(value)
+    return returns, lengths, metrics
+
+
+def summarise(returns, metrics):
+    """Mean and standard error of the returns and of each metric."""
+    return {"return": _mean_stderr(returns), "metrics": {k: _mean_stderr(v) for k, v in metrics.items()}}
+
+
+def evaluate(env_id, policy, episodes, seed, env_kwargs=None, progress=False):
+    """Run ``policy`` for ``episodes`` episodes of ``env_id`` (episode ``i`` reset with ``seed + i``).
+
+    Returns
+    -------
+    dict
+        ``env``, ``policy``, ``episodes``, ``seed``, ``env_kwargs``, ``return`` (``mean``, ``stderr``),
+        ``length`` (mean steps), ``metrics`` (``{name: {"mean", "stderr"}}`` of ``info["episode_metrics"]``),
+        ``seconds`` (wall time of the evaluation) and ``per_episode`` (``{"return": [...], name: [...]}``, in
+        seed order: paired comparisons between policies evaluated on the same seeds).
+    """
+    import gymnasium as gym
+
+    import shipsense  # noqa: F401  (registers the environments)
+
+    episodes = number("episodes", episodes, 1, 10**7, integer=True)
+    seed = number("seed", seed, 0, 2**32 - 1 - episodes, integer=True)
+    if env_kwargs is not None and not isinstance(env_kwargs, dict):
+        raise ValueError(f"env_kwargs must be a dict, got {type(env_kwargs).__name__}")
+    if env_id not in gym.registry:
+        known = sorted(k for k in gym.registry if k.startswith("shipsense/"))
+        raise ValueError(f"env_id {env_id!r} is not registered (shipsense's: {', '.join(known)})")
+    env = gym.make(env_id, **(env_kwargs or {}))
+    try:
+        act = load_policy(env, policy)
+        from tqdm import tqdm
+
+        t0 = time.perf_counter()
+        episodes_iter = tqdm(range(episodes), desc=f"evaluate {policy}", unit="episode", leave=False,
+                             disable=None if progress else True)
+        returns, lengths, metrics = run_episodes(env, act, seed, episodes_iter)
+        seconds = time.perf_counter() - t0
+    finally:
+        env.close()
+    return {"env": env_id, "policy": str(policy), "episodes": episodes, "seed": seed, "env_kwargs": env_kwargs or {},
+            **summarise(returns, metrics), "length": float(np.mean(lengths)), "seconds": seconds,
+            "per_episode": {"return": returns, **metrics}}
+
+
+def summary_lines(result):
+    """The command's printed summary of :func:`evaluate`'s result."""
+    r = result["return"]
+    lines = [f"{result['env']}, policy {result['policy']}: {result['episodes']} episodes from seed {result['seed']} "
+             f"({result['seconds']:.1f} s)",
+             f"  return {r['mean']:.4g} +- {r['stderr']:.2g} (standard error); {result['length']:.1f} steps/episode"]
+    for key, m in result["metrics"].items():
+        lines.append(f"  {key:<14} {m['mean']:.4g} +- {m['stderr']:.2g}")
+    return lines

@@ -1,0 +1,132 @@
+"""The SB3 adapter over gymnasium vector envs (both autoreset modes), the evaluation and the training entry
+points: short learns, refusals, bad arguments."""
+
+import json
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import shipsense  # noqa: F401  (registers the environments)
+from shipsense.envs.evaluation import evaluate, load_policy
+
+pytest.importorskip("stable_baselines3")
+pytest.importorskip("sb3_contrib")
+
+SITE = {"heading_deg": 30.0, "heading_spread_deg": 10.0, "cpa_m": [-10.0, 10.0], "speed_mps": [5.0, 8.0],
+        "p_Am": [80.0, 160.0], "water_depth_m": 15.0}
+KW = {"passages": 2, "site": SITE}
+SMALL_ID = "shipsense/ArrayDesignSmall-v1"
+
+
+def _native(n=2):
+    return gym.make_vec(SMALL_ID, num_envs=n, vectorization_mode="vector_entry_point", **KW)
+
+
+def _sync_next_step(n=2):
+    return gym.make_vec(SMALL_ID, num_envs=n, vectorization_mode="sync",
+                        vector_kwargs={"autoreset_mode": gym.vector.AutoresetMode.NEXT_STEP}, **KW)
+
+
+@pytest.mark.parametrize("make", [_native, _sync_next_step], ids=["native-same-step", "sync-next-step"])
+def test_adapter_hands_sb3_the_terminal_observation_and_the_reset_one(make):
+    from shipsense.envs.sb3 import VectorEnvAdapter
+
+    venv = VectorEnvAdapter(make())
+    venv.seed(0)
+    obs = venv.reset()
+    assert obs.shape == (2,) + venv.observation_space.shape
+    for step in range(3):
+        masks = np.stack(venv.env_method("action_masks"))
+        assert masks.shape == (2, 25)
+        obs, rewards, dones, infos = venv.step(np.array([np.flatnonzero(m)[step] for m in masks]))
+    assert dones.all() and rewards.dtype == np.float32
+    for i in range(2):
+        final = infos[i]["terminal_observation"]
+        assert final[-1] == 1.0 and obs[i][-1] == 0.0                  # last obs: 3 of 3 placed; new episode: 0
+        assert set(infos[i]["episode_metrics"]) == {"score", "ambiguous", "seconds"}
+        assert rewards[i] == pytest.approx(infos[i]["episode_metrics"]["score"]
+                                           - 2.0 * infos[i]["episode_metrics"]["ambiguous"], rel=1e-6)
+        assert infos[i]["TimeLimit.truncated"] is False
+    assert venv.has_attr("action_masks") and not venv.has_attr("no_such_thing")
+
+
+def test_maskable_ppo_and_ppo_learn_through_the_adapter():
+    from sb3_contrib import MaskablePPO
+    from stable_baselines3 import PPO
+
+    from shipsense.envs.sb3 import VectorEnvAdapter
+
+    for algo, make in ((MaskablePPO, _native), (PPO, _sync_next_step)):
+        venv = VectorEnvAdapter(make())
+        model = algo("MlpPolicy", venv, n_steps=64, batch_size=64, n_epochs=1, seed=0, device="cpu")
+        model.learn(256)
+        assert model.num_timesteps >= 256
+
+
+def test_evaluate_refuses_a_policy_the_env_does_not_offer():
+    with pytest.raises(ValueError, match="'round-robin' is not offered by shipsense/ArrayDesignSmall-v1 "
+                                         r"\(offered: random, greedy, convex"):
+        evaluate(SMALL_ID, "round-robin", 2, 0, KW)
+    with pytest.raises(ValueError, match="policy: no model file"):
+        evaluate(SMALL_ID, "missing.zip", 2, 0, KW)
+
+
+@pytest.mark.parametrize("args, name", [
+    (("shipsense/Nope-v0", "random", 2, 0), "env_id"), ((SMALL_ID, "random", 0, 0), "episodes"),
+    ((SMALL_ID, "random", 2, -1), "seed"), ((SMALL_ID, "random", 2, 0, {"k": 99}), "k"),
+])
+def test_evaluate_names_a_bad_argument(args, name):
+    with pytest.raises(ValueError, match=name):
+        evaluate(*args)
+
+
+def test_evaluate_averages_the_episodes_it_ran():
+    r = evaluate(SMALL_ID, "greedy", 3, 5, KW)
+    env = gym.make(SMALL_ID, **KW)
+    act = load_policy(env, "greedy")
+    scores = []
+    for e in range(3):
+        obs, _ = env.reset(seed=5 + e)
+        while True:
+            obs, reward, term, trunc, info = env.step(act(obs))
+            if term or trunc:
+                break
+        scores.append(info["episode_metrics"]["score"])
+    assert r["metrics"]["score"]["mean"] == pytest.approx(np.mean(scores))
+    assert r["metrics"]["score"]["stderr"] == pytest.approx(np.std(scores, ddof=1) / np.sqrt(3))
+    assert r["length"] == 3.0
+
+
+@pytest.mark.parametrize("kwargs, name", [
+    ({"kind": "walking"}, "kind"), ({"env_id": "shipsense/Nope-v0"}, "env_id"), ({"timesteps": 10}, "timesteps"),
+    ({"n_envs": 0}, "n_envs"), ({"eval_episodes": 0}, "eval_episodes"), ({"env_kwargs": [1]}, "env_kwargs"),
+])
+def test_train_names_a_bad_argument(kwargs, name, tmp_path):
+    from shipsense.envs.training import train
+
+    with pytest.raises(ValueError, match=name):
+        train(**{"kind": "placement", "timesteps": 128, "out": tmp_path, **kwargs})
+    assert not any(tmp_path.iterdir())
+
+
+def test_train_placement_then_evaluate_the_saved_model(tmp_path, capsys):
+    from shipsense.cli import main
+
+    out = tmp_path / "run"
+    assert main(["--quiet", "train", "placement", "--env", SMALL_ID, "--env-kwargs", json.dumps(KW),
+                 "--timesteps", "128", "--n-envs", "2", "--eval-every", "64", "--eval-episodes", "2",
+                 "--out", str(out)]) == 0
+    summary = json.loads((out / "evaluation.json").read_text())
+    assert summary["algorithm"] == "MaskablePPO" and summary["timesteps"] >= 128
+    assert [p["timesteps"] for p in json.loads((out / "learning_curve.json").read_text())][0] >= 64
+    for name in ("best_model.zip", "final_model.zip", "learning_curve.png"):
+        assert (out / name).is_file()
+    assert any((out / "tensorboard").rglob("events.out.tfevents*"))
+    capsys.readouterr()
+    assert main(["--quiet", "evaluate", SMALL_ID, "--env-kwargs", json.dumps(KW), "--policy",
+                 str(out / "best_model.zip"), "--episodes", "2", "--seed", "0", "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert result["episodes"] == 2 and result["metrics"]["ambiguous"]["mean"] in (0.0, 0.5, 1.0)
+    assert main(["evaluate", SMALL_ID, "--policy", "round-robin"]) == 2
+    assert "round-robin" in capsys.readouterr().err
