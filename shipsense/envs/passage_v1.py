@@ -55,13 +55,21 @@ default 1 m scale).  Both terms are in ``info``.
 ## Starting state
 
 A passage drawn from the scenario's ``[prior]`` (start range, bearing, course
-offset, speed, moment) under the seed; the observer has seen every sensor's
-first sample.
+offset, speed, moment) under the seed.  **Run-in**: the observer reads every
+sensor from the first sample until it reports a track (its detection and the
+global fit of its first window, 15 s of samples for magnetometers); the
+agent's control starts there (the observation's elapsed
+fraction says where).  While the observer has no track its estimate is the
+prior's mean whatever is read, so those samples would add the same 50-100 m
+errors to every policy's return and hide the scheduling (measured on S2
+before the run-in: the first 30 of 80 samples made up most of every
+baseline's return).  A passage that never gets a track leaves the agent one
+step.
 
 ## Episode end
 
-Terminated at the passage's last sample (``K - 1`` steps, ``K`` the
-scenario's ``steps``).  No truncation (no ``TimeLimit`` is needed).
+Terminated at the passage's last sample (``K`` the scenario's ``steps``;
+the episode has ``K - 1 - run-in`` steps).  No truncation.
 
 ## Info keys
 
@@ -92,12 +100,21 @@ value raises one ``ValueError`` naming the argument.
 
 ## Variants (registered)
 
-* ``shipsense/Passage-v1``: S2 (two vector magnetometers and a bearing
-  accelerometer), one read per step.
-* ``shipsense/Passage-v1-easy``: S2, two reads per step.
-* ``shipsense/Passage-v1-hard``: S2's field-trial array (6 sensors), 2 of 6
-  per step, contaminated noise (10 % outliers of 10 sigma) and 10 %
-  dropouts.
+``shipsense.envs.PASSAGE_V1_VARIANTS`` (S2's noise, 0.5 nT magnetometers):
+
+* ``shipsense/Passage-v1``: four vector magnetometers on a line 40 m apart,
+  one read per step, 100 samples, starts 100-160 m out: which magnetometer
+  is near the ship changes along the passage.
+* ``shipsense/Passage-v1-easy``: S2's array (two magnetometers and a bearing
+  accelerometer within 10 m), one read per step.
+* ``shipsense/Passage-v1-hard``: six magnetometers 30 m apart, 2 of 6 per
+  step, 10 % outliers (10 sigma), 10 % dropouts, starts 100-250 m out,
+  moments 3e3-3e4 A m^2, 120 samples.
+
+Their ``reward_threshold`` is the greedy baseline's mean return on held-out
+passages (EXPERIMENTS.md, ``experiments/passage_baselines.py``).  Keyword
+arguments to ``gymnasium.make`` replace a variant's: ``overrides`` replaces
+its whole ``overrides`` dict.
 
 ## Version history
 
@@ -254,12 +271,16 @@ class PassageV1Core:
     def _predict_gains(self, envs):
         """Predicted drop (nats) of the position covariance's log-det for every action, from the observer's
         estimate and covariance predicted one step, linearised there (0 while the observer has no track)."""
+        blind = self._blind(envs)
+        self.gains[envs[blind]] = 0.0
+        envs = envs[~blind]   # (the prior's mean is the array centroid: a sensor may sit there)
+        if envs.size == 0:
+            return
         xs = self._xs
         x = (self.last.estimate[envs] / xs) @ self._A.T
         P = self.last.cov[envs] / np.outer(xs, xs)
         P = self._A @ P @ self._A.T
         self.gains[envs] = information_gains(self.model.H(x), self._Rinv, P, self.first_channel, self.subsets)
-        self.gains[envs[self._blind(envs)]] = 0.0
 
     def _blind(self, envs):
         """Whether the observers of ``envs`` have no track yet (status no data or initialising)."""

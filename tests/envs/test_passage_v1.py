@@ -235,3 +235,17 @@ def test_render_rgb_array_shows_the_episode():
     env.step(2)
     img = env.render()
     assert img.ndim == 3 and img.shape[2] == 3 and img.dtype == np.uint8 and img.std() > 0
+
+
+def test_a_passage_the_observer_never_tracks_leaves_one_step_and_no_gains():
+    """Moments of a few A m^2: no detection; the run-in lasts to the last step but one, gains are 0 (the prior's
+    mean is the centroid, where S2's accelerometer sits: a linearisation there divided by zero) and greedy
+    falls back to round-robin."""
+    prior = {"range": [60.0, 120.0], "bearing_deg": [0.0, 360.0], "course_offset_deg": [-20.0, 20.0],
+             "speed": [3.0, 7.0], "moment": [1.0, 2.0]}
+    env = PassageV1Env(scenario="S2", overrides={"steps": 40, "prior": prior})
+    obs, _ = env.reset(seed=0)
+    assert env.core.k[0] == 38 and obs[7] * 4 <= 1 and not obs[12:].any()
+    assert env.baseline("greedy")(obs) == env.baseline("round-robin")(obs)
+    _, r, term, _, info = env.step(1)
+    assert term and info["episode_metrics"]["steps"] == 1.0 and info["error"] > 10.0 and np.isfinite(r)
