@@ -112,7 +112,9 @@ value raises one ``ValueError`` naming the argument.
   moments 3e3-3e4 A m^2, 120 samples.
 
 Their ``reward_threshold`` is the greedy baseline's mean return on held-out
-passages (EXPERIMENTS.md, ``experiments/passage_baselines.py``).  Keyword
+passages (EXPERIMENTS.md, ``experiments/passage_baselines.py``); for the hard
+variant the best baseline's (random), as greedy, which trusts an observer
+that loses most of those passages, scores worse there.  Keyword
 arguments to ``gymnasium.make`` replace a variant's: ``overrides`` replaces
 its whole ``overrides`` dict.
 
