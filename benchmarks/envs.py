@@ -1,15 +1,19 @@
 """Environment benchmark: steps per second of Passage-v0 (single and native vector, 64 envs) with the
-project's tracker as observer (what users get; ``--observer bank``: the studies' 12-hypothesis bank),
-and of ArrayDesign-v1 (single and native vector, 16 envs; random valid picks, whole episodes: every
-episode's site set-up, i.e. its Fisher matrices, is included) against ArrayDesign-v0 (a few steps: its
-terminal judge tracks 8 passages), with CartPole-v1 measured in the same run as the reference.
+project's tracker as observer (what users get; ``--observer bank``: the studies' 12-hypothesis bank), of
+Passage-v1 (single and native vector; the tracker is its only observer), and of ArrayDesign-v1 (single and
+native vector, 16 envs; random valid picks, whole episodes: every episode's site set-up, i.e. its Fisher
+matrices, is included) against ArrayDesign-v0 (a few steps: its terminal judge tracks 8 passages), with
+CartPole-v1 measured in the same run as the reference.
 
 Run:  PYTHONPATH=. python benchmarks/envs.py [--steps 2000] [--num-envs 64] [--observer tracker|bank]
-      [--allocator tuned|default] [--design-steps 400] [--design-envs 16] [--skip-passage]
+      [--allocator tuned|default] [--v1-id shipsense/Passage-v1] [--design-steps 400] [--design-envs 16]
+      [--skip-passage]
 
-Actions are all-ones (read every sensor) so that every step runs the full
-update; autoresets are included.  Every rate is the best of three timed runs.  PPO frames per second are reported by
-``shipsense train`` (see EXPERIMENTS.md).
+Passage-v0's actions are all-ones (read every sensor) so that every step runs the full
+update; Passage-v1's read the first ``k``-sensor subset (its full budget).  Autoresets are included (for
+Passage-v1 with its run-in: the observer reads every sensor until its first track, about 0.5 s per
+passage of the initialiser's grid search).  Every rate is the best of three timed runs.  PPO frames per
+second are reported by ``shipsense train`` (see EXPERIMENTS.md).
 """
 
 from __future__ import annotations
@@ -68,6 +72,7 @@ def main(argv=None):
     ap.add_argument("--num-envs", type=int, default=64)
     ap.add_argument("--allocator", choices=("tuned", "default"), default="tuned",
                     help="tuned: shipsense.tune_allocator() as the shipsense command does; default: glibc's")
+    ap.add_argument("--v1-id", default="shipsense/Passage-v1", help="the Passage-v1 variant to measure")
     ap.add_argument("--observer", choices=("tracker", "bank"), default="tracker",
                     help="the environment's observer (default: the tracker, as users get it)")
     ap.add_argument("--design-steps", type=int, default=400, help="ArrayDesign-v1 single-env steps per timed run")
@@ -89,9 +94,17 @@ def main(argv=None):
         single = single_rate(env, args.steps, np.ones(3, dtype=np.int8))
         venv = gym.make_vec("shipsense/Passage-v0", num_envs=n, vectorization_mode="vector_entry_point", **kwargs)
         vec = vector_rate(venv, max(args.steps // 10, 20), np.ones((n, 3), dtype=np.int8))
+        env1 = gym.make(args.v1_id)
+        full = int(env1.unwrapped.core.full[0])
+        single1 = single_rate(env1, args.steps, full)
+        venv1 = gym.make_vec(args.v1_id, num_envs=n, vectorization_mode="vector_entry_point")
+        vec1 = vector_rate(venv1, max(args.steps // 10, 20), np.full(n, full))
         print(f"{f'shipsense/Passage-v0 (single, {args.observer})':<44}{single:>12,.0f}")
         print(f"{f'shipsense/Passage-v0 (vector, {n} envs)':<44}{vec:>12,.0f}")
+        print(f"{f'{args.v1_id} (single)':<44}{single1:>12,.0f}")
+        print(f"{f'{args.v1_id} (vector, {n} envs)':<44}{vec1:>12,.0f}")
         print(f"Passage-v0 / CartPole-v1: single {single / cart:.3f}, vector {vec / cart_vec:.3f}")
+        print(f"Passage-v1 / CartPole-v1: single {single1 / cart:.4f}, vector {vec1 / cart_vec:.4f}")
     d = design_rates(args.design_steps, args.design_envs)
     for name, rate in d.items():
         print(f"{name:<44}{rate:>12,.1f}")

@@ -586,8 +586,8 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--timesteps", type=_whole(1, TIMESTEPS_MAX), default=None,
                     help="environment steps (default: 20000)")
     tr.add_argument("--env", default=None, metavar="ID",
-                    help="environment id (default: shipsense/ArrayDesign-v1 for placement; shipsense/Passage-v0 "
-                         "with max_reads 1 and energy_cost 0.01 for scheduling)")
+                    help="environment id (default: shipsense/ArrayDesign-v1 for placement, shipsense/Passage-v1 for "
+                         "scheduling)")
     tr.add_argument("--env-kwargs", default=None, metavar="JSON", help="the environment's arguments, a JSON object")
     tr.add_argument("--n-envs", type=_whole(1, 256), default=8, help="parallel environments (default: %(default)s)")
     tr.add_argument("--eval-every", type=_whole(1, TIMESTEPS_MAX), default=None, metavar="STEPS",

@@ -1,7 +1,11 @@
 """Gymnasium environments of ship passages past a sensor array (shared/spec/design.md section 4).
 
+* ``shipsense/Passage-v1`` (:class:`~shipsense.envs.passage_v1.PassageV1Env`, native vector version
+  :class:`~shipsense.envs.passage_v1.PassageV1VectorEnv`): read ``k`` of the array's sensors per step, with
+  the variants ``shipsense/PassageEasy-v1`` and ``shipsense/PassageHard-v1`` (:data:`PASSAGE_V1_VARIANTS`).
 * ``shipsense/Passage-v0`` (:class:`~shipsense.envs.passage.PassageEnv`, native vector version
-  :class:`~shipsense.envs.passage.PassageVectorEnv`): schedule which sensors to read.
+  :class:`~shipsense.envs.passage.PassageVectorEnv`): the old version (a trimmed ``MultiBinary`` action, an
+  error reward capped at 100 m), kept registered to compare with earlier results.
 * ``shipsense/ArrayDesign-v1`` (:class:`~shipsense.envs.site_design.SiteDesignEnv`, native vector version
   :class:`~shipsense.envs.site_design.SiteDesignVectorEnv`): place k sensors at a site drawn per episode;
   variants ``shipsense/ArrayDesignSmall-v1`` (k = 3 of 25 candidates) and ``shipsense/ArrayDesignLarge-v1``
@@ -9,13 +13,14 @@
 * ``shipsense/ArrayDesign-v0`` (:class:`~shipsense.envs.array_design.ArrayDesignEnv`): the old version, kept
   registered: place k sensors for one fixed scenario, judged by the tracker on 8 fixed passages.
 
-Both are registered when ``shipsense`` is imported (idempotently), so
-``gymnasium.make("shipsense:shipsense/Passage-v0")`` works in a fresh process.
+All are registered when ``shipsense`` is imported (idempotently), so
+``gymnasium.make("shipsense:shipsense/Passage-v1")`` works in a fresh process.
 """
 
 from __future__ import annotations
 
 PASSAGE_ID = "shipsense/Passage-v0"
+PASSAGE_V1_ID = "shipsense/Passage-v1"
 DESIGN_ID = "shipsense/ArrayDesign-v0"
 DESIGN_V1_ID = "shipsense/ArrayDesign-v1"
 
@@ -29,6 +34,36 @@ DESIGN_V1_VARIANTS = {
 }
 
 
+def magnetometer_line(n, spacing_m):
+    """``n`` vector magnetometers on a line (y = 0, 2 m below the target plane) ``spacing_m`` apart, centred on
+    the origin, with S2's noise (0.5 nT): scenario ``sensors`` entries."""
+    return [{"id": f"M{i + 1}", "type": "magnetometer", "kind": "vector",
+             "position": [(i - (n - 1) / 2) * spacing_m, 0.0, -2.0], "noise_var": 2.5e-19} for i in range(n)]
+
+
+PASSAGE_V1_VARIANTS = {
+    # S2's array (two magnetometers and a bearing accelerometer 5 m apart), one read per step
+    "shipsense/PassageEasy-v1": {"scenario": "S2", "k": 1},
+    # four magnetometers 40 m apart: which one is near the ship changes along the passage
+    PASSAGE_V1_ID: {"scenario": "S2", "k": 1, "overrides": {
+        "sensors": magnetometer_line(4, 40.0), "steps": 100,
+        "prior": {"range": [100.0, 160.0], "bearing_deg": [0.0, 360.0], "course_offset_deg": [-20.0, 20.0],
+                  "speed": [3.0, 7.0], "moment": [5e3, 5e4]}}},
+    # six magnetometers 30 m apart, 2 of 6 per step, 10 % outliers (10 sigma), 10 % dropouts, a wider prior
+    "shipsense/PassageHard-v1": {"scenario": "S2", "k": 2, "overrides": {
+        "sensors": magnetometer_line(6, 30.0), "steps": 120,
+        "noise": {"model": "contaminated", "eps": 0.1, "outlier_scale": 10.0, "dropout": 0.1},
+        "prior": {"range": [100.0, 250.0], "bearing_deg": [0.0, 360.0], "course_offset_deg": [-30.0, 30.0],
+                  "speed": [3.0, 7.0], "moment": [3e3, 3e4]}}},
+}
+"""Passage-v1's registered variants: id -> constructor kwargs."""
+
+PASSAGE_V1_THRESHOLDS = {"shipsense/PassageEasy-v1": -6.0, PASSAGE_V1_ID: -5.3, "shipsense/PassageHard-v1": -233.2}
+"""``reward_threshold`` per variant: the greedy baseline's mean return on held-out seeds (EXPERIMENTS.md,
+``experiments/passage_baselines.py``), rounded to 0.1: an agent that reaches it schedules as well as greedy; for
+the hard variant the best baseline's (random: greedy is worse there, its observer loses most passages)."""
+
+
 def register_envs() -> None:
     """Register the environments with gymnasium (a no-op when they already are)."""
     import gymnasium as gym
@@ -37,6 +72,11 @@ def register_envs() -> None:
         gym.register(id=PASSAGE_ID, entry_point="shipsense.envs.passage:PassageEnv",
                      vector_entry_point="shipsense.envs.passage:PassageVectorEnv",
                      kwargs={"scenario": "S2"})
+    for env_id, kwargs in PASSAGE_V1_VARIANTS.items():
+        if env_id not in gym.registry:
+            gym.register(id=env_id, entry_point="shipsense.envs.passage_v1:PassageV1Env",
+                         vector_entry_point="shipsense.envs.passage_v1:PassageV1VectorEnv",
+                         reward_threshold=PASSAGE_V1_THRESHOLDS[env_id], kwargs=dict(kwargs))
     if DESIGN_ID not in gym.registry:
         gym.register(id=DESIGN_ID, entry_point="shipsense.envs.array_design:ArrayDesignEnv",
                      kwargs={"scenario": "S1-P2"})
@@ -47,4 +87,5 @@ def register_envs() -> None:
                          kwargs=kwargs, reward_threshold=threshold)
 
 
-__all__ = ["DESIGN_ID", "DESIGN_V1_ID", "DESIGN_V1_VARIANTS", "PASSAGE_ID", "register_envs"]
+__all__ = ["DESIGN_ID", "DESIGN_V1_ID", "DESIGN_V1_VARIANTS", "PASSAGE_ID", "PASSAGE_V1_ID", "PASSAGE_V1_VARIANTS",
+           "register_envs"]

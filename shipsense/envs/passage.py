@@ -1,5 +1,12 @@
 """``shipsense/Passage-v0``: schedule which sensors to read while the tracker follows a passing ship.
 
+**The old version**, kept registered to compare with earlier results: use
+``shipsense/Passage-v1`` (:mod:`shipsense.envs.passage_v1`), whose action
+cannot exceed the budget and whose reward is not capped.  Measured on v0
+(issue 18): with the default budget the best policy is "read everything";
+the error term is capped at 100 m, so a diverged observer looks like a
+small error; a ``MultiBinary`` action over budget is silently trimmed.
+
 ## Description
 
 One episode is one ship passage drawn from the scenario's prior past its
@@ -55,6 +62,7 @@ or the scenario's for the bank), ``max_reads`` (default: all sensors),
 
 ## Version history
 
+* v1 (``shipsense/Passage-v1``, another module): supersedes this one.
 * v0 (revised with the one-tracker change): the observer is the project's
   tracker, its covariance and status in the observation (width ``8 + H + S``).
   ``observer="bank"`` keeps the first version's observer (the studies' bank,

@@ -23,7 +23,7 @@ from shipsense.envs.arguments import number
 
 ALGORITHMS = {"scheduling": "PPO", "placement": "MaskablePPO"}
 DEFAULT_ENVS = {   # kind: (env id, its arguments when --env is not given)
-    "scheduling": ("shipsense/Passage-v0", {"max_reads": 1, "energy_cost": 0.01}),   # -> Passage-v1 when merged
+    "scheduling": ("shipsense/Passage-v1", {}),
     "placement": ("shipsense/ArrayDesign-v1", {}),
 }
 DEFAULT_TIMESTEPS = {"scheduling": 20_000, "placement": 20_000}

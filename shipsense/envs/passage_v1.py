@@ -1,0 +1,631 @@
+"""``shipsense/Passage-v1``: read ``k`` of the array's sensors per step while the tracker follows a passing ship.
+
+## Description
+
+One episode is one ship passage drawn from the scenario's prior past its
+array.  The project's tracker (:class:`shipsense.trackers.Tracker`, its
+covariance calibrated: EXPERIMENTS.md) runs inside the environment as the
+observer.  It sees every sensor's first sample (the detection); from then on
+the agent chooses at every step which sensors to read, at most ``k`` of them
+(a seabed node's energy budget), each read costing ``energy_cost``.  The
+agent sees the observer's output and what the observer predicts each sensor
+would tell it, never the truth.
+
+## Action space
+
+``Discrete(A)``: an index into :attr:`PassageV1Env.subsets`, every subset of
+the ``S`` sensors with at most ``k`` members, in order of size then
+lexicographic: action 0 reads nothing, actions ``1 .. S`` read one sensor
+(sensor ``a - 1``), then the pairs, ...  An over-budget choice cannot be
+expressed.  ``A = sum_{j <= k} C(S, j)``.
+
+## Observation space
+
+``Box(-1, 1, (9 + 2 S,), float32)``, all finite (``position_scale``: 1.5 x the prior's farthest start):
+
+| index | content |
+| --- | --- |
+| 0-1 | the observer's position estimate relative to the array centroid / ``position_scale``, clipped |
+| 2-3 | its velocity / 10 m/s, clipped |
+| 4-5 | ``log10(std_x) / 3``, ``log10(std_y) / 3`` of its position covariance, clipped (1 mm .. 1 km) |
+| 6 | the position correlation coefficient |
+| 7 | the observer's status / 4 (0 no data, 0.25 initialising, 0.5 tracking, 0.75 restarted, 1 inconsistent) |
+| 8 | elapsed fraction of the passage |
+| 9 .. 8+S | per sensor: steps since it was last read / (K - 1), clipped to 1 |
+| 9+S .. 8+2S | per sensor: its predicted information gain ``g / (1 + g)`` (below) |
+
+``g`` is the drop (nats) of the log-det of the position covariance if that
+sensor alone were read at the next step, linearised at the observer's
+one-step prediction with the observer's own noise model; 0 while the
+observer has no track (its estimate is then the prior's mean, where a
+linearisation means nothing).
+
+## Rewards
+
+``-ln(1 + error / error_scale) - energy_cost * reads`` per step, with
+``error`` the distance (m) of the observer's position estimate from the
+truth after the step.  The error term uses the truth (the environment has
+it), not the observer's covariance: a reward on the observer's own
+covariance would pay an optimistic observer for being optimistic.  It is
+logarithmic (metre-level improvements count while a 1 km error is not a
+thousand times a 1 m one) but **not capped**: a diverged observer keeps
+earning ever more negative rewards (10 km off: -9.2 per step with the
+default 1 m scale).  Both terms are in ``info``.
+
+## Starting state
+
+A passage drawn from the scenario's ``[prior]`` (start range, bearing, course
+offset, speed, moment) under the seed.  **Run-in**: the observer reads every
+sensor from the first sample until it reports a track (its detection and the
+global fit of its first window, 15 s of samples for magnetometers); the
+agent's control starts there (the observation's elapsed
+fraction says where).  While the observer has no track its estimate is the
+prior's mean whatever is read, so those samples would add the same 50-100 m
+errors to every policy's return and hide the scheduling (measured on S2
+before the run-in: the first 30 of 80 samples made up most of every
+baseline's return).  A passage that never gets a track leaves the agent one
+step.
+
+## Episode end
+
+Terminated at the passage's last sample (``K`` the scenario's ``steps``;
+the episode has ``K - 1 - run-in`` steps).  No truncation.
+
+## Info keys
+
+Every step: ``error`` (m), ``nees`` (the position's normalised squared
+error under the observer's covariance), ``inside95`` (``nees <= 5.991``),
+``reads``, ``error_term``, ``energy_term``, ``truth`` and ``estimate`` (m),
+``status``.  At the episode's end also ``episode_metrics``: ``mean_error_m``
+(the task metric: the mean position error over the episode's steps),
+``final_error_m``, ``coverage95`` (share of steps with the truth inside
+the observer's 95 % ellipse), ``reads_per_step``, ``energy`` (the episode's
+energy cost) and ``return`` -- plain floats.
+
+## Baselines
+
+:meth:`PassageV1Env.baseline` (``BASELINES``): ``random`` (a uniformly
+random subset of exactly ``k`` sensors), ``round-robin`` (the ``k`` sensors
+read longest ago; ties to the lowest index), ``greedy`` (the subset of ``k``
+sensors with the largest predicted drop of the position covariance's
+log-det, all subsets searched; round-robin while the observer has no track).
+
+## Arguments
+
+``scenario`` (shipped name or TOML path), ``overrides`` (dict of top-level
+scenario fields, e.g. ``{"steps": 60}``), ``k`` (reads per step, default 1),
+``energy_cost`` (per read, default 0.01), ``error_scale`` (m, default 1),
+``render_mode`` (``"rgb_array"`` or ``"human"``).  All JSON-able; a bad
+value raises one ``ValueError`` naming the argument.
+
+## Variants (registered)
+
+``shipsense.envs.PASSAGE_V1_VARIANTS`` (S2's noise, 0.5 nT magnetometers):
+
+* ``shipsense/Passage-v1``: four vector magnetometers on a line 40 m apart,
+  one read per step, 100 samples, starts 100-160 m out: which magnetometer
+  is near the ship changes along the passage.
+* ``shipsense/PassageEasy-v1``: S2's array (two magnetometers and a bearing
+  accelerometer within 10 m), one read per step.
+* ``shipsense/PassageHard-v1``: six magnetometers 30 m apart, 2 of 6 per
+  step, 10 % outliers (10 sigma), 10 % dropouts, starts 100-250 m out,
+  moments 3e3-3e4 A m^2, 120 samples.
+
+Their ``reward_threshold`` is the greedy baseline's mean return on held-out
+passages (EXPERIMENTS.md, ``experiments/passage_baselines.py``); for the hard
+variant the best baseline's (random), as greedy, which trusts an observer
+that loses most of those passages, scores worse there.  Keyword
+arguments to ``gymnasium.make`` replace a variant's: ``overrides`` replaces
+its whole ``overrides`` dict.
+
+## Version history
+
+* v1: the agent picks a subset of at most ``k`` sensors (``Discrete``, no
+  trimming), uncapped log-error reward, time since each read and predicted
+  information gains observed, episode metrics and baselines.
+* v0 (``shipsense/Passage-v0``, :mod:`shipsense.envs.passage`): a
+  ``MultiBinary`` action trimmed to ``max_reads``, the error reward capped at
+  100 m; kept registered for comparison with earlier results.
+"""
+
+from __future__ import annotations
+
+from itertools import combinations
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from shipsense.config import load_scenario
+from shipsense.envs.arguments import number
+from shipsense.simulator import simulate
+from shipsense.trackers import Tracker
+from shipsense.trackers.tracker import INITIALISING, NO_DATA
+
+SEED_HIGH = 2**31 - 1
+PASSAGE_BLOCK = 16
+"""Passages simulated per simulator call and environment (see :meth:`PassageV1Core.reset_envs`)."""
+CHI2_2_95 = 5.991464547107979
+"""95 % quantile of the chi-square distribution with 2 degrees of freedom."""
+BASELINES = ("random", "round-robin", "greedy")
+
+
+def subsets(S, k):
+    """All subsets of at most ``k`` of ``S`` sensors as a boolean matrix (A, S): by size, then lexicographic."""
+    rows = [np.zeros(S, dtype=bool)]
+    for j in range(1, k + 1):
+        for c in combinations(range(S), j):
+            r = np.zeros(S, dtype=bool)
+            r[list(c)] = True
+            rows.append(r)
+    return np.array(rows)
+
+
+class PassageV1Core:
+    """State and dynamics of E Passage-v1 environments at once (E = 1 for :class:`PassageV1Env`)."""
+
+    def __init__(self, num_envs=1, scenario="S2", overrides=None, k=1, energy_cost=0.01, error_scale=1.0):
+        num_envs = number("num_envs", num_envs, 1, 100_000, integer=True)
+        energy_cost = number("energy_cost", energy_cost, 0.0, 1e6)
+        error_scale = number("error_scale", error_scale, 1e-6, 1e6, lo_open=True)
+        if overrides is not None and not isinstance(overrides, dict):
+            raise ValueError(f"overrides must be a dict of scenario fields, got {type(overrides).__name__}")
+        try:
+            sc = load_scenario(scenario)
+            if overrides:
+                sc = sc.with_updates(**overrides)
+        except Exception as exc:   # a missing file, a bad field: one line naming the argument
+            first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+            raise ValueError(f"scenario/overrides: {first}") from None
+        if sc.prior is None:
+            raise ValueError(f"scenario {sc.name!r} has no [prior]: Passage-v1 draws passages from it")
+        self.scenario = sc
+        self.tracker = Tracker(sc, passages=num_envs)
+        self.model = self.tracker.model
+        arr = self.model.array
+        self.S = len(arr.ids)
+        self.k_reads = number("k", k, 1, self.S, integer=True)
+        self.subsets = subsets(self.S, self.k_reads)
+        self.full = np.flatnonzero(self.subsets.sum(axis=1) == self.k_reads)   # actions reading exactly k
+        self.energy_cost, self.error_scale = energy_cost, error_scale
+        self.E, self.K = num_envs, sc.steps
+        self.centre = arr.positions[:, :2].mean(axis=0)
+        self.position_scale = 1.5 * sc.prior.range[1]
+        self.sensor_of = arr.channel_sensor
+        self.first_channel = np.flatnonzero(np.diff(np.concatenate([[-1], self.sensor_of])))
+        self.obs_dim = 9 + 2 * self.S
+        self.times = sc.times
+        E, K = self.E, self.K
+        self.y = np.zeros((E, K, self.model.m))
+        self.truth = np.zeros((E, K, self.model.n))
+        self.est_hist = np.zeros((E, K, 2))
+        self.errors = np.zeros((E, K))
+        self.inside = np.zeros((E, K), dtype=bool)
+        self.returns = np.zeros(E)
+        self.reads = np.zeros(E)
+        self.k = np.zeros(E, dtype=int)
+        self.start = np.zeros(E, dtype=int)   # the sample the agent's control starts at (after the run-in)
+        self.since = np.zeros((E, self.S))
+        self.last_read = np.zeros((E, self.S), dtype=bool)
+        self.last = self.tracker._prior_sample()
+        self.gains = np.zeros((E, len(self.subsets)))   # predicted gain (nats) of every action
+        self._passages = {}
+        self._rows = np.arange(E)
+        # the observer's noise (internal units) and the one-step transition
+        self._Rinv = 1.0 / self.tracker.filter_model.R
+        self._A = self.model.A
+        self._xs = self.model.x_scale
+
+    # -- episodes ---------------------------------------------------------------
+    def reset_envs(self, envs, seeds, fresh=False):
+        """Draw new passages for ``envs`` (indices) from integer ``seeds`` and show their observers every
+        sensor's first sample.  Passages are simulated in blocks of :data:`PASSAGE_BLOCK` per environment; an
+        explicit seed (``fresh``) drops the rest of a block first.  Returns the observations of ``envs``."""
+        envs = np.asarray(envs, dtype=int)
+        for e, s in zip(envs, seeds):   # each environment draws from its own reproducible stream
+            queue = self._passages.setdefault(int(e), [])
+            if fresh:
+                queue.clear()
+            if not queue:
+                sim = simulate(self.scenario, runs=PASSAGE_BLOCK, seed=int(s), random=True)
+                queue.extend(zip(sim.measurements, self.model.state_from_truth(sim.truth)))
+            self.y[e], self.truth[e] = queue.pop(0)
+        self.tracker.reset_passages(envs)
+        self.k[envs] = 0
+        self._record(self.tracker.update(self.times[0], self.y[envs, 0], passages=envs), envs)
+        # the run-in: every sensor is read until the observer has a track (detection and its first fit)
+        waiting = envs[self._blind(envs) & (self.k[envs] < self.K - 2)]
+        while waiting.size:
+            self.k[waiting] += 1
+            self._record(self.tracker.update(self.times[self.k[waiting]], self.y[waiting, self.k[waiting]],
+                                             passages=waiting), waiting)
+            waiting = waiting[self._blind(waiting) & (self.k[waiting] < self.K - 2)]
+        self.start[envs] = self.k[envs]
+        self.since[envs] = 0.0
+        self.last_read[envs] = True
+        self.returns[envs] = 0.0
+        self.reads[envs] = 0.0
+        self._measure(envs)
+        self._predict_gains(envs)
+        return self.observe()[envs]
+
+    def _record(self, sample, envs):
+        for name in ("estimate", "cov", "status", "selected"):
+            getattr(self.last, name)[envs] = getattr(sample, name)
+
+    def _measure(self, envs):
+        """Error and 95 % ellipse coverage of ``envs`` at their current sample (stored in the histories)."""
+        k = self.k[envs]
+        est, cov = self.last.estimate[envs, :2], self.last.cov[envs, :2, :2]
+        d = est - self.truth[envs, k, :2]
+        a, b, c = cov[:, 0, 0], cov[:, 0, 1], cov[:, 1, 1]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            nees = (c * d[:, 0] ** 2 - 2 * b * d[:, 0] * d[:, 1] + a * d[:, 1] ** 2) / (a * c - b * b)
+        nees = np.where(np.isfinite(nees), nees, np.inf)
+        error = np.hypot(d[:, 0], d[:, 1])
+        self.est_hist[envs, k] = est
+        self.errors[envs, k] = error
+        self.inside[envs, k] = nees <= CHI2_2_95
+        return error, nees
+
+    def _predict_gains(self, envs):
+        """Predicted drop (nats) of the position covariance's log-det for every action, from the observer's
+        estimate and covariance predicted one step, linearised there (0 while the observer has no track)."""
+        blind = self._blind(envs)
+        self.gains[envs[blind]] = 0.0
+        envs = envs[~blind]   # (the prior's mean is the array centroid: a sensor may sit there)
+        if envs.size == 0:
+            return
+        xs = self._xs
+        x = (self.last.estimate[envs] / xs) @ self._A.T
+        P = self.last.cov[envs] / np.outer(xs, xs)
+        P = self._A @ P @ self._A.T
+        self.gains[envs] = information_gains(self.model.H(x), self._Rinv, P, self.first_channel, self.subsets)
+
+    def _blind(self, envs):
+        """Whether the observers of ``envs`` have no track yet (status no data or initialising)."""
+        status = self.last.status[envs]
+        return (status == NO_DATA) | (status == INITIALISING)
+
+    def step(self, actions, envs=None):
+        """Advance environments ``envs`` (default all) by one sample with actions (E,) (indices of
+        :attr:`subsets`).  Returns rewards, terminated (E,) and an info dict of (E,) arrays; entries of
+        environments that did not step are meaningless."""
+        actions = np.asarray(actions).reshape(self.E)
+        who = self._rows if envs is None else np.asarray(envs, dtype=int)
+        read = self.subsets[actions]
+        self.k[who] += 1
+        y = np.where(read[:, self.sensor_of], self.y[self._rows, self.k], np.nan)[who]
+        self._record(self.tracker.update(self.times[self.k[who]], y, passages=who), who)
+        self.last_read[who] = read[who]
+        self.since[who] += 1.0
+        self.since[who] = np.where(read[who], 0.0, self.since[who])
+        error, nees = np.zeros(self.E), np.zeros(self.E)
+        error[who], nees[who] = self._measure(who)
+        self._predict_gains(who)
+        reads = read.sum(axis=1).astype(float)
+        error_term = -np.log1p(error / self.error_scale)
+        energy_term = -self.energy_cost * reads
+        rewards = error_term + energy_term
+        self.returns[who] += rewards[who]
+        self.reads[who] += reads[who]
+        info = {"error": error, "nees": nees, "inside95": nees <= CHI2_2_95, "reads": reads,
+                "error_term": error_term, "energy_term": energy_term, "status": self.last.status.copy(),
+                "truth": self.truth[self._rows, self.k, :2].copy(), "estimate": self.last.estimate[:, :2].copy()}
+        return rewards, self.k >= self.K - 1, info
+
+    def episode_metrics(self, envs):
+        """The episodes' metrics of ``envs`` (at their last sample): dict of (len(envs),) arrays."""
+        envs = np.asarray(envs, dtype=int)
+        steps = np.maximum(self.k[envs] - self.start[envs], 1)
+        ks = np.arange(self.K)[None, :]
+        live = (ks > self.start[envs, None]) & (ks <= self.k[envs, None])   # the agent's steps
+        return {"mean_error_m": np.where(live, self.errors[envs], 0.0).sum(axis=1) / steps,
+                "final_error_m": self.errors[envs, self.k[envs]],
+                "coverage95": np.where(live, self.inside[envs], False).sum(axis=1) / steps,
+                "steps": steps.astype(float),
+                "reads_per_step": self.reads[envs] / steps,
+                "energy": self.reads[envs] * self.energy_cost,
+                "return": self.returns[envs].copy()}
+
+    def observe(self):
+        """Observations (E, obs_dim) float32 (see the module docstring's table)."""
+        S, est, cov = self.S, self.last.estimate, self.last.cov
+        obs = np.empty((self.E, self.obs_dim))
+        obs[:, 0:2] = (est[:, :2] - self.centre) / self.position_scale
+        obs[:, 2:4] = est[:, 2:4] * 0.1
+        vx, vy, cxy = cov[:, 0, 0], cov[:, 1, 1], cov[:, 0, 1]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            obs[:, 4] = np.log10(np.maximum(vx, 1e-12)) / 6.0
+            obs[:, 5] = np.log10(np.maximum(vy, 1e-12)) / 6.0
+            obs[:, 6] = cxy / np.sqrt(np.maximum(vx * vy, 1e-300))
+        obs[:, 7] = self.last.status / 4.0
+        obs[:, 8] = self.k / max(self.K - 1, 1)
+        obs[:, 9:9 + S] = self.since / max(self.K - 1, 1)
+        g = np.maximum(self.gains[:, 1:1 + S], 0.0)   # the single-sensor actions
+        obs[:, 9 + S:] = g / (1.0 + g)
+        obs = np.nan_to_num(obs, nan=0.0, posinf=1.0, neginf=-1.0)
+        np.clip(obs, -1.0, 1.0, out=obs)
+        return obs.astype(np.float32)
+
+    # -- baselines (batched: one action per environment) ---------------------------
+    def round_robin_actions(self):
+        """The ``k`` sensors read longest ago (ties to the lowest index), as action indices (E,)."""
+        order = np.argsort(-self.since, axis=1, kind="stable")[:, :self.k_reads]
+        want = np.zeros((self.E, self.S), dtype=bool)
+        np.put_along_axis(want, order, True, axis=1)
+        return action_of(self.subsets, want)
+
+    def greedy_actions(self):
+        """The subset of ``k`` sensors with the largest predicted gain (E,); round-robin without a track."""
+        best = self.full[np.argmax(self.gains[:, self.full], axis=1)]
+        return np.where(self._blind(self._rows), self.round_robin_actions(), best)
+
+    def random_actions(self, rng):
+        """A uniformly random subset of exactly ``k`` sensors per environment (E,)."""
+        return self.full[rng.integers(0, self.full.size, self.E)]
+
+    # -- rendering ----------------------------------------------------------------
+    def render(self, e=0):
+        """RGB picture of environment ``e``: the array (sensors read at this step ringed), the true and estimated
+        tracks so far and the estimate's 95 % ellipse."""
+        from shipsense.plotting import draw_array, figure_to_rgb, plt
+
+        fig, ax = plt.subplots(figsize=(5, 5), dpi=80)
+        arr = self.model.array
+        draw_array(ax, arr, label=True)
+        read = np.flatnonzero(self.last_read[e])
+        ax.scatter(arr.positions[read, 0], arr.positions[read, 1], s=260, facecolor="none", edgecolor="tab:green",
+                   lw=2, zorder=6, label="read")
+        k = self.k[e]
+        ax.plot(*self.truth[e, : k + 1, :2].T, "-", color="tab:red", label="truth")
+        ax.plot(*self.est_hist[e, : k + 1].T, "-", color="tab:blue", lw=0.8, label="estimate")
+        mean, cov = self.last.estimate[e, :2], self.last.cov[e, :2, :2]
+        w, V = np.linalg.eigh(cov)
+        t = np.linspace(0, 2 * np.pi, 60)
+        pts = mean[:, None] + V @ (np.sqrt(np.clip(w, 0, None) * CHI2_2_95)[:, None] * np.stack([np.cos(t), np.sin(t)]))
+        ax.plot(pts[0], pts[1], "-", color="tab:blue", lw=1.0, label="95 % ellipse")
+        ax.plot(*mean, "o", color="tab:blue")
+        r = self.position_scale
+        ax.set_xlim(self.centre[0] - r, self.centre[0] + r)
+        ax.set_ylim(self.centre[1] - r, self.centre[1] + r)
+        ax.set_aspect("equal")
+        ax.legend(loc="upper right", fontsize=7)
+        ax.set_title(f"step {k}: error {self.errors[e, k]:.3g} m", fontsize=9)
+        return figure_to_rgb(fig)
+
+
+def information_gains(Hm, Rinv, P, first_channel, subsets):
+    """Drop (nats) of the position block's log-det of covariances ``P`` (E, n, n) when the sensors of each of
+    ``subsets`` (A, S) are read, in information form: Jacobians ``Hm`` (E, m, n), inverse noise variances
+    ``Rinv`` (m,), channels grouped by sensor from ``first_channel`` (S,).  Returns (E, A)."""
+    Hw = Hm * Rinv[:, None]
+    Jc = Hw[..., :, None] * Hm[..., None, :]                     # (E, m, n, n) per channel
+    Js = np.add.reduceat(Jc, first_channel, axis=1)              # (E, S, n, n) per sensor
+    Ja = np.einsum("as,esij->eaij", subsets.astype(float), Js)   # (E, A, n, n) per action
+    with np.errstate(all="ignore"):
+        Pinv = np.linalg.inv(P)
+        post = np.linalg.inv(Pinv[:, None] + Ja)
+        before = np.linalg.slogdet(P[:, :2, :2])[1]
+        after = np.linalg.slogdet(post[..., :2, :2])[1]
+    g = before[:, None] - after
+    return np.where(np.isfinite(g), np.maximum(g, 0.0), 0.0)
+
+
+def action_of(table, want):
+    """The action indices (E,) whose rows of ``table`` (A, S) equal ``want`` (E, S)."""
+    weights = 1 << np.arange(table.shape[1])
+    code = table.astype(np.int64) @ weights
+    lookup = np.full(int(code.max()) + 1, -1)
+    lookup[code] = np.arange(table.shape[0])
+    return lookup[want.astype(np.int64) @ weights]
+
+
+def _spaces(core):
+    low = -np.ones(core.obs_dim, dtype=np.float32)
+    low[7:9] = 0.0
+    low[9:] = 0.0
+    return spaces.Box(low, np.ones(core.obs_dim, dtype=np.float32), dtype=np.float32), \
+        spaces.Discrete(len(core.subsets))
+
+
+class _Policy:
+    """A baseline policy: ``policy(obs) -> action`` (reads the environment's internal state; ``obs`` unused)."""
+
+    def __init__(self, core, name, seed, single):
+        self.core, self.name, self.single = core, name, single
+        self.rng = np.random.default_rng(seed)
+
+    def __call__(self, obs=None):
+        c = self.core
+        a = (c.random_actions(self.rng) if self.name == "random" else
+             c.round_robin_actions() if self.name == "round-robin" else c.greedy_actions())
+        return int(a[0]) if self.single else a
+
+    def __repr__(self):
+        return f"<{self.name} baseline of Passage-v1>"
+
+
+def _check_baseline(name):
+    if name not in BASELINES:
+        raise ValueError(f"unknown baseline {name!r}; offered: {', '.join(BASELINES)}")
+
+
+class PassageV1Env(gym.Env):
+    __doc__ = __doc__
+    metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 4}
+    BASELINES = BASELINES
+
+    def __init__(self, scenario="S2", overrides=None, k=1, energy_cost=0.01, error_scale=1.0, render_mode=None):
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
+        self.core = PassageV1Core(1, scenario, overrides, k, energy_cost, error_scale)
+        self.observation_space, self.action_space = _spaces(self.core)
+        self.subsets = self.core.subsets
+        self.render_mode = render_mode
+        self._started = False
+        self._fig = None
+        self._kwargs = dict(scenario=scenario, overrides=overrides, k=k, energy_cost=energy_cost,
+                            error_scale=error_scale, render_mode=render_mode)
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        obs = self.core.reset_envs([0], [int(self.np_random.integers(SEED_HIGH))], fresh=seed is not None)
+        self._started = True
+        if self.render_mode == "human":
+            self.render()
+        return obs[0], {}
+
+    def step(self, action):
+        if not self._started:
+            raise RuntimeError("call reset() before step()")
+        if self.core.k[0] >= self.core.K - 1:
+            raise RuntimeError("the passage has ended: call reset()")
+        if not self.action_space.contains(action):
+            raise ValueError(f"action must be an integer in [0, {self.action_space.n}), got {action!r}")
+        rewards, terminated, info = self.core.step(np.array([int(action)]))
+        obs = self.core.observe()[0]
+        info = {k: v[0] for k, v in info.items()}
+        done = bool(terminated[0])
+        if done:
+            info["episode_metrics"] = {k: float(v[0]) for k, v in self.core.episode_metrics([0]).items()}
+        if self.render_mode == "human":
+            self.render()
+        return obs, float(rewards[0]), done, False, info
+
+    def baseline(self, name, seed=None):
+        """The baseline policy ``name`` (one of :attr:`BASELINES`): ``policy(obs) -> action``; ``seed`` seeds
+        ``random``'s own generator (the environment's is left alone)."""
+        _check_baseline(name)
+        return _Policy(self.core, name, seed, single=True)
+
+    def render(self):
+        if self.render_mode == "rgb_array":
+            return self.core.render(0)
+        if self.render_mode == "human":
+            from shipsense.plotting import plt
+
+            img = self.core.render(0)
+            if self._fig is None:
+                plt.ion()
+                self._fig, ax = plt.subplots()
+                ax.set_axis_off()
+                self._img = ax.imshow(img)
+            else:
+                self._img.set_data(img)
+            self._fig.canvas.draw_idle()
+            plt.pause(1.0 / self.metadata["render_fps"])
+        return None
+
+    def close(self):
+        if self._fig is not None:
+            from shipsense.plotting import plt
+
+            plt.close(self._fig)
+            self._fig = None
+
+    def __getstate__(self):   # rebuild from the JSON-able arguments (and keep the episode state)
+        return {"kwargs": self._kwargs, "core": self.core.__dict__, "np_random": self._np_random,
+                "started": self._started}
+
+    def __setstate__(self, state):
+        self.__init__(**state["kwargs"])
+        self.core.__dict__.update(state["core"])
+        self._np_random = state["np_random"]
+        self._started = state["started"]
+
+
+class PassageV1VectorEnv(VectorEnv):
+    """Native vector version of ``shipsense/Passage-v1``: one :class:`PassageV1Core` (one batched tracker) for
+    all sub-environments.
+
+    Sub-environment ``i`` reset with an integer ``seed`` behaves exactly like a single :class:`PassageV1Env`
+    reset with ``seed + i``; ``seed`` may also be a list of ``num_envs`` seeds (``None`` entries draw fresh
+    entropy).  **Autoreset mode: next step** (``AutoresetMode.NEXT_STEP``, gymnasium 1.x): the step after a
+    sub-environment terminated resets it, ignores its action and returns its first observation with reward 0,
+    ``terminated`` and ``truncated`` False.  ``info`` holds, per key, an (num_envs,) array and the ``_key``
+    mask of the sub-environments it is valid for (those that stepped); ``info["episode_metrics"]`` (with its
+    own masks) for those that terminated.
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "autoreset_mode": AutoresetMode.NEXT_STEP}
+    BASELINES = BASELINES
+
+    def __init__(self, num_envs=1, scenario="S2", overrides=None, k=1, energy_cost=0.01, error_scale=1.0,
+                 render_mode=None):
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
+        self.core = PassageV1Core(num_envs, scenario, overrides, k, energy_cost, error_scale)
+        self.num_envs = self.core.E
+        self.subsets = self.core.subsets
+        self.single_observation_space, self.single_action_space = _spaces(self.core)
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+        self.action_space = batch_space(self.single_action_space, self.num_envs)
+        self.render_mode = render_mode
+        self._rngs = None
+        self._prev_done = np.zeros(self.num_envs, dtype=bool)
+
+    def _reseed(self, seed):
+        n = self.num_envs
+        if seed is None or isinstance(seed, (int, np.integer)):
+            base = np.random.SeedSequence().entropy % SEED_HIGH if seed is None else int(seed)
+            seeds = [base + i for i in range(n)]
+        else:
+            seeds = list(seed)
+            if len(seeds) != n:
+                raise ValueError(f"seed must be an int or a list of {n} seeds (one per environment), "
+                                 f"got {len(seeds)}")
+            seeds = [np.random.SeedSequence().entropy % SEED_HIGH if s is None else int(s) for s in seeds]
+        self._rngs = [np.random.Generator(np.random.PCG64(np.random.SeedSequence(s))) for s in seeds]
+
+    def reset(self, *, seed=None, options=None):
+        fresh = seed is not None or self._rngs is None
+        if fresh:
+            self._reseed(seed)
+        envs = np.arange(self.num_envs)
+        obs = self.core.reset_envs(envs, [int(r.integers(SEED_HIGH)) for r in self._rngs], fresh=fresh)
+        self._prev_done[:] = False
+        return obs, {}
+
+    def step(self, actions):
+        actions = np.asarray(actions).reshape(self.num_envs)
+        if np.any((actions < 0) | (actions >= len(self.subsets))):
+            raise ValueError(f"actions must be integers in [0, {len(self.subsets)})")
+        done = self._prev_done
+        if done.any():   # next-step autoreset: these environments reset now and ignore their action
+            idx = np.flatnonzero(done)
+            self.core.reset_envs(idx, [int(self._rngs[i].integers(SEED_HIGH)) for i in idx])
+        live = ~done
+        rewards, terminated, info = self.core.step(np.where(live, actions, 0),
+                                                   envs=np.flatnonzero(live) if done.any() else None)
+        rewards = np.where(live, rewards, 0.0)
+        terminated = terminated & live
+        infos = {}
+        for key, v in info.items():
+            infos[key], infos["_" + key] = v, live.copy()
+        if terminated.any():
+            ended = np.flatnonzero(terminated)
+            metrics = {}
+            for key, v in self.core.episode_metrics(ended).items():
+                full = np.zeros(self.num_envs)
+                full[ended] = v
+                metrics[key], metrics["_" + key] = full, terminated.copy()
+            infos["episode_metrics"], infos["_episode_metrics"] = metrics, terminated.copy()
+        self._prev_done = terminated.copy()
+        return (self.core.observe(), rewards.astype(np.float64), terminated,
+                np.zeros(self.num_envs, dtype=bool), infos)
+
+    def baseline(self, name, seed=None):
+        """The batched baseline policy ``name``: ``policy(obs) -> actions`` (num_envs,)."""
+        _check_baseline(name)
+        return _Policy(self.core, name, seed, single=False)
+
+    def render(self):
+        if self.render_mode == "rgb_array":
+            return tuple(self.core.render(e) for e in range(self.num_envs))
+        return None
+
+
+__all__ = ["BASELINES", "PassageV1Core", "PassageV1Env", "PassageV1VectorEnv", "information_gains", "subsets"]

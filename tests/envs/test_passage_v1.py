@@ -1,0 +1,251 @@
+"""Passage-v1 and its native vector env: checkers, budget, uncapped reward, seeds, vector = single, greedy."""
+
+import warnings
+from math import comb
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import shipsense  # noqa: F401  (registers the environments)
+from shipsense.envs import PASSAGE_V1_VARIANTS
+from shipsense.envs.passage_v1 import CHI2_2_95, PassageV1Env, PassageV1VectorEnv
+
+EASY = "shipsense/PassageEasy-v1"
+KW = {"scenario": "S2", "overrides": {"steps": 50}}   # S2: the run-in ends near sample 30, ~20 agent steps
+
+
+def _rollout(env, seed, policy_seed=0):
+    obs, _ = env.reset(seed=seed)
+    rng = np.random.default_rng(policy_seed)
+    out = [(obs, None, None, None)]
+    while True:
+        obs, r, term, trunc, info = env.step(int(rng.integers(env.action_space.n)))
+        out.append((obs, r, term, info))
+        if term or trunc:
+            return out
+
+
+def test_variants_registered_with_vector_entry_points_and_v0_kept():
+    assert "shipsense/Passage-v0" in gym.registry
+    for vid in PASSAGE_V1_VARIANTS:
+        spec = gym.registry[vid]
+        assert spec.entry_point.endswith("PassageV1Env") and spec.vector_entry_point.endswith("PassageV1VectorEnv")
+        assert spec.reward_threshold is not None
+    envs = gym.make_vec(EASY, num_envs=2, vectorization_mode="vector_entry_point", overrides={"steps": 50})
+    assert isinstance(envs.unwrapped, PassageV1VectorEnv)
+
+
+def test_gymnasium_checker_passes_without_warnings():
+    from gymnasium.utils.env_checker import check_env
+
+    env = gym.make(EASY, render_mode="rgb_array", overrides={"steps": 50}).unwrapped
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        check_env(env, skip_render_check=False)
+    assert not [str(w.message) for w in caught if "shipsense" in str(w.filename) or "gymnasium" in str(w.filename)]
+
+
+def test_stable_baselines_checker_passes():
+    sb3 = pytest.importorskip("stable_baselines3.common.env_checker")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        sb3.check_env(PassageV1Env(**KW), warn=True)
+    assert not [w for w in caught if "shipsense" in str(w.filename) or "env_checker" in str(w.filename)], \
+        [str(w.message) for w in caught]
+
+
+@pytest.mark.parametrize("k", [1, 2, 3])
+def test_the_action_space_cannot_exceed_the_budget(k):
+    env = PassageV1Env(k=k, **KW)
+    table = env.subsets
+    assert env.action_space.n == len(table) == sum(comb(3, j) for j in range(k + 1))
+    assert table.sum(axis=1).max() == k and not table[0].any()
+    assert len({tuple(r) for r in table}) == len(table)           # every subset once
+    env.reset(seed=0)
+    for a in range(env.action_space.n):
+        _, r, term, _, info = env.step(a)
+        assert info["reads"] == table[a].sum() <= k
+        assert info["energy_term"] == pytest.approx(-0.01 * table[a].sum())
+        if term:
+            env.reset(seed=1)
+    with pytest.raises(ValueError, match="action"):
+        env.step(env.action_space.n)
+
+
+def test_reward_is_uncapped_so_a_diverged_observer_pays_for_it():
+    env = PassageV1Env(**KW)
+    env.reset(seed=3)
+    core = env.core
+    update = core.tracker.update
+    rewards = {}
+    for off in (1.0, 100.0, 1e4, 1e6):
+        def diverged(t, y, passages=None, off=off):
+            s = update(t, y, passages=passages)
+            s.estimate[:, 0] += off                       # the observer's estimate is `off` metres away
+            return s
+        core.tracker.update = diverged
+        _, r, term, _, info = env.step(1)
+        rewards[off] = r - info["energy_term"]
+        assert info["error"] == pytest.approx(off, abs=0.5)   # plus the tracking error (cm)
+        assert info["error_term"] == pytest.approx(-np.log1p(info["error"] / 1.0))
+    assert rewards[1e6] < rewards[1e4] < rewards[100.0] < rewards[1.0]
+    assert rewards[1e4] < -9.0 and rewards[1e6] < -13.0     # v0 capped the error term at -10
+
+
+def test_same_seed_same_rollout_and_another_seed_another():
+    a = _rollout(PassageV1Env(**KW), seed=7)
+    b = _rollout(PassageV1Env(**KW), seed=7)
+    assert len(a) == len(b)
+    for (oa, ra, ta, ia), (ob, rb, tb, ib) in zip(a, b):
+        np.testing.assert_array_equal(oa, ob)
+        assert ra == rb and ta == tb
+        if ia is not None:
+            assert ia.keys() == ib.keys()
+    c = _rollout(PassageV1Env(**KW), seed=8)
+    assert not np.array_equal(a[0][0], c[0][0])
+
+
+def test_episode_metrics_are_the_episode_and_observations_stay_in_the_space():
+    env = PassageV1Env(**KW)
+    roll = _rollout(env, seed=2)
+    assert all(env.observation_space.contains(o) for o, *_ in roll)
+    infos = [i for *_, i in roll[1:]]
+    m = infos[-1]["episode_metrics"]
+    assert all(type(v) is float for v in m.values())
+    assert m["mean_error_m"] == pytest.approx(np.mean([i["error"] for i in infos]))
+    assert m["coverage95"] == pytest.approx(np.mean([i["nees"] <= CHI2_2_95 for i in infos]))
+    assert m["return"] == pytest.approx(sum(r for _, r, *_ in roll[1:]))
+    assert m["steps"] == len(infos) and m["reads_per_step"] == pytest.approx(np.mean([i["reads"] for i in infos]))
+    assert "episode_metrics" not in infos[-2]
+
+
+def test_vector_env_equals_single_envs_across_autoreset_with_masks():
+    n = 2
+    venv = PassageV1VectorEnv(num_envs=n, **KW)
+    singles = [PassageV1Env(**KW) for _ in range(n)]
+    vo, _ = venv.reset(seed=[21, 5])                         # a list of seeds: one per sub-environment
+    so = [s.reset(seed=sd)[0] for s, sd in zip(singles, (21, 5))]
+    np.testing.assert_allclose(vo, np.array(so), rtol=0, atol=1e-6)
+    rng = np.random.default_rng(0)
+    pending, ended = [False] * n, 0
+    for _ in range(60):
+        acts = rng.integers(0, venv.single_action_space.n, n)
+        vo, vr, vt, vtr, vinfo = venv.step(acts)
+        for i, s in enumerate(singles):
+            if pending[i]:                                   # next-step autoreset
+                obs, _ = s.reset()
+                r, t = 0.0, False
+                pending[i] = False
+                assert not vinfo["_error"][i]
+            else:
+                obs, r, t, _, info = s.step(int(acts[i]))
+                assert vinfo["_error"][i] and info["error"] == pytest.approx(vinfo["error"][i], rel=0, abs=1e-6)
+                pending[i] = t
+                if t:
+                    ended += 1
+                    assert vinfo["_episode_metrics"][i]
+                    for key, v in info["episode_metrics"].items():
+                        assert vinfo["episode_metrics"][key][i] == pytest.approx(v, rel=1e-9, abs=1e-6)
+                        assert vinfo["episode_metrics"]["_" + key][i]
+            np.testing.assert_allclose(vo[i], obs, rtol=0, atol=1e-6)
+            assert vr[i] == pytest.approx(r, rel=0, abs=1e-6) and vt[i] == t
+        assert not vtr.any()
+    assert ended >= n
+
+
+def test_an_integer_seed_is_seed_plus_index_and_a_wrong_list_is_refused():
+    venv = PassageV1VectorEnv(num_envs=2, **KW)
+    a, _ = venv.reset(seed=40)
+    b, _ = venv.reset(seed=[40, 41])
+    np.testing.assert_array_equal(a, b)
+    with pytest.raises(ValueError, match="seed"):
+        venv.reset(seed=[1, 2, 3])
+
+
+def _brute_force_gains(model, R, x, P, subsets, h=1e-6):
+    """Position log-det drop of every subset: Kalman form on the stacked channels, numerical Jacobian."""
+    n = model.n
+    J = np.empty((model.m, n))
+    for j in range(n):
+        dx = np.zeros(n)
+        dx[j] = h * max(1.0, abs(x[j]))
+        J[:, j] = model.residual(model.h(x + dx), model.h(x - dx)) / (2 * dx[j])
+    out = []
+    for row in subsets:
+        ch = row[model.array.channel_sensor]
+        Hs = J[ch]
+        S = Hs @ P @ Hs.T + np.diag(R[ch])
+        post = P - P @ Hs.T @ np.linalg.solve(S, Hs @ P)
+        out.append(np.linalg.slogdet(P[:2, :2])[1] - np.linalg.slogdet(post[:2, :2])[1] if ch.any() else 0.0)
+    return np.array(out)
+
+
+def test_greedy_is_the_brute_force_argmax_of_the_predicted_gain():
+    env = PassageV1Env(k=2, **KW)
+    greedy = env.baseline("greedy")
+    checked = 0
+    for seed in range(3):
+        obs, _ = env.reset(seed=seed)
+        c = env.core
+        for _ in range(5):
+            if c.last.status[0] >= 2:                        # the observer has a track
+                xs = c.model.x_scale
+                x = c.model.A @ (c.last.estimate[0] / xs)
+                P = c.model.A @ (c.last.cov[0] / np.outer(xs, xs)) @ c.model.A.T
+                brute = _brute_force_gains(c.model, c.tracker.filter_model.R, x, P, c.subsets)
+                np.testing.assert_allclose(c.gains[0], brute, rtol=1e-3, atol=1e-6)
+                full = np.flatnonzero(c.subsets.sum(axis=1) == 2)
+                assert greedy(obs) == full[np.argmax(brute[full])]
+                assert np.allclose(obs[9 + 3:], np.maximum(brute[1:4], 0) / (1 + np.maximum(brute[1:4], 0)),
+                                   atol=1e-5)
+                checked += 1
+            obs, *_ = env.step(greedy(obs))
+    assert checked >= 5
+
+
+def test_round_robin_cycles_and_random_reads_k():
+    env = PassageV1Env(k=1, **KW)
+    obs, _ = env.reset(seed=0)
+    rr, rnd = env.baseline("round-robin"), env.baseline("random", seed=1)
+    seen = [rr(obs) for _ in range(1)]
+    for _ in range(5):
+        obs, *_ = env.step(seen[-1])
+        seen.append(rr(obs))
+    assert seen[:6] == [1, 2, 3, 1, 2, 3]
+    assert all(env.subsets[rnd(obs)].sum() == 1 for _ in range(20))
+    with pytest.raises(ValueError, match="'best'.*random, round-robin, greedy"):
+        env.baseline("best")
+
+
+@pytest.mark.parametrize("kwargs, name", [
+    ({"energy_cost": -0.1}, "energy_cost"), ({"k": 4}, "k"), ({"k": 0}, "k"), ({"k": 1.5}, "k"),
+    ({"error_scale": 0.0}, "error_scale"), ({"scenario": "no-such-scenario"}, "scenario"),
+    ({"overrides": {"steps": -3}}, "overrides"), ({"render_mode": "ascii"}, "render_mode"),
+])
+def test_bad_kwargs_raise_one_value_error_naming_the_argument(kwargs, name):
+    with pytest.raises(ValueError, match=name) as exc:
+        PassageV1Env(**{**KW, **kwargs})
+    assert "\n" not in str(exc.value)
+
+
+def test_render_rgb_array_shows_the_episode():
+    env = PassageV1Env(render_mode="rgb_array", **KW)
+    env.reset(seed=0)
+    env.step(2)
+    img = env.render()
+    assert img.ndim == 3 and img.shape[2] == 3 and img.dtype == np.uint8 and img.std() > 0
+
+
+def test_a_passage_the_observer_never_tracks_leaves_one_step_and_no_gains():
+    """Moments of a few A m^2: no detection; the run-in lasts to the last step but one, gains are 0 (the prior's
+    mean is the centroid, where S2's accelerometer sits: a linearisation there divided by zero) and greedy
+    falls back to round-robin."""
+    prior = {"range": [60.0, 120.0], "bearing_deg": [0.0, 360.0], "course_offset_deg": [-20.0, 20.0],
+             "speed": [3.0, 7.0], "moment": [1.0, 2.0]}
+    env = PassageV1Env(scenario="S2", overrides={"steps": 40, "prior": prior})
+    obs, _ = env.reset(seed=0)
+    assert env.core.k[0] == 38 and obs[7] * 4 <= 1 and not obs[12:].any()
+    assert env.baseline("greedy")(obs) == env.baseline("round-robin")(obs)
+    _, r, term, _, info = env.step(1)
+    assert term and info["episode_metrics"]["steps"] == 1.0 and info["error"] > 10.0 and np.isfinite(r)
