@@ -21,8 +21,12 @@ batch, the pipeline of this package one sample at a time:
    recent samples (:func:`~shipsense.trackers.restarts.refit_window`): every
    ``refit_every`` samples until the closest approach, once when the signal
    has fallen to ``through_peak`` of its peak, when the selected hypothesis's
-   innovations say it has diverged, and when its covariance collapses (see
-   :mod:`~shipsense.trackers.restarts`).  At a refit the status is
+   innovations say it has diverged, when its covariance collapses (see
+   :mod:`~shipsense.trackers.restarts`), and when the windowed innovation
+   consistency test fails (:mod:`~shipsense.trackers.consistency`: the
+   innovations of the last ``consistency_window`` samples have a mean the
+   filter's covariance does not allow, at level ``consistency_level``; that
+   sample is **inconsistent**, with the refit's covariance).  At a refit the status is
    **restarted**; a fit that fails its goodness-of-fit test makes the status
    **inconsistent** and its covariance is inflated by the ratio of its
    chi-square to the expected (never NaN), and it is re-fitted every
@@ -607,7 +611,8 @@ class Tracker:
         self._report(runs, out)
 
     def _restart(self, runs, snr, out):
-        """Refit the passages among ``runs`` whose bank is due (alarms, schedule, peak, collapse)."""
+        """Refit the passages among ``runs`` whose bank is due (alarms, schedule, peak, collapse, a failed
+        consistency test)."""
         o = self.options
         since = self.n[runs] - self.start[runs]
         window = self.nis[runs]
