@@ -389,7 +389,7 @@ class Tracker:
         # a failed fit or a diverged bank: the model does not explain the data, so the estimate is located no
         # better than the passage prior says (its spread is added: an inconsistent track's own covariance was
         # centimetres to metres while it was 20-150 m off, EXPERIMENTS.md)
-        # (not a failed consistency test: its covariance is inflated by its own estimate of the factor)
+        # (not a failed consistency test whose refit passed its own: that sample has the refit's covariance)
         bad = act[(out.status[act] == INCONSISTENT) & ~self.cons_now[act]]
         out.cov[bad] += self._prior[1]
         self.last_t[act] = t
@@ -458,7 +458,8 @@ class Tracker:
         sel = self.bank.selected()[runs]
         self.nis[runs] = np.roll(self.nis[runs], -1, axis=1)
         self.nis[runs, -1] = nis[np.arange(runs.size), sel]
-        failed = self._consistency(runs, yi, inn, sel) if self.options.consistency_window else runs[:0]
+        test = self.options.consistency_window and self.options.method == "tracker"   # (the bank is the studies')
+        failed = self._consistency(runs, yi, inn, sel) if test else runs[:0]
         self._report(runs, out)
         out.status[failed] = INCONSISTENT
 
