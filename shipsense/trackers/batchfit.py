@@ -268,6 +268,10 @@ def leverage_information(J, JtJ, huber, rows):
     rel[:, rows:] = 1.0
     rel = np.where(np.isfinite(rel), rel, 1.0)
     meat = np.swapaxes(J, -1, -2) @ (J * rel[..., None])
-    info = JtJ @ np.linalg.solve(meat + 1e-300 * np.eye(JtJ.shape[-1]), JtJ)
+    try:
+        info = JtJ @ np.linalg.solve(meat + 1e-300 * np.eye(JtJ.shape[-1]), JtJ)
+    except np.linalg.LinAlgError:   # a fit some state component does not reach (a singular J^T J): its pseudo-inverse
+        with np.errstate(all="ignore"):
+            info = JtJ @ np.linalg.pinv(meat, hermitian=True) @ JtJ
     ok = np.isfinite(info).all(axis=(-1, -2))
     return np.where(ok[:, None, None], 0.5 * (info + np.swapaxes(info, -1, -2)), JtJ)

@@ -21,8 +21,12 @@ batch, the pipeline of this package one sample at a time:
    recent samples (:func:`~shipsense.trackers.restarts.refit_window`): every
    ``refit_every`` samples until the closest approach, once when the signal
    has fallen to ``through_peak`` of its peak, when the selected hypothesis's
-   innovations say it has diverged, and when its covariance collapses (see
-   :mod:`~shipsense.trackers.restarts`).  At a refit the status is
+   innovations say it has diverged, when its covariance collapses (see
+   :mod:`~shipsense.trackers.restarts`), and when the windowed innovation
+   consistency test fails (:mod:`~shipsense.trackers.consistency`: the
+   innovations of the last ``consistency_window`` samples have a mean the
+   filter's covariance does not allow, at level ``consistency_level``; that
+   sample is **inconsistent**, with the refit's covariance).  At a refit the status is
    **restarted**; a fit that fails its goodness-of-fit test makes the status
    **inconsistent** and its covariance is inflated by the ratio of its
    chi-square to the expected (never NaN), and it is re-fitted every
@@ -63,6 +67,7 @@ import numpy as np
 
 from shipsense.trackers.bank import BankState
 from shipsense.trackers.batchfit import Huber, transitions
+from shipsense.trackers.consistency import statistic, terms, threshold
 from shipsense.trackers.filters import get_filter
 from shipsense.trackers.filters._core import symmetrize
 from shipsense.trackers.initialiser import depth_prior, strongest_snr, window_fits
@@ -110,6 +115,8 @@ class TrackerOptions:
     inflate: float = 2.0
     history: int = 1000
     gap_limit_s: float | None = None
+    consistency_window: int | None = 20
+    consistency_level: float = 0.01
 
     def __post_init__(self):
         if self.method not in ("tracker", "bank"):
@@ -120,6 +127,12 @@ class TrackerOptions:
                 continue
             if not (np.isfinite(v) and v > 0) and not (name == "max_restarts" and v == 0):
                 raise ValueError(f"{name} must be a positive number, got {v!r}")
+        if self.consistency_window is not None and not (
+                isinstance(self.consistency_window, int | np.integer) and self.consistency_window >= 2):
+            raise ValueError(f"consistency_window must be an integer of at least 2 or None, "
+                             f"got {self.consistency_window!r}")
+        if not (np.isfinite(self.consistency_level) and 0.0 < self.consistency_level < 1.0):
+            raise ValueError(f"consistency_level must lie strictly between 0 and 1, got {self.consistency_level!r}")
         if self.keep > self.keep_init:
             raise ValueError(f"keep ({self.keep}) cannot exceed keep_init ({self.keep_init})")
 
@@ -316,6 +329,13 @@ class Tracker:
             "y_hist": ((hist, m), float, np.nan),
             "t_hist": ((hist,), float, np.nan),
             "own": ((), float, np.nan),             # trace of the selected hypothesis's own position covariance
+            # the consistency test's window (consistency.terms of the selected hypothesis), its length, the
+            # samples it failed on, and whether it failed on this one
+            "cons": ((self.options.consistency_window or 1, 2, m), float, 0.0),
+            "cons_n": ((), int, 0),
+            "cons_tests": ((), int, 0),
+            "cons_fails": ((), int, 0),
+            "cons_now": ((), bool, False),
         }
 
     @property
@@ -350,6 +370,7 @@ class Tracker:
         self.y_hist[act, slot], self.t_hist[act, slot] = yi[act], t
         snr = self._snr(yi, act)
         out = self._prior_sample()
+        self.cons_now[act] = False
         field = np.zeros(self.P, dtype=bool)
         field[act] = np.isfinite(np.where(self.model.axial, np.nan, yi[act])).any(axis=1)
         self.phase[(self.phase == _WAITING) & field] = _STARTING
@@ -368,7 +389,8 @@ class Tracker:
         # a failed fit or a diverged bank: the model does not explain the data, so the estimate is located no
         # better than the passage prior says (its spread is added: an inconsistent track's own covariance was
         # centimetres to metres while it was 20-150 m off, EXPERIMENTS.md)
-        bad = act[out.status[act] == INCONSISTENT]
+        # (not a failed consistency test whose refit passed its own: that sample has the refit's covariance)
+        bad = act[(out.status[act] == INCONSISTENT) & ~self.cons_now[act]]
         out.cov[bad] += self._prior[1]
         self.last_t[act] = t
         self.n[act] += 1
@@ -436,7 +458,33 @@ class Tracker:
         sel = self.bank.selected()[runs]
         self.nis[runs] = np.roll(self.nis[runs], -1, axis=1)
         self.nis[runs, -1] = nis[np.arange(runs.size), sel]
+        test = self.options.consistency_window and self.options.method == "tracker"   # (the bank is the studies')
+        failed = self._consistency(runs, yi, inn, sel) if test else runs[:0]
         self._report(runs, out)
+        out.status[failed] = INCONSISTENT
+
+    def _consistency(self, runs, yi, inn, sel):
+        """The windowed innovation test (:mod:`~shipsense.trackers.consistency`) of passages ``runs`` with the
+        innovations ``inn`` of this sample (selected hypotheses ``sel``).  Returns the passages it failed on
+        (their window starts over; :meth:`_restart` refits them)."""
+        H, m, N = self._H, self.model.m, self.options.consistency_window
+        pick = np.arange(runs.size)
+        eps = inn.eps.reshape(runs.size, H, m)[pick, sel]
+        S = np.diagonal(inn.S, axis1=-2, axis2=-1).reshape(runs.size, H, m)[pick, sel]
+        noise = self.filter_model.R if inn.R is None else inn.R.reshape(runs.size, H, m)[pick, sel]
+        h = self.huber
+        t = terms(eps, np.maximum(S - noise, 0.0), self.model.R, np.isfinite(yi[runs]),
+                  *((h.gamma, h.eps, h.scale) if h is not None else (np.inf, 0.0, 1.0)))
+        self.cons[runs, self.cons_n[runs] % N] = t
+        self.cons_n[runs] += 1
+        T, dof = statistic(self.cons[runs].sum(axis=1))
+        tested = self.cons_n[runs] >= N
+        self.cons_tests[runs] += tested
+        failed = runs[tested & (T > threshold(dof, self.options.consistency_level))]
+        self.cons[failed], self.cons_n[failed] = 0.0, 0
+        self.cons_fails[failed] += 1
+        self.cons_now[failed] = True
+        return failed
 
     def _report(self, runs, out):
         """Selected estimate, its mixture mean-square error (tracker) or own covariance (bank), and the
@@ -560,10 +608,12 @@ class Tracker:
         self.start[runs], self.trusted[runs] = self.n[runs], fits.fit_ok
         self.ref[runs] = np.trace(P0[np.arange(len(runs)), 0, :2, :2] * np.outer(xs[:2], xs[:2]), axis1=-2, axis2=-1)
         self.nis[runs] = np.nan
+        self.cons[runs], self.cons_n[runs], self.cons_now[runs] = 0.0, 0, False
         self._report(runs, out)
 
     def _restart(self, runs, snr, out):
-        """Refit the passages among ``runs`` whose bank is due (alarms, schedule, peak, collapse)."""
+        """Refit the passages among ``runs`` whose bank is due (alarms, schedule, peak, collapse, a failed
+        consistency test)."""
         o = self.options
         since = self.n[runs] - self.start[runs]
         window = self.nis[runs]
@@ -583,7 +633,8 @@ class Tracker:
         collapse = np.zeros(runs.size, dtype=bool)
         if o.collapse is not None:
             collapse = (since < o.nis_window) & (since > 0) & (self.own[runs] < o.collapse * self.ref[runs])
-        due = alarm | after_peak | scheduled | collapse
+        failed_test = self.cons_now[runs]
+        due = alarm | after_peak | scheduled | collapse | failed_test
         stuck = diverged & ~alarm                     # diverged with no restarts left: say so
         out.status[runs[stuck]] = INCONSISTENT
         out.cov[runs[stuck]] *= np.maximum(1.0, level[stuck])[:, None, None]
@@ -593,6 +644,10 @@ class Tracker:
             self.alarms[sel] += alarm[due]
             self.restarts[sel] += 1
             self._refit(sel, alarm[due], out)
+            # a refit after a failed consistency test: the sample is still the test's (inconsistent), with the
+            # refit's covariance -- unless the fit failed its own test (then as any failed fit)
+            ok = runs[failed_test & self.trusted[runs]]
+            out.status[ok], self.cons_now[ok] = INCONSISTENT, True
 
     def _refit(self, runs, multistart, out):
         """Batch refits of passages ``runs`` to their samples since the window start (at most ``history``),

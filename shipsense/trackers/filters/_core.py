@@ -122,13 +122,16 @@ class Innovation(NamedTuple):
     """What an update saw: innovation ``eps`` (..., m), its covariance ``S`` (..., m, m),
     the log-likelihood ``ln N(eps; 0, S)`` over the present components (...), the
     normalised innovation squared ``eps^T S^-1 eps`` (...) and the number of present
-    components (...).  Masked components have ``eps = 0`` and unit, uncoupled rows in ``S``."""
+    components (...).  Masked components have ``eps = 0`` and unit, uncoupled rows in ``S``.
+    ``R`` (..., m): the noise variances on ``S``'s diagonal where a filter reweights them (the Huber UKF);
+    None when they are the model's."""
 
     eps: np.ndarray
     S: np.ndarray
     loglik: np.ndarray
     nis: np.ndarray
     m: np.ndarray
+    R: np.ndarray | None = None
 
 
 def transposed(a):

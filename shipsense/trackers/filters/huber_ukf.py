@@ -48,4 +48,5 @@ def update(belief: Belief, y, model, mask=None, gamma=GAMMA, iterations=10, alph
         if np.allclose(new, R_eff, rtol=1e-9, atol=0):
             break
         R_eff = new
-    return gain_update(belief, eps, Pxy, Pyy + R_eff[..., :, None] * eye, present)
+    new, inn = gain_update(belief, eps, Pxy, Pyy + R_eff[..., :, None] * eye, present)
+    return new, inn._replace(R=R_eff)
