@@ -10,6 +10,7 @@ at the end of an episode (``info["episode_metrics"]``) averaged the same way.
 
 from __future__ import annotations
 
+import inspect
 import math
 import time
 from pathlib import Path
@@ -37,8 +38,11 @@ def _is_maskable(path):
     return "maskable" in data.lower()
 
 
-def load_policy(env, name_or_path):
+def load_policy(env, name_or_path, seed=None):
     """A callable ``obs -> action`` for ``env``: one of its baselines by name, or an SB3 model ``PATH.zip``.
+
+    ``seed`` goes to a baseline whose ``baseline(name, seed=...)`` takes one (a random policy with its own
+    generator), so that an evaluation is reproducible under its seed.
 
     A name the environment does not offer, a missing file or a model for other observations raises one
     ``ValueError`` naming the policy.
@@ -78,6 +82,8 @@ def load_policy(env, name_or_path):
     if name not in offered:
         raise ValueError(f"policy {name!r} is not offered by {env_id} (offered: "
                          f"{', '.join(offered) if offered else 'none'}; or a model PATH.zip)")
+    if "seed" in inspect.signature(base.baseline).parameters:
+        return base.baseline(name, seed=seed)
     return base.baseline(name)
 
 
@@ -130,7 +136,7 @@ def evaluate(env_id, policy, episodes, seed, env_kwargs=None, progress=False):
         raise ValueError(f"env_id {env_id!r} is not registered (shipsense's: {', '.join(known)})")
     env = gym.make(env_id, **(env_kwargs or {}))
     try:
-        act = load_policy(env, policy)
+        act = load_policy(env, policy, seed=seed)
         from tqdm import tqdm
 
         t0 = time.perf_counter()
