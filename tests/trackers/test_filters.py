@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
+from reference import kalman_reference
 from scaled import assert_cov_close, assert_factor_close, assert_loglik_close
 
 from shipsense import load_scenario, simulate
@@ -16,21 +17,6 @@ ALL["huber_ukf"] = get_filter("huber_ukf", gamma=1e12)   # the KF limit needs ga
 ALL["puekf"] = get_filter("puekf", n_pu=4)               # linear: N_pu sub-updates with R N_pu = one update
 
 
-def kalman_reference(A, Q, C, R, y, x0, P0):
-    """Textbook Kalman filter with explicit inverses, one batch element at a time (independent)."""
-    x, P = x0.copy(), P0.copy()
-    xs, Ps, ll = [], [], []
-    for k in range(y.shape[0]):
-        if k:
-            x, P = A @ x, A @ P @ A.T + Q
-        S = C @ P @ C.T + R
-        K = P @ C.T @ np.linalg.inv(S)
-        e = y[k] - C @ x
-        ll.append(-0.5 * (len(e) * np.log(2 * np.pi) + np.log(np.linalg.det(S)) + e @ np.linalg.inv(S) @ e))
-        x, P = x + K @ e, (np.eye(len(x)) - K @ C) @ P
-        xs.append(x)
-        Ps.append(P)
-    return np.array(xs), np.array(Ps), np.array(ll)
 
 
 @pytest.fixture(scope="module")

@@ -7,6 +7,7 @@ ways over whole passages and must agree to rounding at each quantity's own scale
 
 import numpy as np
 import pytest
+from reference import kalman_reference
 from scaled import assert_cov_close, assert_loglik_close, close
 
 from shipsense import load_scenario, simulate
@@ -19,21 +20,6 @@ OPTIONS = {"ukf": {"alpha": 0.7, "beta": 2.0, "kappa": 1.0}, "cdkf": {"h": 1.6},
            "puekf": {"n_pu": 3}, "huber_ukf": {"gamma": 1.0}}
 
 
-def kalman_reference(A, Q, C, R, y, x0, P0):
-    """Textbook Kalman filter with explicit inverses, one batch element (as in test_filters)."""
-    x, P = x0.copy(), P0.copy()
-    xs, Ps, ll = [], [], []
-    for k in range(y.shape[0]):
-        if k:
-            x, P = A @ x, A @ P @ A.T + Q
-        S = C @ P @ C.T + R
-        K = P @ C.T @ np.linalg.inv(S)
-        e = y[k] - C @ x
-        ll.append(-0.5 * (len(e) * np.log(2 * np.pi) + np.log(np.linalg.det(S)) + e @ np.linalg.inv(S) @ e))
-        x, P = x + K @ e, (np.eye(len(x)) - K @ C) @ P
-        xs.append(x)
-        Ps.append(P)
-    return np.array(xs), np.array(Ps), np.array(ll)
 
 
 def numpy_run(name, model, y, x0, P0, options, mask=None):
