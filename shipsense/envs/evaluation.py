@@ -125,7 +125,9 @@ def evaluate(env_id, policy, episodes, seed, env_kwargs=None, progress=False):
     """
     import gymnasium as gym
 
-    import shipsense  # noqa: F401  (registers the environments)
+    from shipsense.envs import register_envs
+
+    register_envs()
 
     episodes = number("episodes", episodes, 1, 10**7, integer=True)
     seed = number("seed", seed, 0, 2**32 - 1 - episodes, integer=True)

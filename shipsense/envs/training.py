@@ -72,7 +72,9 @@ def rollout_steps(timesteps, n_envs):
 def _check(kind, env_id, timesteps, seed, n_envs, eval_every, eval_episodes, env_kwargs):
     import gymnasium as gym
 
-    import shipsense  # noqa: F401  (registers the environments)
+    from shipsense.envs import register_envs
+
+    register_envs()
 
     if kind not in ALGORITHMS:
         raise ValueError(f"kind must be one of {', '.join(ALGORITHMS)}, got {kind!r}")
