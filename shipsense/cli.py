@@ -648,6 +648,19 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _interrupted(err):
+    """Whether ``err`` stands for an interruption: a KeyboardInterrupt in its chain of causes (a signal handler
+    that raises while a compiled kernel runs surfaces as "SystemError: ... returned a result with an exception
+    set", caused by the KeyboardInterrupt)."""
+    seen = set()
+    while err is not None and id(err) not in seen:
+        if isinstance(err, KeyboardInterrupt):
+            return True
+        seen.add(id(err))
+        err = err.__cause__ or err.__context__
+    return False
+
+
 def main(argv=None) -> int:
     from shipsense.allocator import tune_allocator
 
@@ -676,6 +689,9 @@ def main(argv=None) -> int:
         print(f"shipsense {args.command}: interrupted", file=sys.stderr)
         return 130
     except Exception as err:   # a bug, not the input: one line, the traceback on request
+        if _interrupted(err):   # Ctrl-C or SIGTERM inside compiled code: numba wraps it in a SystemError
+            print(f"shipsense {args.command}: interrupted", file=sys.stderr)
+            return 130
         if args.debug:
             raise
         print(f"shipsense {args.command}: internal error: {type(err).__name__}: {err} "

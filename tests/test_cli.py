@@ -425,3 +425,19 @@ def test_a_terminated_demo_leaves_nothing_behind(tmp_path):
     else:
         assert proc.returncode == 130 and "interrupted" in err, (proc.returncode, err)
         assert list(tmp_path.iterdir()) == []
+
+
+def test_an_interruption_inside_compiled_code_is_an_interruption(monkeypatch, capsys):
+    """A signal handler that raises while a numba kernel runs surfaces as a SystemError caused by the
+    KeyboardInterrupt: it is reported as an interruption (exit 130), not an internal error."""
+    import shipsense.cli as cli
+
+    def interrupted_in_a_kernel(args):
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as err:
+            raise SystemError("CPUDispatcher(<function hed_points>) returned a result with an exception set") from err
+
+    monkeypatch.setattr(cli, "cmd_scenarios", interrupted_in_a_kernel)
+    assert main(["scenarios"]) == 130
+    assert "interrupted" in capsys.readouterr().err
