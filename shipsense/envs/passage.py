@@ -81,6 +81,7 @@ from gymnasium.vector.utils import batch_space
 
 from shipsense.config import load_scenario
 from shipsense.envs.arguments import number
+from shipsense.envs.core_env import RebuiltOnUnpickle
 from shipsense.simulator import simulate
 from shipsense.trackers import Tracker
 
@@ -268,7 +269,7 @@ def _spaces(core):
     return spaces.Box(low, high, dtype=np.float32), spaces.MultiBinary(core.S)
 
 
-class PassageEnv(gym.Env):
+class PassageEnv(RebuiltOnUnpickle, gym.Env):
     __doc__ = __doc__
     metadata = {"render_modes": ["rgb_array"], "render_fps": 4}
 
@@ -303,16 +304,6 @@ class PassageEnv(gym.Env):
         if self.render_mode == "rgb_array":
             return self.core.render(0)
         return None
-
-    def __getstate__(self):  # rebuild from the JSON-able arguments (and keep the episode state)
-        return {"kwargs": self._kwargs, "core": self.core.__dict__, "np_random": self._np_random,
-                "started": self._started}
-
-    def __setstate__(self, state):
-        self.__init__(**state["kwargs"])
-        self.core.__dict__.update(state["core"])
-        self._np_random = state["np_random"]
-        self._started = state["started"]
 
 
 class PassageVectorEnv(VectorEnv):

@@ -140,6 +140,7 @@ from gymnasium.vector.utils import batch_space
 
 from shipsense.config import load_scenario
 from shipsense.envs.arguments import number
+from shipsense.envs.core_env import ClosesItsFigure, RebuiltOnUnpickle
 from shipsense.simulator import simulate
 from shipsense.trackers import Tracker
 from shipsense.trackers.tracker import INITIALISING, NO_DATA
@@ -453,7 +454,7 @@ def _check_baseline(name):
         raise ValueError(f"unknown baseline {name!r}; offered: {', '.join(BASELINES)}")
 
 
-class PassageV1Env(gym.Env):
+class PassageV1Env(RebuiltOnUnpickle, ClosesItsFigure, gym.Env):
     __doc__ = __doc__
     metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 4}
     BASELINES = BASELINES
@@ -518,23 +519,6 @@ class PassageV1Env(gym.Env):
             self._fig.canvas.draw_idle()
             plt.pause(1.0 / self.metadata["render_fps"])
         return None
-
-    def close(self):
-        if self._fig is not None:
-            from shipsense.plotting import plt
-
-            plt.close(self._fig)
-            self._fig = None
-
-    def __getstate__(self):   # rebuild from the JSON-able arguments (and keep the episode state)
-        return {"kwargs": self._kwargs, "core": self.core.__dict__, "np_random": self._np_random,
-                "started": self._started}
-
-    def __setstate__(self, state):
-        self.__init__(**state["kwargs"])
-        self.core.__dict__.update(state["core"])
-        self._np_random = state["np_random"]
-        self._started = state["started"]
 
 
 class PassageV1VectorEnv(VectorEnv):

@@ -124,6 +124,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from shipsense.envs.arguments import number
+from shipsense.envs.core_env import ClosesItsFigure
 from shipsense.envs.sites import SITE_FEATURES, Site, sample_site
 
 SEED_HIGH = 2**31 - 1
@@ -358,7 +359,7 @@ def _spaces(core):
     return obs, spaces.Discrete(core.N)
 
 
-class SiteDesignEnv(gym.Env):
+class SiteDesignEnv(ClosesItsFigure, gym.Env):
     __doc__ = __doc__
     metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 2}
     BASELINES = ("random", "greedy", "convex")
@@ -425,13 +426,6 @@ class SiteDesignEnv(gym.Env):
             self.core.render(0, ax=self._ax)
             plt.pause(1.0 / self.metadata["render_fps"])
         return None
-
-    def close(self):
-        if self._fig is not None:
-            from shipsense.plotting import plt
-
-            plt.close(self._fig)
-            self._fig = None
 
     def baseline(self, name):
         """The policy ``name`` (one of :attr:`BASELINES`): a callable obs -> action that reads this env."""
