@@ -38,6 +38,14 @@ batch, the pipeline of this package one sample at a time:
    sample since the detection, so it can leave a wrong track that a local
    refit would stay near (measured with 20 % outliers on two magnetometers:
    convergence 0.933 -> 0.999 over the same 1,000 passages, EXPERIMENTS.md).
+   With ``rescan`` (one magnetometer's default) the global initialiser also
+   runs every ``refit_every`` samples until the closest approach, counted
+   from the last such rescan rather than from the last restart (the collapse
+   alarm restarts one magnetometer's bank every few samples early in a
+   passage): far out, one magnetometer's samples fit a wrong track hundreds
+   of metres off as well as the true one, and refits started from the bank's
+   hypotheses stayed on it after the data had told the two apart
+   (EXPERIMENTS.md).
 
 The reported estimate is the maximum-likelihood hypothesis, the reported
 covariance its mean-square-error matrix under the mixture of the bank's
@@ -86,9 +94,9 @@ BANK_INFLATION_MAX = 100.0   # largest chi-square inflation a failed fit's bank 
 class TrackerOptions:
     """Options of :class:`Tracker` (defaults: the project's measured settings, EXPERIMENTS.md).
 
-    ``window_s``, ``snr_start``, ``refine``, ``explore_samples`` and ``z_std``
-    default to the global initialiser's settings for the array's family
-    (:func:`family_options`).
+    ``window_s``, ``snr_start``, ``refine``, ``explore_samples``, ``z_std`` and
+    ``rescan`` default to the global initialiser's settings for the array's
+    family (:func:`family_options`).
     """
 
     method: str = "tracker"
@@ -117,6 +125,7 @@ class TrackerOptions:
     gap_limit_s: float | None = None
     consistency_window: int | None = 20
     consistency_level: float = 0.01
+    rescan: bool | None = None
 
     def __post_init__(self):
         if self.method not in ("tracker", "bank"):
@@ -149,14 +158,19 @@ def family_options(model, scenario):
     the tracker's refits an earlier start is corrected, and S0 passages that end before their closest
     approach -- whose CRLB at the end is still 0.2-5 m -- get a track: on 300 S0 passages (seeds 0 and 1)
     convergence 0.917 / 0.950 at SNR 400, 0.987 / 0.987 at SNR 50, with the approaching passages at 1.000
-    either way (EXPERIMENTS.md)."""
+    either way (EXPERIMENTS.md).  One magnetometer also rescans (see :class:`Tracker`): on 300 S0 passages
+    (seed 0) convergence 0.987 -> 0.990, the remaining failures ending with a position CRLB sd of 4.5-21 m where
+    convergence is judged, for twice the CPU time; the other families converge on 0.999-1.000 without it."""
     types = list(model.array.types)
     if "electrode" in types:
         z_std = scenario.tracker.bank.z_std if scenario.tracker is not None and scenario.tracker.bank else 1.0
-        return {"snr_start": 50.0, "refine": (10, 30, 60), "explore_samples": None, "z_std": z_std, "window_s": 15.0}
+        return {"snr_start": 50.0, "refine": (10, 30, 60), "explore_samples": None, "z_std": z_std, "window_s": 15.0,
+                "rescan": False}
     if types.count("magnetometer") == 1:
-        return {"snr_start": 50.0, "refine": (20, 60), "explore_samples": 15, "z_std": None, "window_s": 7.5}
-    return {"snr_start": 5.0, "refine": (5, 20), "explore_samples": None, "z_std": None, "window_s": 15.0}
+        return {"snr_start": 50.0, "refine": (20, 60), "explore_samples": 15, "z_std": None, "window_s": 7.5,
+                "rescan": True}
+    return {"snr_start": 5.0, "refine": (5, 20), "explore_samples": None, "z_std": None, "window_s": 15.0,
+            "rescan": False}
 
 
 @dataclass(frozen=True)
@@ -316,6 +330,7 @@ class Tracker:
             "k0": ((), int, -1),                    # detection sample (-1: none yet)
             "peak": ((), float, 0.0),
             "start": ((), int, 0),                  # sample the bank (re)started at
+            "scan": ((), int, 0),                   # sample of the last scheduled refit (or the first window fit)
             "trusted": ((), bool, True),            # the last fit passed its test
             "excess": ((), float, 1.0),             # reported / bank covariance of a failed fit (_start_banks)
             "alarms": ((), int, 0),
@@ -561,6 +576,7 @@ class Tracker:
         fits = self._fits(yw, taus)
         self.seconds["initialiser"] += time.perf_counter() - t0
         self.win[ready], self.win_t0[ready] = fits.theta, self.t_hist[ready, self.k0[ready] % self.y_hist.shape[1]]
+        self.scan[ready] = self.n[ready]
         self.phase[ready] = _RUNNING
         self._start_banks(ready, fits, taus[:, -1], o.inflate, out)
 
@@ -576,7 +592,11 @@ class Tracker:
         """Starts (R, keep_init, n) at the windows' first samples: the global fits of the windows ``which``
         (a restart after an alarm need not stay near the track that diverged), NaN for the others."""
         starts = np.full((yw.shape[0], self.options.keep_init, self.model.n), np.nan)
-        starts[which] = self._fits(yw[which], taus[which]).theta
+        # (they are only starts, which the refit takes to all the samples: the global fits see at most a
+        # window's worth of them, evenly spread from the first to the last, so their cost does not grow)
+        W = yw.shape[1]
+        pick = np.unique(np.round(np.linspace(0, W - 1, min(W, self.window))).astype(int))
+        starts[which] = self._fits(yw[which][:, pick], taus[which][:, pick]).theta
         return starts
 
     def _start_banks(self, runs, fits, tau, inflate, out):
@@ -630,26 +650,29 @@ class Tracker:
         after_peak = (o.through_peak is not None) & ~self.peak_done[runs] & (since > 0) & (
             snr[runs] < (o.through_peak or 0.0) * self.peak[runs])
         scheduled = (o.refit_every is not None) & ~self.peak_done[runs] & (since >= (o.refit_every or 0))
+        rescan = o.rescan & (o.refit_every is not None) & ~self.peak_done[runs] & (
+            self.n[runs] - self.scan[runs] >= (o.refit_every or 0))
         collapse = np.zeros(runs.size, dtype=bool)
         if o.collapse is not None:
             collapse = (since < o.nis_window) & (since > 0) & (self.own[runs] < o.collapse * self.ref[runs])
         failed_test = self.cons_now[runs]
-        due = alarm | after_peak | scheduled | collapse | failed_test
+        due = alarm | after_peak | scheduled | rescan | collapse | failed_test
         stuck = diverged & ~alarm                     # diverged with no restarts left: say so
         out.status[runs[stuck]] = INCONSISTENT
         out.cov[runs[stuck]] *= np.maximum(1.0, level[stuck])[:, None, None]
         if due.any():
             sel = runs[due]
+            self.scan[runs[rescan]] = self.n[runs[rescan]]
             self.peak_done[sel] |= after_peak[due]
             self.alarms[sel] += alarm[due]
             self.restarts[sel] += 1
-            self._refit(sel, alarm[due], out)
+            self._refit(sel, alarm[due], rescan[due], out)
             # a refit after a failed consistency test: the sample is still the test's (inconsistent), with the
             # refit's covariance -- unless the fit failed its own test (then as any failed fit)
             ok = runs[failed_test & self.trusted[runs]]
             out.status[ok], self.cons_now[ok] = INCONSISTENT, True
 
-    def _refit(self, runs, multistart, out):
+    def _refit(self, runs, alarm, rescan, out):
         """Batch refits of passages ``runs`` to their samples since the window start (at most ``history``),
         started from the selected estimate, the bank's live hypotheses and (``multistart``) the initial
         window fits; the bank restarts from the ``keep`` best distinct fits."""
@@ -669,8 +692,9 @@ class Tracker:
         theta = np.einsum("rij,rhj->rhi", back, starts)
         t_first = self.t_hist[runs, first % self.y_hist.shape[1]]
         win = np.einsum("rij,rhj->rhi", transitions(self.model, t_first - self.win_t0[runs]), self.win[runs])
-        theta = np.concatenate([theta, np.where(multistart[:, None, None], win, np.nan)], axis=1)
+        theta = np.concatenate([theta, np.where(alarm[:, None, None], win, np.nan)], axis=1)
         t0 = time.perf_counter()
+        multistart = alarm | rescan
         if multistart.any():   # an alarm: the global initialiser again, on everything since the detection
             theta = np.concatenate([theta, self._global_starts(yw, taus, multistart)], axis=1)
         prior = depth_prior(self.model, o.z_std)
