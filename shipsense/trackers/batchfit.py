@@ -150,80 +150,113 @@ def fit_passages(model, y, theta_init, steps, stride=1, iterations=40, return_in
     noise = None
     if huber is not None:
         noise = huber if isinstance(huber, Huber) else Huber(gamma=float(huber))
-        huber = noise.gamma
     if taus is None:
         Ak = powers(model.A, steps)[::stride][None]                     # (1, K', n, n)
     else:
         Ak = transitions(model, taus)                                    # (B or 1, K', n, n)
-    w = 1.0 / np.sqrt(model.R)
     lo, hi = getattr(model, "state_bounds", None) or (None, None)
     theta = np.array(theta_init, dtype=float)
     if lo is not None:
         theta = np.clip(theta, lo, hi)
-    B, n = theta.shape
+    problem = _Passages(model, y, Ak, prior, None if noise is None else noise.gamma, len(theta))
+    theta, cost, r, X, Hs = _levenberg_marquardt(problem, theta, iterations, tol, lo, hi)
+    if not return_information:
+        return theta, cost
+    Jac = problem.jacobian(X, np.arange(len(theta)), r, Hs, weighted=False)   # the sandwich's bread, unweighted
+    JtJ = np.swapaxes(Jac, -1, -2) @ Jac
+    if noise is not None:
+        JtJ = leverage_information(Jac, JtJ, noise, Jac.shape[1] - (problem.n if prior is not None else 0))
+    return theta, cost, JtJ
 
-    present = np.isfinite(y)
-    y = np.where(present, y, 0.0)
 
+class _Passages:
+    """The whitened residuals and Jacobians of :func:`fit_passages`' least-squares problem.
+
+    Rows ``idx`` of the batch: states ``theta`` (len(idx), n) are propagated by ``Ak`` to every fitted
+    sample; masked samples give zero rows; a prior appends its rows ``root (theta - mu)``.  With ``huber``
+    the Jacobian rows are scaled by the square root of the Huber weight ``min(1, gamma / |r|)`` (IRLS).
+    """
+
+    def __init__(self, model, y, Ak, prior, huber, B):
+        self.model, self.Ak, self.huber = model, Ak, huber
+        self.n = model.A.shape[0]
+        self.w = 1.0 / np.sqrt(model.R)
+        self.present = np.isfinite(y)
+        self.y = np.where(self.present, y, 0.0)
+        self.prior = prior
+        if prior is not None:
+            self.mu = np.broadcast_to(np.asarray(prior[0], dtype=float), (B, self.n))
+            self.root = np.sqrt(np.asarray(prior[1], dtype=float))            # (n,): the prior's rows
+        # a model that gives h and H in one pass (FieldModel.h_and_H): every trial state's Jacobian is formed
+        # with its residual and kept, so an accepted step's next iteration needs no kernel pass of its own
+        self.fused = getattr(model, "h_and_H", None)
+
+    @staticmethod
     def rows(a, idx):
         return a if a.shape[0] == 1 else a[idx]
 
-    if prior is not None:
-        mu = np.broadcast_to(np.asarray(prior[0], dtype=float), (B, n))
-        root = np.sqrt(np.asarray(prior[1], dtype=float))                 # (n,): the prior's rows
-
-    # a model that gives h and H in one pass (FieldModel.h_and_H): every trial state's Jacobian is formed with
-    # its residual and kept, so an accepted step's next iteration needs no kernel pass of its own
-    fused = getattr(model, "h_and_H", None)
-
-    def residual(th, idx):
-        X = np.einsum("bkij,bj->bki", rows(Ak, idx), th)
-        if fused is not None:
-            hx, Hx = fused(X)
+    def residual(self, th, idx):
+        """Whitened residuals (len(idx), rows), the propagated states and (a fused model) their Jacobians."""
+        X = np.einsum("bkij,bj->bki", self.rows(self.Ak, idx), th)
+        if self.fused is not None:
+            hx, Hx = self.fused(X)
         else:
-            hx, Hx = model.h(X), None
-        r = (model.residual(hx, rows(y, idx)) * w * rows(present, idx)).reshape(len(th), -1)
-        if prior is not None:
-            r = np.concatenate([r, root * (th - mu[idx])], axis=-1)
+            hx, Hx = self.model.h(X), None
+        r = (self.model.residual(hx, self.rows(self.y, idx)) * self.w * self.rows(self.present, idx)).reshape(
+            len(th), -1)
+        if self.prior is not None:
+            r = np.concatenate([r, self.root * (th - self.mu[idx])], axis=-1)
         return r, X, Hx
 
-    def cost_of(r):
-        return np.sum(r * r, axis=-1) if huber is None else huber_cost(r, huber)
+    def cost(self, r):
+        return np.sum(r * r, axis=-1) if self.huber is None else huber_cost(r, self.huber)
 
-    def jacobian(X, idx, r, Hx=None):
-        Hx = model.H(X) if Hx is None else Hx
-        J = (Hx @ rows(Ak, idx) * (w * rows(present, idx))[..., None]).reshape(len(X), -1, n)
-        if prior is not None:
-            J = np.concatenate([J, np.broadcast_to(np.diag(root), (len(X), n, n))], axis=1)
-        if huber is not None:   # IRLS: rows scaled by the square root of the Huber weight min(1, gamma / |r|)
-            J = J * np.sqrt(np.minimum(1.0, huber / np.maximum(np.abs(r), 1e-300)))[..., None]
+    def _weights(self, r):
+        return np.sqrt(np.minimum(1.0, self.huber / np.maximum(np.abs(r), 1e-300)))
+
+    def jacobian(self, X, idx, r, Hx=None, weighted=True):
+        """Jacobian of the residuals (len(idx), rows, n); IRLS-weighted for a Huber fit unless not ``weighted``."""
+        Hx = self.model.H(X) if Hx is None else Hx
+        J = (Hx @ self.rows(self.Ak, idx) * (self.w * self.rows(self.present, idx))[..., None]).reshape(
+            len(X), -1, self.n)
+        if self.prior is not None:
+            J = np.concatenate([J, np.broadcast_to(np.diag(self.root), (len(X), self.n, self.n))], axis=1)
+        if self.huber is not None and weighted:
+            J = J * self._weights(r)[..., None]
         return J
 
-    def weighted(r):
-        return r if huber is None else r * np.sqrt(np.minimum(1.0, huber / np.maximum(np.abs(r), 1e-300)))
+    def weighted(self, r):
+        return r if self.huber is None else r * self._weights(r)
 
-    everyone = np.arange(B)
-    r, X, Hs = residual(theta, everyone)
-    cost = cost_of(r)
+
+def _levenberg_marquardt(problem, theta, iterations, tol, lo, hi):
+    """Damped Gauss-Newton steps of every fit of ``problem`` from ``theta`` (B, n), projected on ``[lo, hi]``.
+
+    A fit that stalled three times in a row (an accepted step gaining less than ``tol`` relative, or a
+    rejected one at a damping of 1e6 or more) is done: only the others are stepped, so the late iterations
+    of a few slow fits do not cost a full batch.  Returns the states, costs, residuals, propagated states and
+    (a fused model) Jacobians at the solution.
+    """
+    B, n = theta.shape
+    r, X, Hs = problem.residual(theta, np.arange(B))
+    cost = problem.cost(r)
     lam = np.full(B, 1e-2)
     stall = np.zeros(B, dtype=int)
     for _ in range(iterations):
-        # fits that stalled in 3 successive iterations are done: only the
-        # others are stepped (the late iterations of a few slow fits no longer cost a full batch)
         a = np.flatnonzero(stall < 3)
         if a.size == 0:
             break
-        Jac = jacobian(X[a], a, r[a], None if Hs is None else Hs[a])
+        Jac = problem.jacobian(X[a], a, r[a], None if Hs is None else Hs[a])
         JtJ = np.swapaxes(Jac, -1, -2) @ Jac
-        g = np.einsum("bmn,bm->bn", Jac, weighted(r[a]))
+        g = np.einsum("bmn,bm->bn", Jac, problem.weighted(r[a]))
         D = np.diagonal(JtJ, axis1=-2, axis2=-1)
         A = JtJ + lam[a, None, None] * (np.eye(n) * (D + 1e-12)[:, None, :])
         step = -np.linalg.solve(A, g[..., None])[..., 0]
         trial = theta[a] + step
         if lo is not None:   # projected steps: the fit stays physical (e.g. the source in the water)
             trial = np.clip(trial, lo, hi)
-        r_t, X_t, H_t = residual(trial, a)
-        cost_t = cost_of(r_t)
+        r_t, X_t, H_t = problem.residual(trial, a)
+        cost_t = problem.cost(r_t)
         better = np.isfinite(cost_t) & (cost_t < cost[a])
         gain = np.where(better, (cost[a] - cost_t) / np.maximum(cost[a], 1e-300), 0.0)
         ok = a[better]
@@ -234,18 +267,9 @@ def fit_passages(model, y, theta_init, steps, stride=1, iterations=40, return_in
             Hs[ok] = H_t[better]
         cost[ok] = cost_t[better]
         lam[a] = np.clip(np.where(better, lam[a] / 3.0, lam[a] * 5.0), 1e-9, 1e9)
-        # a stall: an accepted step that gained less than tol, or a rejected one at a large damping
         stalled = np.where(better, gain < tol, lam[a] >= 1e6)
         stall[a] = np.where(stalled, stall[a] + 1, 0)
-    if return_information:
-        huber, gamma = None, huber   # the information is J^T J (the sandwich's bread), unweighted
-        Jac = jacobian(X, everyone, r, Hs)
-        huber = gamma
-        JtJ = np.swapaxes(Jac, -1, -2) @ Jac
-        if noise is not None:
-            JtJ = leverage_information(Jac, JtJ, noise, Jac.shape[1] - (n if prior is not None else 0))
-        return theta, cost, JtJ
-    return theta, cost
+    return theta, cost, r, X, Hs
 
 
 def leverage_information(J, JtJ, huber, rows):
