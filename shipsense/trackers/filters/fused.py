@@ -390,6 +390,202 @@ def _difference_stats(x, L, present, spec, h, pt, Y, yhat, Y1, Y2, Pxy, B):
 UKF, CDKF, HUBER, EKF, PUEKF, SRCDKF = range(6)
 
 
+@njit(cache=True, error_model="numpy", inline="always")
+def _backward(L, w):
+    """Solve ``L^T out = w`` in place (``L`` lower triangular)."""
+    for i in range(L.shape[0] - 1, -1, -1):
+        t = w[i]
+        for q in range(i + 1, L.shape[0]):
+            t -= L[q, i] * w[q]
+        w[i] = t / L[i, i]
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _huber_reweight(L, present, R, eps, Pxy, Pyy, S, gamma, iterations, Ls, w, Ht, Reff, new, dx):
+    """The Huber update's reweighting: ``S = Pyy + diag(R_eff)`` with the noise of every component whose
+    posterior residual exceeds ``gamma`` standard deviations inflated by ``|e| / gamma``, iterated until the
+    weights settle (at most ``iterations``).  ``L`` is the prior's factor.  False if ``S`` is not positive
+    definite."""
+    n, m = L.shape[0], eps.shape[0]
+    for j in range(m):   # H^T = P^-1 Pxy through the prior's factor
+        for a in range(n):
+            t = Pxy[a, j]
+            for q in range(a):
+                t -= L[a, q] * Ht[q, j]
+            Ht[a, j] = t / L[a, a]
+        for a in range(n - 1, -1, -1):
+            t = Ht[a, j]
+            for q in range(a + 1, n):
+                t -= L[q, a] * Ht[q, j]
+            Ht[a, j] = t / L[a, a]
+    for j in range(m):
+        Reff[j] = R[j]
+    for _ in range(iterations):
+        if not _chol(S, Ls):
+            return False
+        _forward(Ls, eps, w)    # dx = K eps = Pxy S^-1 eps
+        _backward(Ls, w)
+        for a in range(n):
+            t = 0.0
+            for j in range(m):
+                t += Pxy[a, j] * w[j]
+            dx[a] = t
+        same = True
+        for j in range(m):
+            t = eps[j]
+            for a in range(n):
+                t -= Ht[a, j] * dx[a]
+            e = abs(t) / math.sqrt(R[j])
+            new[j] = R[j] * (e / gamma if present[j] and e > gamma else 1.0)
+            if not abs(new[j] - Reff[j]) <= 1e-9 * abs(Reff[j]):
+                same = False
+        if same:
+            break
+        for j in range(m):
+            Reff[j] = new[j]
+            S[j, j] = Pyy[j, j] + Reff[j]
+    return True
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _difference_cov(Y1, Y2, R, S):
+    """The CDKF's innovation covariance ``S = Y1^T Y1 + Y2^T Y2 + diag(R)``."""
+    n, m = Y1.shape
+    for i in range(m):
+        for j in range(i + 1):
+            t = 0.0
+            for a in range(n):
+                t += Y1[a, i] * Y1[a, j] + Y2[a, i] * Y2[a, j]
+            S[i, j] = t
+            S[j, i] = t
+        S[i, i] += R[i]
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _srcdkf_gain(x, L, eps, Y1, Y2, Pxy, R, My, Ls, Asc, vsc, W, w, Mx, S, mean, Pout):
+    """The SR-CDKF update: ``Sy = tria([Y1^T, Y2^T, R^(1/2)])``, ``K = Pxy Sy^-T Sy^-1``, ``Sx = tria([L - K Y1^T,
+    K Y2^T, K R^(1/2)])`` into ``mean``, ``Pout`` (the factor) and ``S = Sy Sy^T``.  Returns
+    ``(ok, nis, log det S)``."""
+    n, m = x.shape[0], eps.shape[0]
+    for i in range(m):
+        for a in range(n):
+            My[i, a] = Y1[a, i]
+            My[i, n + a] = Y2[a, i]
+        My[i, 2 * n + i] = math.sqrt(R[i])
+    ok = _tria(My, Ls, Asc, vsc)
+    for i in range(m):
+        if not Ls[i, i] > 0.0:
+            ok = False
+    if not ok:
+        return False, 0.0, 0.0
+    for i in range(m):      # W = Sy^-1 Pxy^T, then K^T = Sy^-T W
+        for a in range(n):
+            t = Pxy[a, i]
+            for q in range(i):
+                t -= Ls[i, q] * W[q, a]
+            W[i, a] = t / Ls[i, i]
+    for i in range(m - 1, -1, -1):
+        for a in range(n):
+            t = W[i, a]
+            for q in range(i + 1, m):
+                t -= Ls[q, i] * W[q, a]
+            W[i, a] = t / Ls[i, i]
+    for a in range(n):
+        t = x[a]
+        for i in range(m):
+            t += W[i, a] * eps[i]
+        mean[a] = t
+        if not math.isfinite(t):
+            ok = False
+        for c in range(n):
+            t1 = 0.0
+            t2 = 0.0
+            for i in range(m):
+                t1 += W[i, a] * Y1[c, i]
+                t2 += W[i, a] * Y2[c, i]
+            Mx[a, c] = L[a, c] - t1
+            Mx[a, n + c] = t2
+        for i in range(m):
+            Mx[a, 2 * n + i] = W[i, a] * My[i, 2 * n + i]
+    ok = ok and _tria(Mx, Pout, Asc, vsc)
+    for a in range(n):
+        if not Pout[a, a] > 0.0:
+            ok = False
+    _forward(Ls, eps, w)
+    nis = 0.0
+    logdet = 0.0
+    for i in range(m):
+        nis += w[i] * w[i]
+        logdet += 2.0 * math.log(Ls[i, i])
+    for i in range(m):
+        for j in range(i + 1):
+            t = 0.0
+            for q in range(j + 1):
+                t += Ls[i, q] * Ls[j, q]
+            S[i, j] = t
+            S[j, i] = t
+    return ok, nis, logdet
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _ekf_gain(subs, x, P0, present, y, R, spec, sc, mean, Pout, eps_out, S_out):
+    """EKF (``subs = 1``) or PUEKF update: ``subs`` sub-updates with noise ``R subs``, each re-linearised at the
+    current estimate, into ``mean`` and ``Pout``; ``eps_out``, ``S_out`` get the first one's innovation and its
+    covariance, from which the returned ``(ok, nis, log det S)`` are computed.  ``sc``: scratch."""
+    xc, P, Pn, H, yhat, eps, Pxy, Pyy, S, Ls, W, w, r3, m3, B, dBq, dBm = sc
+    n, m = x.shape[0], y.shape[0]
+    axial = spec[9]
+    for a in range(n):
+        xc[a] = x[a]
+        for c in range(n):
+            P[a, c] = P0[a, c]
+    ok, nis, logdet = True, 0.0, 0.0
+    for sub in range(subs):
+        _h_jac(xc, spec, yhat, H, r3, m3, B, dBq, dBm)
+        for j in range(m):
+            eps[j] = _residual(y[j], yhat[j], axial[j]) if present[j] else 0.0
+            if not present[j]:
+                H[j, :] = 0.0
+        for a in range(n):          # Pxy = P H^T
+            for j in range(m):
+                t = 0.0
+                for c in range(n):
+                    t += P[a, c] * H[j, c]
+                Pxy[a, j] = t
+        for i in range(m):          # H P H^T
+            for j in range(m):
+                t = 0.0
+                for c in range(n):
+                    t += H[i, c] * Pxy[c, j]
+                Pyy[i, j] = t
+        for i in range(m):
+            if sub == 0:
+                for j in range(m):
+                    S_out[i, j] = Pyy[i, j]
+                S_out[i, i] += R[i]
+                eps_out[i] = eps[i]
+            for j in range(m):
+                S[i, j] = Pyy[i, j]
+            S[i, i] += R[i] * subs if present[i] else 1.0
+        ok, nis, logdet = _gain(xc, P, eps, Pxy, S, n, m, Ls, W, w, mean, Pn)
+        if not ok:
+            return ok, nis, logdet
+        for a in range(n):
+            xc[a] = mean[a]
+            for c in range(n):
+                P[a, c] = Pn[a, c]
+                Pout[a, c] = Pn[a, c]
+    if subs > 1:   # the statistics of the first innovation
+        ok = _chol(S_out, Ls)
+        if ok:
+            _forward(Ls, eps_out, w)
+            nis, logdet = 0.0, 0.0
+            for i in range(m):
+                nis += w[i] * w[i]
+                logdet += 2.0 * math.log(Ls[i, i])
+    return ok, nis, logdet
+
+
 @njit(cache=True, error_model="numpy")
 def _update_kernel(filt, X, Ls_in, P_in, Yobs, mask, Rm, spec, spread, center, Wm, Wc, h, gamma, iterations, n_pu,
                    mean_out, P_out, L_out, eps_out, S_out, loglik, nis_out, m_out, ok_out):
@@ -402,39 +598,16 @@ def _update_kernel(filt, X, Ls_in, P_in, Yobs, mask, Rm, spec, spread, center, W
     m = Yobs.shape[1]
     k = 2 * n + m
     axial = spec[9]
-    present = np.empty(m, np.bool_)
-    y = np.empty(m)
-    R = np.empty(m)
-    pt = np.empty(n)
-    Y = np.empty((2 * n + 1, m))
-    dY = np.empty((2 * n + 1, m))
-    yhat = np.empty(m)
-    eps = np.empty(m)
-    Pxy = np.empty((n, m))
-    Pyy = np.empty((m, m))
-    S = np.empty((m, m))
-    Ls = np.zeros((m, m))
-    W = np.empty((m, n))
-    w = np.empty(m)
-    Y1 = np.empty((n, m))
-    Y2 = np.empty((n, m))
-    H = np.empty((m, n))
-    P = np.empty((n, n))
-    Pn = np.empty((n, n))
-    xc = np.empty(n)
-    Ht = np.empty((n, m))
-    Reff = np.empty(m)
-    new = np.empty(m)
-    dx = np.empty(n)
-    My = np.zeros((m, k))
-    Mx = np.empty((n, k))
-    Asc = np.empty((k, max(n, m)))
-    vsc = np.empty(k)
-    r3 = np.empty(3)
-    m3 = np.empty(3)
+    present, y, R, yhat, eps, w = (np.empty(m, np.bool_), np.empty(m), np.empty(m), np.empty(m), np.empty(m),
+                                   np.empty(m))
+    Y, dY = np.empty((2 * n + 1, m)), np.empty((2 * n + 1, m))
+    Pxy, Pyy, S, Ls = np.empty((n, m)), np.empty((m, m)), np.empty((m, m)), np.zeros((m, m))
+    W, Y1, Y2, Ht = np.empty((m, n)), np.empty((n, m)), np.empty((n, m)), np.empty((n, m))
+    pt, dx, Reff, new = np.empty(n), np.empty(n), np.empty(m), np.empty(m)
+    My, Mx, Asc, vsc = np.zeros((m, k)), np.empty((n, k)), np.empty((k, max(n, m))), np.empty(k)
     B = np.empty(3)
-    dBq = np.empty((3, 3))
-    dBm = np.empty((3, 3))
+    ekf = (np.empty(n), np.empty((n, n)), np.empty((n, n)), np.empty((m, n)), yhat, eps, Pxy, Pyy, S, Ls, W, w,
+           np.empty(3), np.empty(3), B, np.empty((3, 3)), np.empty((3, 3)))
     for b in range(nb):
         x = X[b]
         L = Ls_in[b]
@@ -445,62 +618,16 @@ def _update_kernel(filt, X, Ls_in, P_in, Yobs, mask, Rm, spec, spread, center, W
             R[j] = Rm[j] if present[j] else 1.0
             cnt += present[j]
         m_out[b] = cnt
-        ok = True
-        nis = 0.0
-        logdet = 0.0
+        ok, nis, logdet = True, 0.0, 0.0
         if filt == UKF or filt == HUBER:
             _sigma_stats(x, L, present, spec, spread, Wm, Wc, center, pt, Y, yhat, dY, Pxy, Pyy, B)
-            for j in range(m):
-                eps[j] = _residual(y[j], yhat[j], axial[j]) if present[j] else 0.0
             for i in range(m):
+                eps[i] = _residual(y[i], yhat[i], axial[i]) if present[i] else 0.0
                 for j in range(m):
                     S[i, j] = Pyy[i, j]
                 S[i, i] += R[i]
             if filt == HUBER:
-                # H^T = P^-1 Pxy through the prior's factor
-                for j in range(m):
-                    for a in range(n):
-                        t = Pxy[a, j]
-                        for q in range(a):
-                            t -= L[a, q] * Ht[q, j]
-                        Ht[a, j] = t / L[a, a]
-                    for a in range(n - 1, -1, -1):
-                        t = Ht[a, j]
-                        for q in range(a + 1, n):
-                            t -= L[q, a] * Ht[q, j]
-                        Ht[a, j] = t / L[a, a]
-                for j in range(m):
-                    Reff[j] = R[j]
-                for _ in range(iterations):
-                    if not _chol(S, Ls):
-                        ok = False
-                        break
-                    # dx = K eps = Pxy S^-1 eps
-                    _forward(Ls, eps, w)
-                    for i in range(m - 1, -1, -1):
-                        t = w[i]
-                        for q in range(i + 1, m):
-                            t -= Ls[q, i] * w[q]
-                        w[i] = t / Ls[i, i]
-                    for a in range(n):
-                        t = 0.0
-                        for j in range(m):
-                            t += Pxy[a, j] * w[j]
-                        dx[a] = t
-                    same = True
-                    for j in range(m):
-                        t = eps[j]
-                        for a in range(n):
-                            t -= Ht[a, j] * dx[a]
-                        e = abs(t) / math.sqrt(R[j])
-                        new[j] = R[j] * (e / gamma if present[j] and e > gamma else 1.0)
-                        if not abs(new[j] - Reff[j]) <= 1e-9 * abs(Reff[j]):
-                            same = False
-                    if same:
-                        break
-                    for j in range(m):
-                        Reff[j] = new[j]
-                        S[j, j] = Pyy[j, j] + Reff[j]
+                ok = _huber_reweight(L, present, R, eps, Pxy, Pyy, S, gamma, iterations, Ls, w, Ht, Reff, new, dx)
             if ok:
                 ok, nis, logdet = _gain(x, P_in[b], eps, Pxy, S, n, m, Ls, W, w, mean_out[b], P_out[b])
         elif filt == CDKF or filt == SRCDKF:
@@ -508,127 +635,14 @@ def _update_kernel(filt, X, Ls_in, P_in, Yobs, mask, Rm, spec, spread, center, W
             for j in range(m):
                 eps[j] = _residual(y[j], yhat[j], axial[j]) if present[j] else 0.0
             if filt == CDKF:
-                for i in range(m):
-                    for j in range(i + 1):
-                        t = 0.0
-                        for a in range(n):
-                            t += Y1[a, i] * Y1[a, j] + Y2[a, i] * Y2[a, j]
-                        S[i, j] = t
-                        S[j, i] = t
-                    S[i, i] += R[i]
+                _difference_cov(Y1, Y2, R, S)
                 ok, nis, logdet = _gain(x, P_in[b], eps, Pxy, S, n, m, Ls, W, w, mean_out[b], P_out[b])
             else:
-                # Sy = tria([Y1^T, Y2^T, R^(1/2)]), K = Pxy Sy^-T Sy^-1, Sx = tria([L - K Y1^T, K Y2^T, K R^(1/2)])
-                for i in range(m):
-                    for a in range(n):
-                        My[i, a] = Y1[a, i]
-                        My[i, n + a] = Y2[a, i]
-                    My[i, 2 * n + i] = math.sqrt(R[i])
-                ok = _tria(My, Ls, Asc, vsc)
-                for i in range(m):
-                    if not Ls[i, i] > 0.0:
-                        ok = False
-                if ok:
-                    for i in range(m):      # W = Sy^-1 Pxy^T, then K^T = Sy^-T W
-                        for a in range(n):
-                            t = Pxy[a, i]
-                            for q in range(i):
-                                t -= Ls[i, q] * W[q, a]
-                            W[i, a] = t / Ls[i, i]
-                    for i in range(m - 1, -1, -1):
-                        for a in range(n):
-                            t = W[i, a]
-                            for q in range(i + 1, m):
-                                t -= Ls[q, i] * W[q, a]
-                            W[i, a] = t / Ls[i, i]
-                    mean = mean_out[b]
-                    for a in range(n):
-                        t = x[a]
-                        for i in range(m):
-                            t += W[i, a] * eps[i]
-                        mean[a] = t
-                        if not math.isfinite(t):
-                            ok = False
-                        for c in range(n):
-                            t1 = 0.0
-                            t2 = 0.0
-                            for i in range(m):
-                                t1 += W[i, a] * Y1[c, i]
-                                t2 += W[i, a] * Y2[c, i]
-                            Mx[a, c] = L[a, c] - t1
-                            Mx[a, n + c] = t2
-                        for i in range(m):
-                            Mx[a, 2 * n + i] = W[i, a] * My[i, 2 * n + i]
-                    ok = ok and _tria(Mx, P_out[b], Asc, vsc)
-                    for a in range(n):
-                        if not P_out[b, a, a] > 0.0:
-                            ok = False
-                    _forward(Ls, eps, w)
-                    for i in range(m):
-                        nis += w[i] * w[i]
-                        logdet += 2.0 * math.log(Ls[i, i])
-                    for i in range(m):
-                        for j in range(i + 1):
-                            t = 0.0
-                            for q in range(j + 1):
-                                t += Ls[i, q] * Ls[j, q]
-                            S[i, j] = t
-                            S[j, i] = t
+                ok, nis, logdet = _srcdkf_gain(x, L, eps, Y1, Y2, Pxy, R, My, Ls, Asc, vsc, W, w, Mx, S,
+                                               mean_out[b], P_out[b])
         else:   # EKF, PUEKF: n_pu sub-updates with R n_pu, re-linearised; the innovation is the first one's
-            for a in range(n):
-                xc[a] = x[a]
-                for c in range(n):
-                    P[a, c] = P_in[b, a, c]
-            subs = 1 if filt == EKF else n_pu
-            for sub in range(subs):
-                _h_jac(xc, spec, yhat, H, r3, m3, B, dBq, dBm)
-                for j in range(m):
-                    eps[j] = _residual(y[j], yhat[j], axial[j]) if present[j] else 0.0
-                    if not present[j]:
-                        H[j, :] = 0.0
-                for a in range(n):          # Pxy = P H^T
-                    for j in range(m):
-                        t = 0.0
-                        for c in range(n):
-                            t += P[a, c] * H[j, c]
-                        Pxy[a, j] = t
-                for i in range(m):          # H P H^T
-                    for j in range(m):
-                        t = 0.0
-                        for c in range(n):
-                            t += H[i, c] * Pxy[c, j]
-                        Pyy[i, j] = t
-                if sub == 0:
-                    for i in range(m):
-                        for j in range(m):
-                            S_out[b, i, j] = Pyy[i, j]
-                        S_out[b, i, i] += R[i]
-                        eps_out[b, i] = eps[i]
-                for i in range(m):
-                    for j in range(m):
-                        S[i, j] = Pyy[i, j]
-                    S[i, i] += R[i] * subs if present[i] else 1.0
-                ok, nis, logdet = _gain(xc, P, eps, Pxy, S, n, m, Ls, W, w, mean_out[b], Pn)
-                if not ok:
-                    break
-                for a in range(n):
-                    xc[a] = mean_out[b, a]
-                    for c in range(n):
-                        P[a, c] = Pn[a, c]
-                        P_out[b, a, c] = Pn[a, c]
-            if ok and filt == PUEKF:
-                for i in range(m):
-                    for j in range(m):
-                        S[i, j] = S_out[b, i, j]
-                    eps[i] = eps_out[b, i]
-                ok = _chol(S, Ls)
-                if ok:
-                    _forward(Ls, eps, w)
-                    nis = 0.0
-                    logdet = 0.0
-                    for i in range(m):
-                        nis += w[i] * w[i]
-                        logdet += 2.0 * math.log(Ls[i, i])
+            ok, nis, logdet = _ekf_gain(1 if filt == EKF else n_pu, x, P_in[b], present, y, R, spec, ekf,
+                                        mean_out[b], P_out[b], eps_out[b], S_out[b])
         if filt != EKF and filt != PUEKF:
             for i in range(m):
                 eps_out[b, i] = eps[i]
