@@ -1,6 +1,9 @@
-"""What the single environments built on a batched core share: pickling by rebuilding, and closing a figure."""
+"""What the environments built on a batched core share: pickling by rebuilding, closing a figure, and the
+native vector envs' partial reset."""
 
 from __future__ import annotations
+
+import numpy as np
 
 
 class RebuiltOnUnpickle:
@@ -27,3 +30,18 @@ class ClosesItsFigure:
 
             plt.close(self._fig)
             self._fig = None
+
+
+def reset_rows(options, num_envs):
+    """The sub-environments a native vector env's ``reset`` resets: all of them, or those of gymnasium's
+    partial reset ``options={"reset_mask": mask}`` (a boolean array of ``num_envs``), which a next-step
+    autoreset env needs to serve SB3 (:class:`~shipsense.envs.sb3.VectorEnvAdapter` resets the environments
+    that ended in the step that ended them)."""
+    mask = None if not options else options.get("reset_mask")
+    if mask is None:
+        return np.arange(num_envs)
+    mask = np.asarray(mask)
+    if mask.shape != (num_envs,) or mask.dtype != bool:
+        raise ValueError(f"options['reset_mask'] must be a boolean array of shape ({num_envs},), "
+                         f"got {mask.dtype} {mask.shape}")
+    return np.flatnonzero(mask)

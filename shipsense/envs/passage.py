@@ -81,7 +81,7 @@ from gymnasium.vector.utils import batch_space
 
 from shipsense.config import load_scenario
 from shipsense.envs.arguments import number
-from shipsense.envs.core_env import RebuiltOnUnpickle
+from shipsense.envs.core_env import RebuiltOnUnpickle, reset_rows
 from shipsense.simulator import simulate
 from shipsense.trackers import Tracker
 
@@ -342,10 +342,10 @@ class PassageVectorEnv(VectorEnv):
         fresh = seed is not None or self._rngs is None
         if fresh:
             self._reseed(seed)
-        envs = np.arange(self.num_envs)
-        obs = self.core.reset_envs(envs, [int(r.integers(SEED_HIGH)) for r in self._rngs], fresh=fresh)
-        self._prev_done[:] = False
-        return obs, {}
+        envs = reset_rows(options, self.num_envs)
+        obs = self.core.reset_envs(envs, [int(self._rngs[i].integers(SEED_HIGH)) for i in envs], fresh=fresh)
+        self._prev_done[envs] = False
+        return (obs if envs.size == self.num_envs else self.core._observe()), {}
 
     def step(self, actions):
         actions = np.asarray(actions).reshape(self.num_envs, -1)

@@ -140,7 +140,7 @@ from gymnasium.vector.utils import batch_space
 
 from shipsense.config import load_scenario
 from shipsense.envs.arguments import number
-from shipsense.envs.core_env import ClosesItsFigure, RebuiltOnUnpickle
+from shipsense.envs.core_env import ClosesItsFigure, RebuiltOnUnpickle, reset_rows
 from shipsense.simulator import simulate
 from shipsense.trackers import Tracker
 from shipsense.trackers.tracker import INITIALISING, NO_DATA
@@ -568,10 +568,10 @@ class PassageV1VectorEnv(VectorEnv):
         fresh = seed is not None or self._rngs is None
         if fresh:
             self._reseed(seed)
-        envs = np.arange(self.num_envs)
-        obs = self.core.reset_envs(envs, [int(r.integers(SEED_HIGH)) for r in self._rngs], fresh=fresh)
-        self._prev_done[:] = False
-        return obs, {}
+        envs = reset_rows(options, self.num_envs)
+        self.core.reset_envs(envs, [int(self._rngs[i].integers(SEED_HIGH)) for i in envs], fresh=fresh)
+        self._prev_done[envs] = False
+        return self.core.observe(), {}
 
     def step(self, actions):
         actions = np.asarray(actions).reshape(self.num_envs)

@@ -2,8 +2,8 @@
 
 :func:`train` serves both kinds: ``scheduling`` trains PPO, ``placement`` MaskablePPO (with the env's
 ``action_masks``), each on the environment's vector version through :class:`~shipsense.envs.sb3.VectorEnvAdapter`
-(the native ``vector_entry_point`` when it autoresets in the same step, else gymnasium's ``SyncVectorEnv`` in that
-mode; the defaults: :data:`DEFAULT_ENVS`), with TensorBoard logs in ``OUT/tensorboard``. Every ``eval_every`` steps
+(the native ``vector_entry_point`` when the environment has one, else gymnasium's ``SyncVectorEnv`` with same-step
+autoreset; the defaults: :data:`DEFAULT_ENVS`), with TensorBoard logs in ``OUT/tensorboard``. Every ``eval_every`` steps
 the deterministic agent plays ``eval_episodes`` held-out episodes (seeds :data:`HELD_OUT_SEED` + i; training
 environments are seeded from ``seed``); the best one so far is saved as ``OUT/best_model.zip``. At the end:
 ``OUT/final_model.zip``, ``OUT/learning_curve.json`` and ``OUT/learning_curve.png`` (the held-out mean return with
@@ -48,18 +48,16 @@ def _require_rl():
 
 
 def make_vector_env(env_id, n_envs, env_kwargs=None):
-    """The gymnasium vector env training uses: the native one when it autoresets in the same step, else
-    ``SyncVectorEnv`` with same-step autoreset."""
+    """The gymnasium vector env training uses: the native one (``vector_entry_point``: one batched tracker
+    or Fisher computation for all environments) when the environment has one, else ``SyncVectorEnv`` with
+    same-step autoreset.  A native env that autoresets in the next step serves SB3 through its partial reset
+    (``reset(options={"reset_mask": ...})``, :class:`~shipsense.envs.sb3.VectorEnvAdapter`)."""
     import gymnasium as gym
-    from gymnasium.envs.registration import load_env_creator
     from gymnasium.vector import AutoresetMode
 
-    spec = gym.spec(env_id)
     kwargs = env_kwargs or {}
-    if spec.vector_entry_point is not None:
-        cls = load_env_creator(spec.vector_entry_point)
-        if getattr(cls, "metadata", {}).get("autoreset_mode") == AutoresetMode.SAME_STEP:
-            return gym.make_vec(env_id, num_envs=n_envs, vectorization_mode="vector_entry_point", **kwargs)
+    if gym.spec(env_id).vector_entry_point is not None:
+        return gym.make_vec(env_id, num_envs=n_envs, vectorization_mode="vector_entry_point", **kwargs)
     return gym.make_vec(env_id, num_envs=n_envs, vectorization_mode="sync",
                         vector_kwargs={"autoreset_mode": AutoresetMode.SAME_STEP}, **kwargs)
 

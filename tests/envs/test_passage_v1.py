@@ -154,6 +154,39 @@ def test_vector_env_equals_single_envs_across_autoreset_with_masks():
     assert ended >= n
 
 
+def test_sb3_adapter_on_the_native_vector_env_equals_single_envs_through_its_partial_reset():
+    """What ``shipsense train`` runs: the native env (next-step autoreset) under SB3's adapter, which resets an
+    ended sub-environment at once with ``reset(options={"reset_mask": ...})``; each sub-environment's
+    episodes are those of a single env seeded alike (the same stream of passages)."""
+    pytest.importorskip("stable_baselines3")
+    from shipsense.envs.sb3 import VectorEnvAdapter
+
+    n = 2
+    venv = VectorEnvAdapter(PassageV1VectorEnv(num_envs=n, **KW))
+    singles = [PassageV1Env(**KW) for _ in range(n)]
+    venv.seed(7)
+    vo = venv.reset()
+    so = [s.reset(seed=7 + i)[0] for i, s in enumerate(singles)]
+    np.testing.assert_allclose(vo, np.array(so), rtol=0, atol=1e-6)
+    rng = np.random.default_rng(1)
+    ended = 0
+    for _ in range(50):
+        acts = rng.integers(0, venv.action_space.n, n)
+        vo, vr, vd, vinfo = venv.step(acts)
+        for i, s in enumerate(singles):
+            obs, r, t, _, info = s.step(int(acts[i]))
+            assert vr[i] == pytest.approx(r, rel=0, abs=1e-5) and vd[i] == t
+            if t:                                          # SB3 gets the last observation and the reset one
+                ended += 1
+                np.testing.assert_allclose(vinfo[i]["terminal_observation"], obs, rtol=0, atol=1e-6)
+                assert vinfo[i]["episode_metrics"]["return"] == pytest.approx(info["episode_metrics"]["return"])
+                obs, _ = s.reset()
+            np.testing.assert_allclose(vo[i], obs, rtol=0, atol=1e-6)
+    assert ended >= n
+    with pytest.raises(ValueError, match="reset_mask"):
+        venv.venv.reset(options={"reset_mask": np.ones(n + 1, dtype=bool)})
+
+
 def test_an_integer_seed_is_seed_plus_index_and_a_wrong_list_is_refused():
     venv = PassageV1VectorEnv(num_envs=2, **KW)
     a, _ = venv.reset(seed=40)
