@@ -401,7 +401,7 @@ def cmd_train(args) -> int:
     try:
         with staged_directory(out) as stage:   # the models, logs, curve and summary, or nothing
             s = training.train(args.task, args.env, timesteps, stage, args.seed, args.n_envs, args.eval_every,
-                               args.eval_episodes, env_kwargs, progress=not _QUIET["on"])
+                               args.eval_episodes, env_kwargs, progress=not _QUIET["on"], shaping=args.shaping)
     except (RuntimeError, ValueError) as err:
         raise _BadInput(str(err)) from None
     best, final = s["best"], s["final"]
@@ -594,6 +594,10 @@ def build_parser() -> argparse.ArgumentParser:
                     help="held-out evaluation every this many steps (default: a tenth of --timesteps)")
     tr.add_argument("--eval-episodes", type=_whole(1, 100_000), default=20,
                     help="held-out episodes per evaluation (default: %(default)s)")
+    tr.add_argument("--shaping", type=float, default=0.0, metavar="COEF",
+                    help="weight of potential-based reward shaping with the environment's potential (Passage-v1: "
+                         "the observer's position information); the optimal policies do not change "
+                         "(default: %(default)s, none)")
     tr.add_argument("--out", default=None, help="output directory (default: results/train-TASK)")
     tr.add_argument("--seed", type=SEED, default=0)
     tr.set_defaults(func=cmd_train)

@@ -398,6 +398,17 @@ class PassageV1Core:
         return figure_to_rgb(fig)
 
 
+def observation_potential(obs):
+    """``-1/2 ln det`` (nats, position in m) of the observer's position covariance as observations (..., obs_dim)
+    state it (indices 4-6; the stds' clip at 1 mm .. 1 km and a correlation of at most 1 - 1e-6 in magnitude):
+    the potential of ``shipsense train scheduling --shaping`` (:class:`~shipsense.envs.sb3.PotentialShaping`).
+    A read that shrinks the covariance raises it by about the predicted gain of the observation's last
+    columns."""
+    obs = np.asarray(obs, dtype=float)
+    rho2 = np.minimum(obs[..., 6] ** 2, 1.0 - 1e-6)
+    return -0.5 * (6.0 * np.log(10.0) * (obs[..., 4] + obs[..., 5]) + np.log1p(-rho2))
+
+
 def information_gains(Hm, Rinv, P, first_channel, subsets):
     """Drop (nats) of the position block's log-det of covariances ``P`` (E, n, n) when the sensors of each of
     ``subsets`` (A, S) are read, in information form: Jacobians ``Hm`` (E, m, n), inverse noise variances
@@ -458,6 +469,7 @@ class PassageV1Env(RebuiltOnUnpickle, ClosesItsFigure, gym.Env):
     __doc__ = __doc__
     metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 4}
     BASELINES = BASELINES
+    potential = staticmethod(observation_potential)
 
     def __init__(self, scenario="S2", overrides=None, k=1, energy_cost=0.01, error_scale=1.0, render_mode=None):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
@@ -536,6 +548,8 @@ class PassageV1VectorEnv(VectorEnv):
 
     metadata = {"render_modes": ["rgb_array"], "autoreset_mode": AutoresetMode.NEXT_STEP}
     BASELINES = BASELINES
+    potential = staticmethod(observation_potential)
+    """The shaping potential of training (:func:`observation_potential`)."""
 
     def __init__(self, num_envs=1, scenario="S2", overrides=None, k=1, energy_cost=0.01, error_scale=1.0,
                  render_mode=None):
@@ -612,4 +626,5 @@ class PassageV1VectorEnv(VectorEnv):
         return None
 
 
-__all__ = ["BASELINES", "PassageV1Core", "PassageV1Env", "PassageV1VectorEnv", "information_gains", "subsets"]
+__all__ = ["BASELINES", "PassageV1Core", "PassageV1Env", "PassageV1VectorEnv", "information_gains",
+           "observation_potential", "subsets"]

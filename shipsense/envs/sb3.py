@@ -15,13 +15,15 @@ Per-environment infos are rebuilt from gymnasium's ``{key: array, "_key": mask}`
 too), so ``infos[i]["episode_metrics"]`` reaches callbacks.  ``env_method("action_masks")`` and
 ``get_attr`` work on the vector env's batched methods (one row per environment), so sb3-contrib's
 MaskablePPO finds the masks.  Requires the ``rl`` extra.
+
+:class:`PotentialShaping` adds potential-based reward shaping (Ng, Harada & Russell 1999) for training.
 """
 
 from __future__ import annotations
 
 import numpy as np
 from gymnasium.vector import AutoresetMode
-from stable_baselines3.common.vec_env.base_vec_env import VecEnv
+from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvWrapper
 
 
 def unbatch_info(info, num_envs):
@@ -129,3 +131,45 @@ class VectorEnvAdapter(VecEnv):
     def get_images(self):
         images = self.venv.render()
         return list(images) if images is not None else [None] * self.num_envs
+
+
+class PotentialShaping(VecEnvWrapper):
+    """Potential-based reward shaping of an SB3 ``VecEnv`` (Ng, Harada & Russell 1999), for training.
+
+    Each step's reward gets ``coef * (gamma * phi(obs') - phi(obs))``, with ``phi(obs') = 0`` when the step ended
+    the episode.  Over an episode the added terms sum (discounted by ``gamma``) to ``-coef * phi(obs_0)``,
+    which no action changes: the optimal policies of the discounted task stay what they were, while an action
+    whose benefit shows in ``phi`` at once (a read that shrinks the observer's covariance) is credited in its own
+    step instead of through many noisy later rewards.  ``gamma`` must be the agent's discount.  The unshaped
+    reward is in ``infos[i]["unshaped_reward"]``; SB3's episode statistics (``VecMonitor`` inside this
+    wrapper) and the held-out evaluations see only the environment's own reward.
+
+    Parameters
+    ----------
+    venv : VecEnv
+    potential : callable
+        ``phi(obs)`` for a batch of observations (N, ...) -> (N,), finite.
+    coef : float
+        Weight of the shaping term (> 0).
+    gamma : float
+        The agent's discount factor.
+    """
+
+    def __init__(self, venv, potential, coef, gamma):
+        super().__init__(venv)
+        self.potential, self.coef, self.gamma = potential, float(coef), float(gamma)
+        self._phi = None
+
+    def reset(self):
+        obs = self.venv.reset()
+        self._phi = np.asarray(self.potential(obs), dtype=float)
+        return obs
+
+    def step_wait(self):
+        obs, rewards, dones, infos = self.venv.step_wait()
+        phi = np.asarray(self.potential(obs), dtype=float)   # after a done: the next episode's first observation
+        shaping = self.coef * (self.gamma * np.where(dones, 0.0, phi) - self._phi)
+        for i, info in enumerate(infos):
+            info["unshaped_reward"] = float(rewards[i])
+        self._phi = phi
+        return obs, (rewards + shaping).astype(np.float32), dones, infos

@@ -33,6 +33,8 @@ POLICY_KWARGS = {"net_arch": {"pi": [256, 256], "vf": [256, 256]}}
 """Two hidden layers of 256 for the policy and the value (SB3's default 64 is a bottleneck for ArrayDesign-v1's
 one logit per candidate, 81 of them, each to be read off its own gain feature)."""
 MODEL_FILES = {"best": "best_model.zip", "final": "final_model.zip"}
+GAMMA = 0.99
+"""The agents' discount factor (SB3's default), also the shaping's."""
 
 
 def _require_rl():
@@ -65,6 +67,14 @@ def make_vector_env(env_id, n_envs, env_kwargs=None):
 def rollout_steps(timesteps, n_envs):
     """Steps per environment in one PPO rollout: 1024 steps in all, fewer when the whole run is shorter."""
     return max(8, min(1024 // n_envs, -(-timesteps // n_envs)))
+
+
+def shaping_potential(env_id):
+    """The shaping potential ``phi(obs)`` the environment ``env_id`` declares (its class's ``potential``), or None."""
+    import gymnasium as gym
+    from gymnasium.envs.registration import load_env_creator
+
+    return getattr(load_env_creator(gym.spec(env_id).entry_point), "potential", None)
 
 
 def _check(kind, env_id, timesteps, seed, n_envs, eval_every, eval_episodes, env_kwargs):
@@ -162,23 +172,31 @@ def plot_learning_curve(curve, path, title):
 
 
 def train(kind, env_id=None, timesteps=None, out=None, seed=0, n_envs=8, eval_every=None, eval_episodes=20,
-          env_kwargs=None, progress=True):
+          env_kwargs=None, progress=True, shaping=0.0):
     """Train the ``kind``'s agent on ``env_id`` (default :data:`DEFAULT_ENVS`) and write its files to ``out``.
 
-    Bad arguments raise one ``ValueError`` naming the argument.  Returns the summary written to
-    ``out/evaluation.json``.
+    ``shaping`` > 0 adds potential-based reward shaping with the environment's ``potential`` and that weight
+    to the training reward (:class:`~shipsense.envs.sb3.PotentialShaping`; the optimal policies do not change,
+    the held-out evaluations use the environment's own reward).  Bad arguments raise one ``ValueError``
+    naming the argument.  Returns the summary written to ``out/evaluation.json``.
     """
     timesteps = DEFAULT_TIMESTEPS.get(kind, 0) if timesteps is None else timesteps
     env_id, timesteps, seed, n_envs, eval_every, eval_episodes, env_kwargs = _check(
         kind, env_id, timesteps, seed, n_envs, eval_every, eval_episodes, env_kwargs)
+    shaping = number("shaping", shaping, 0.0, 1e6)
+    potential = shaping_potential(env_id) if shaping else None
+    if shaping and potential is None:
+        raise ValueError(f"shaping: {env_id} declares no shaping potential (its class has no 'potential')")
     _require_rl()
     from stable_baselines3.common.vec_env import VecMonitor
 
-    from shipsense.envs.sb3 import VectorEnvAdapter
+    from shipsense.envs.sb3 import PotentialShaping, VectorEnvAdapter
 
     out = Path(out if out is not None else f"results/train-{kind}")
     out.mkdir(parents=True, exist_ok=True)
     venv = VecMonitor(VectorEnvAdapter(make_vector_env(env_id, n_envs, env_kwargs)))
+    if shaping:
+        venv = PotentialShaping(venv, potential, shaping, GAMMA)
     venv.seed(seed)
     masked = kind == "placement"
     if masked:
@@ -186,7 +204,7 @@ def train(kind, env_id=None, timesteps=None, out=None, seed=0, n_envs=8, eval_ev
     else:
         from stable_baselines3 import PPO as Algo
     n_steps = rollout_steps(timesteps, n_envs)
-    model = Algo("MlpPolicy", venv, n_steps=n_steps, batch_size=min(256, n_steps * n_envs), seed=seed,
+    model = Algo("MlpPolicy", venv, n_steps=n_steps, batch_size=min(256, n_steps * n_envs), seed=seed, gamma=GAMMA,
                  device="cpu", verbose=0, tensorboard_log=str(out / "tensorboard"), policy_kwargs=POLICY_KWARGS)
     callback = _eval_callback(env_id, env_kwargs, out, eval_every, eval_episodes, masked, progress)
     t0 = time.perf_counter()
@@ -200,6 +218,7 @@ def train(kind, env_id=None, timesteps=None, out=None, seed=0, n_envs=8, eval_ev
     plot_learning_curve(curve, out / "learning_curve.png",
                         f"{ALGORITHMS[kind]} on {env_id}: {eval_episodes} held-out episodes (seeds {HELD_OUT_SEED}+)")
     summary = {"kind": kind, "algorithm": ALGORITHMS[kind], "env": env_id, "env_kwargs": env_kwargs or {},
+               "shaping": shaping,
                "timesteps": int(model.num_timesteps), "n_envs": n_envs, "seed": seed, "seconds": seconds,
                "frames_per_second": model.num_timesteps / seconds, "held_out_seed": HELD_OUT_SEED,
                "eval_episodes": eval_episodes, "best": best, "final": curve[-1],

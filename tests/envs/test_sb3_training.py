@@ -101,6 +101,7 @@ def test_evaluate_averages_the_episodes_it_ran():
 @pytest.mark.parametrize("kwargs, name", [
     ({"kind": "walking"}, "kind"), ({"env_id": "shipsense/Nope-v0"}, "env_id"), ({"timesteps": 10}, "timesteps"),
     ({"n_envs": 0}, "n_envs"), ({"eval_episodes": 0}, "eval_episodes"), ({"env_kwargs": [1]}, "env_kwargs"),
+    ({"shaping": -1.0}, "shaping"), ({"shaping": 1.0}, "shaping"),   # ArrayDesign-v1 declares no potential
 ])
 def test_train_names_a_bad_argument(kwargs, name, tmp_path):
     from shipsense.envs.training import train
@@ -139,3 +140,29 @@ def test_a_random_baseline_is_reproducible_under_the_evaluations_seed():
     a, b = (evaluate(env_id, "random", 2, 11, kw)["per_episode"]["return"] for _ in range(2))
     c = evaluate(env_id, "random", 2, 12, kw)["per_episode"]["return"]
     assert a == b and c[0] != a[0]
+
+
+def test_potential_shaping_adds_what_telescopes_to_minus_the_first_potential():
+    """Per episode, the discounted sum of the shaping terms is ``-coef * phi(first observation)`` whatever the
+    actions (Ng et al. 1999): the shaping cannot change which policy is best.  The unshaped reward is kept."""
+    from shipsense.envs.passage_v1 import PassageV1VectorEnv, observation_potential
+    from shipsense.envs.sb3 import PotentialShaping, VectorEnvAdapter
+
+    coef, gamma, n = 0.7, 0.9, 2
+    venv = PotentialShaping(VectorEnvAdapter(PassageV1VectorEnv(num_envs=n, scenario="S2",
+                                                                overrides={"steps": 45})), observation_potential,
+                            coef, gamma)
+    venv.seed(3)
+    obs = venv.reset()
+    first, acc, disc = observation_potential(obs), np.zeros(n), np.ones(n)
+    rng, checked = np.random.default_rng(0), 0
+    for _ in range(40):
+        obs, rewards, dones, infos = venv.step(rng.integers(0, 4, n))
+        shaping = rewards - np.array([info["unshaped_reward"] for info in infos], dtype=np.float32)
+        acc += disc * shaping
+        disc *= gamma
+        for i in np.flatnonzero(dones):
+            assert acc[i] == pytest.approx(-coef * first[i], rel=1e-4, abs=1e-4)
+            checked += 1
+            first[i], acc[i], disc[i] = observation_potential(obs[i]), 0.0, 1.0
+    assert checked >= n
