@@ -401,7 +401,8 @@ def cmd_train(args) -> int:
     try:
         with staged_directory(out) as stage:   # the models, logs, curve and summary, or nothing
             s = training.train(args.task, args.env, timesteps, stage, args.seed, args.n_envs, args.eval_every,
-                               args.eval_episodes, env_kwargs, progress=not _QUIET["on"], shaping=args.shaping)
+                               args.eval_episodes, env_kwargs, progress=not _QUIET["on"], shaping=args.shaping,
+                               imitate_policy=args.imitate, imitation_steps=args.imitation_steps)
     except (RuntimeError, ValueError) as err:
         raise _BadInput(str(err)) from None
     best, final = s["best"], s["final"]
@@ -598,6 +599,11 @@ def build_parser() -> argparse.ArgumentParser:
                     help="weight of potential-based reward shaping with the environment's potential (Passage-v1: "
                          "the observer's position information); the optimal policies do not change "
                          "(default: %(default)s, none)")
+    tr.add_argument("--imitate", default=None, metavar="BASELINE",
+                    help="scheduling: first clone this baseline of the environment (e.g. greedy) by behaviour "
+                         "cloning, then train PPO from it (default: none, PPO from scratch)")
+    tr.add_argument("--imitation-steps", type=_whole(64, TIMESTEPS_MAX), default=20_000, metavar="STEPS",
+                    help="environment steps of the baseline that --imitate clones (default: %(default)s)")
     tr.add_argument("--out", default=None, help="output directory (default: results/train-TASK)")
     tr.add_argument("--seed", type=SEED, default=0)
     tr.set_defaults(func=cmd_train)

@@ -104,7 +104,7 @@ def _check(kind, env_id, timesteps, seed, n_envs, eval_every, eval_episodes, env
     return env_id, timesteps, seed, n_envs, eval_every, eval_episodes, env_kwargs or None
 
 
-def _eval_callback(env_id, env_kwargs, out, every, episodes, masked, progress):
+def _eval_callback(env_id, env_kwargs, out, every, episodes, masked, progress, at_start=False):
     import gymnasium as gym
     from stable_baselines3.common.callbacks import BaseCallback
     from tqdm import tqdm
@@ -119,6 +119,8 @@ def _eval_callback(env_id, env_kwargs, out, every, episodes, masked, progress):
             self.curve, self.best, self.next = [], -np.inf, every
             self.bar = tqdm(total=self.locals["total_timesteps"], desc=f"train {env_id}", unit="step", leave=False,
                             disable=None if progress else True)
+            if at_start:   # the policy it starts from (behaviour cloning) is a candidate too
+                self.evaluate()
 
         def _agent(self, obs):
             kw = {"action_masks": self.env.unwrapped.action_masks()} if masked else {}
@@ -152,6 +154,49 @@ def _eval_callback(env_id, env_kwargs, out, every, episodes, masked, progress):
     return HeldOut()
 
 
+def imitate(model, venv, teacher, steps, epochs=5, batch_size=256):
+    """Behaviour cloning before PPO: the policy learns the ``teacher``'s actions and the value net the discounted
+    training returns it earns, on ``steps`` environment steps of the teacher in ``venv`` (the SB3 vector env
+    training uses, shaping included).  Only completed episodes are kept (their returns are known).  Returns
+    the share of the teacher's actions the policy then picks (its deterministic action), over those steps.
+    """
+    import torch
+
+    obs, n = venv.reset(), venv.num_envs
+    rows, live = [], [[] for _ in range(n)]            # finished (obs, action, return) rows; open episodes
+    for _ in range(-(-steps // n)):
+        actions = np.asarray(teacher(obs)).reshape(n)
+        nxt, rewards, dones, _ = venv.step(actions)
+        for i in range(n):
+            live[i].append((obs[i], actions[i], float(rewards[i])))
+            if dones[i]:
+                ret = 0.0
+                for o, a, r in reversed(live[i]):
+                    ret = r + model.gamma * ret
+                    rows.append((o, a, ret))
+                live[i] = []
+        obs = nxt
+    if not rows:
+        raise ValueError(f"imitation_steps: {steps} steps finished no episode; give more")
+    policy = model.policy
+    X = torch.as_tensor(np.stack([r[0] for r in rows]), dtype=torch.float32)
+    A = torch.as_tensor(np.array([r[1] for r in rows]))
+    G = torch.as_tensor(np.array([r[2] for r in rows]), dtype=torch.float32)
+    gen = torch.Generator().manual_seed(0)
+    policy.set_training_mode(True)
+    for _ in range(epochs):
+        for idx in torch.randperm(len(rows), generator=gen).split(batch_size):
+            values, logp, _ = policy.evaluate_actions(X[idx], A[idx])
+            loss = -logp.mean() + 0.5 * torch.nn.functional.mse_loss(values.flatten(), G[idx])
+            policy.optimizer.zero_grad()
+            loss.backward()
+            policy.optimizer.step()
+    policy.set_training_mode(False)
+    with torch.no_grad():
+        agree = (policy.get_distribution(X).mode() == A).float().mean().item()
+    return agree
+
+
 def plot_learning_curve(curve, path, title):
     """The held-out mean return (with its standard error) against the training steps, as a PNG."""
     from shipsense.plotting import plt
@@ -172,13 +217,16 @@ def plot_learning_curve(curve, path, title):
 
 
 def train(kind, env_id=None, timesteps=None, out=None, seed=0, n_envs=8, eval_every=None, eval_episodes=20,
-          env_kwargs=None, progress=True, shaping=0.0):
+          env_kwargs=None, progress=True, shaping=0.0, imitate_policy=None, imitation_steps=20_000):
     """Train the ``kind``'s agent on ``env_id`` (default :data:`DEFAULT_ENVS`) and write its files to ``out``.
 
     ``shaping`` > 0 adds potential-based reward shaping with the environment's ``potential`` and that weight
     to the training reward (:class:`~shipsense.envs.sb3.PotentialShaping`; the optimal policies do not change,
-    the held-out evaluations use the environment's own reward).  Bad arguments raise one ``ValueError``
-    naming the argument.  Returns the summary written to ``out/evaluation.json``.
+    the held-out evaluations use the environment's own reward).  ``imitate_policy`` (a baseline the native
+    vector env offers, e.g. ``"greedy"``) first clones that policy's actions on ``imitation_steps`` steps
+    (:func:`imitate`), and the held-out evaluation at step 0 scores the clone, so the best model is never worse
+    than it on those seeds.  Bad arguments raise one ``ValueError`` naming the argument.  Returns the summary
+    written to ``out/evaluation.json``.
     """
     timesteps = DEFAULT_TIMESTEPS.get(kind, 0) if timesteps is None else timesteps
     env_id, timesteps, seed, n_envs, eval_every, eval_episodes, env_kwargs = _check(
@@ -187,6 +235,10 @@ def train(kind, env_id=None, timesteps=None, out=None, seed=0, n_envs=8, eval_ev
     potential = shaping_potential(env_id) if shaping else None
     if shaping and potential is None:
         raise ValueError(f"shaping: {env_id} declares no shaping potential (its class has no 'potential')")
+    if imitate_policy is not None:
+        if kind != "scheduling":
+            raise ValueError("imitate_policy: behaviour cloning is offered for the scheduling agent (PPO) only")
+        imitation_steps = number("imitation_steps", imitation_steps, 64, 10**8, integer=True)
     _require_rl()
     from stable_baselines3.common.vec_env import VecMonitor
 
@@ -194,7 +246,16 @@ def train(kind, env_id=None, timesteps=None, out=None, seed=0, n_envs=8, eval_ev
 
     out = Path(out if out is not None else f"results/train-{kind}")
     out.mkdir(parents=True, exist_ok=True)
-    venv = VecMonitor(VectorEnvAdapter(make_vector_env(env_id, n_envs, env_kwargs)))
+    native = make_vector_env(env_id, n_envs, env_kwargs)
+    teacher = None
+    if imitate_policy is not None:
+        offered = tuple(getattr(native.unwrapped, "BASELINES", ()))
+        if imitate_policy not in offered or not hasattr(native.unwrapped, "baseline"):
+            native.close()
+            raise ValueError(f"imitate_policy: {env_id}'s vector env offers {', '.join(offered) or 'no baseline'}, "
+                             f"not {imitate_policy!r}")
+        teacher = native.unwrapped.baseline(imitate_policy, seed=seed)
+    venv = VecMonitor(VectorEnvAdapter(native))
     if shaping:
         venv = PotentialShaping(venv, potential, shaping, GAMMA)
     venv.seed(seed)
@@ -206,8 +267,13 @@ def train(kind, env_id=None, timesteps=None, out=None, seed=0, n_envs=8, eval_ev
     n_steps = rollout_steps(timesteps, n_envs)
     model = Algo("MlpPolicy", venv, n_steps=n_steps, batch_size=min(256, n_steps * n_envs), seed=seed, gamma=GAMMA,
                  device="cpu", verbose=0, tensorboard_log=str(out / "tensorboard"), policy_kwargs=POLICY_KWARGS)
-    callback = _eval_callback(env_id, env_kwargs, out, eval_every, eval_episodes, masked, progress)
+    callback = _eval_callback(env_id, env_kwargs, out, eval_every, eval_episodes, masked, progress,
+                              at_start=teacher is not None)
     t0 = time.perf_counter()
+    agreement = None
+    if teacher is not None:
+        agreement = imitate(model, venv, teacher, imitation_steps)   # (PPO only: checked above)
+        venv.seed(seed)
     model.learn(total_timesteps=timesteps, callback=callback, tb_log_name=ALGORITHMS[kind])
     seconds = time.perf_counter() - t0
     model.save(out / MODEL_FILES["final"])
@@ -218,7 +284,8 @@ def train(kind, env_id=None, timesteps=None, out=None, seed=0, n_envs=8, eval_ev
     plot_learning_curve(curve, out / "learning_curve.png",
                         f"{ALGORITHMS[kind]} on {env_id}: {eval_episodes} held-out episodes (seeds {HELD_OUT_SEED}+)")
     summary = {"kind": kind, "algorithm": ALGORITHMS[kind], "env": env_id, "env_kwargs": env_kwargs or {},
-               "shaping": shaping,
+               "shaping": shaping, "imitate_policy": imitate_policy, "imitation_agreement": agreement,
+               "imitation_steps": imitation_steps if imitate_policy is not None else 0,
                "timesteps": int(model.num_timesteps), "n_envs": n_envs, "seed": seed, "seconds": seconds,
                "frames_per_second": model.num_timesteps / seconds, "held_out_seed": HELD_OUT_SEED,
                "eval_episodes": eval_episodes, "best": best, "final": curve[-1],

@@ -102,6 +102,8 @@ def test_evaluate_averages_the_episodes_it_ran():
     ({"kind": "walking"}, "kind"), ({"env_id": "shipsense/Nope-v0"}, "env_id"), ({"timesteps": 10}, "timesteps"),
     ({"n_envs": 0}, "n_envs"), ({"eval_episodes": 0}, "eval_episodes"), ({"env_kwargs": [1]}, "env_kwargs"),
     ({"shaping": -1.0}, "shaping"), ({"shaping": 1.0}, "shaping"),   # ArrayDesign-v1 declares no potential
+    ({"imitate_policy": "greedy"}, "imitate_policy"),                  # behaviour cloning: scheduling only
+    ({"kind": "scheduling", "env_id": "shipsense/PassageEasy-v1", "imitate_policy": "oracle"}, "imitate_policy"),
 ])
 def test_train_names_a_bad_argument(kwargs, name, tmp_path):
     from shipsense.envs.training import train
@@ -166,3 +168,17 @@ def test_potential_shaping_adds_what_telescopes_to_minus_the_first_potential():
             checked += 1
             first[i], acc[i], disc[i] = observation_potential(obs[i]), 0.0, 1.0
     assert checked >= n
+
+
+def test_train_scheduling_from_a_cloned_greedy_scores_the_clone_first(tmp_path):
+    from shipsense.cli import main
+
+    out = tmp_path / "bc"
+    assert main(["--quiet", "train", "scheduling", "--env", "shipsense/PassageEasy-v1", "--env-kwargs",
+                 json.dumps({"overrides": {"steps": 50}}), "--timesteps", "64", "--n-envs", "2",
+                 "--imitate", "greedy", "--imitation-steps", "200", "--shaping", "1", "--eval-episodes", "1",
+                 "--out", str(out)]) == 0
+    summary = json.loads((out / "evaluation.json").read_text())
+    assert summary["imitate_policy"] == "greedy" and summary["imitation_steps"] == 200 and summary["shaping"] == 1.0
+    assert 0.0 <= summary["imitation_agreement"] <= 1.0
+    assert json.loads((out / "learning_curve.json").read_text())[0]["timesteps"] == 0   # the clone, scored
