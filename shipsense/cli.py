@@ -395,7 +395,8 @@ def cmd_train(args) -> int:
         raise _BadInput(f"--timesteps must be >= 64, got {args.timesteps}")
     timesteps = args.timesteps or training.DEFAULT_TIMESTEPS[args.task]
     evaluations = max(1, timesteps // args.eval_every) if args.eval_every else 10
-    _within_budget(args, budget.training(args.task, timesteps, evaluations, args.eval_episodes))
+    imitation = args.imitation_steps if args.task == "scheduling" and args.imitate != "none" else 0
+    _within_budget(args, budget.training(args.task, timesteps + imitation, evaluations, args.eval_episodes))
     env_kwargs = _json_kwargs("--env-kwargs", args.env_kwargs)
     out = args.out or f"results/train-{args.task}"
     try:
@@ -595,13 +596,14 @@ def build_parser() -> argparse.ArgumentParser:
                     help="held-out evaluation every this many steps (default: a tenth of --timesteps)")
     tr.add_argument("--eval-episodes", type=_whole(1, 100_000), default=20,
                     help="held-out episodes per evaluation (default: %(default)s)")
-    tr.add_argument("--shaping", type=float, default=0.0, metavar="COEF",
+    tr.add_argument("--shaping", type=float, default=None, metavar="COEF",
                     help="weight of potential-based reward shaping with the environment's potential (Passage-v1: "
                          "the observer's position information); the optimal policies do not change "
-                         "(default: %(default)s, none)")
+                         "(default: 1 where the environment declares a potential, else 0)")
     tr.add_argument("--imitate", default=None, metavar="BASELINE",
-                    help="scheduling: first clone this baseline of the environment (e.g. greedy) by behaviour "
-                         "cloning, then train PPO from it (default: none, PPO from scratch)")
+                    help="scheduling: first clone this baseline of the environment by behaviour cloning, then "
+                         "train PPO from it; 'none': PPO from scratch (default: greedy where the environment "
+                         "offers it)")
     tr.add_argument("--imitation-steps", type=_whole(64, TIMESTEPS_MAX), default=20_000, metavar="STEPS",
                     help="environment steps of the baseline that --imitate clones (default: %(default)s)")
     tr.add_argument("--out", default=None, help="output directory (default: results/train-TASK)")

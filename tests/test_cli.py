@@ -235,10 +235,10 @@ def test_train_scheduling_writes_a_model_and_an_evaluation(tmp_path):
 
     pytest.importorskip("stable_baselines3")
     assert main(["--quiet", "train", "scheduling", "--timesteps", "128", "--n-envs", "2", "--eval-episodes", "1",
-                 "--eval-every", "128", "--out", str(tmp_path)]) == 0
+                 "--eval-every", "128", "--imitate", "none", "--out", str(tmp_path)]) == 0
     summary = json.loads((tmp_path / "evaluation.json").read_text())
     assert summary["algorithm"] == "PPO" and summary["env"] == "shipsense/Passage-v1"
-    assert summary["env_kwargs"] == {}
+    assert summary["env_kwargs"] == {} and summary["shaping"] == 1.0 and summary["imitate_policy"] is None
     assert summary["timesteps"] >= 128 and np.isfinite(summary["best"]["return"]["mean"])
     assert (tmp_path / "best_model.zip").is_file() and (tmp_path / "learning_curve.png").is_file()
 
