@@ -414,6 +414,9 @@ def cmd_train(args) -> int:
         metrics = ", ".join(f"{k} {m['mean']:.4g}" for k, m in p["metrics"].items())
         print(f"  {name:<5} at {p['timesteps']:>8} steps: held-out return {r['mean']:.4g} +- {r['stderr']:.2g}"
               + (f" ({metrics})" if metrics else ""))
+    if s["held_out_baselines"]:
+        print("  baselines on the same held-out episodes: "
+              + ", ".join(f"{k} {v:.4g}" for k, v in s["held_out_baselines"].items()))
     print(f"wrote {out}/{s['files']['best_model']} (best on held-out seeds {s['held_out_seed']}+), "
           f"{out}/{s['files']['final_model']}, {out}/learning_curve.png, {out}/evaluation.json and "
           f"{out}/tensorboard")

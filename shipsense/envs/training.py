@@ -33,6 +33,9 @@ POLICY_KWARGS = {"net_arch": {"pi": [256, 256], "vf": [256, 256]}}
 """Two hidden layers of 256 for the policy and the value (SB3's default 64 is a bottleneck for ArrayDesign-v1's
 one logit per candidate, 81 of them, each to be read off its own gain feature)."""
 MODEL_FILES = {"best": "best_model.zip", "final": "final_model.zip"}
+CURVE_BASELINES = ("greedy", "round-robin", "random")
+"""Baselines that play the held-out episodes once for the learning curve, where the environment offers them
+(not ``convex``: seconds per episode)."""
 GAMMA = 0.99
 """The agents' discount factor (SB3's default), also the shaping's."""
 
@@ -134,14 +137,20 @@ def _eval_callback(env_id, env_kwargs, out, every, episodes, masked, progress, a
     from stable_baselines3.common.callbacks import BaseCallback
     from tqdm import tqdm
 
-    from shipsense.envs.evaluation import run_episodes, summarise
+    from shipsense.envs.evaluation import load_policy, run_episodes, summarise
 
     class HeldOut(BaseCallback):
-        """Periodic evaluation of the deterministic agent on held-out seeds; keeps the best model."""
+        """Periodic evaluation of the deterministic agent on held-out seeds; keeps the best model.  The
+        environment's cheap baselines (:data:`CURVE_BASELINES`) play the same episodes once, for the curve."""
 
         def _on_training_start(self):
             self.env = gym.make(env_id, **(env_kwargs or {}))
             self.curve, self.best, self.next = [], -np.inf, every
+            self.baselines = {}
+            for name in (b for b in CURVE_BASELINES if b in getattr(type(self.env.unwrapped), "BASELINES", ())):
+                returns, _, _ = run_episodes(self.env, load_policy(self.env, name, seed=HELD_OUT_SEED),
+                                             HELD_OUT_SEED, range(episodes))
+                self.baselines[name] = float(np.mean(returns))
             self.bar = tqdm(total=self.locals["total_timesteps"], desc=f"train {env_id}", unit="step", leave=False,
                             disable=None if progress else True)
             if at_start:   # the policy it starts from (behaviour cloning) is a candidate too
@@ -222,8 +231,9 @@ def imitate(model, venv, teacher, steps, epochs=5, batch_size=256):
     return agree
 
 
-def plot_learning_curve(curve, path, title):
-    """The held-out mean return (with its standard error) against the training steps, as a PNG."""
+def plot_learning_curve(curve, path, title, baselines=None):
+    """The held-out mean return (with its standard error) against the training steps, as a PNG, with the
+    baselines' mean returns on the same episodes (``{name: return}``) as horizontal lines."""
     from shipsense.plotting import plt
 
     t = [p["timesteps"] for p in curve]
@@ -232,6 +242,8 @@ def plot_learning_curve(curve, path, title):
     fig, ax = plt.subplots(figsize=(6, 4), dpi=100)
     ax.plot(t, m, marker="o", label="agent (deterministic), held-out episodes")
     ax.fill_between(t, m - se, m + se, alpha=0.25)
+    for (name, value), style in zip(sorted((baselines or {}).items(), key=lambda kv: -kv[1]), ("--", "-.", ":")):
+        ax.axhline(value, color="0.35", ls=style, lw=1, label=f"{name} (same episodes)")
     ax.set_xlabel("training steps")
     ax.set_ylabel("mean return")
     ax.set_title(title, fontsize=9)
@@ -309,13 +321,15 @@ def train(kind, env_id=None, timesteps=None, out=None, seed=0, n_envs=8, eval_ev
     best = max(curve, key=lambda p: p["return"]["mean"])
     (out / "learning_curve.json").write_text(json.dumps(curve, indent=2) + "\n")
     plot_learning_curve(curve, out / "learning_curve.png",
-                        f"{ALGORITHMS[kind]} on {env_id}: {eval_episodes} held-out episodes (seeds {HELD_OUT_SEED}+)")
+                        f"{ALGORITHMS[kind]} on {env_id}: {eval_episodes} held-out episodes (seeds {HELD_OUT_SEED}+)",
+                        callback.baselines)
     summary = {"kind": kind, "algorithm": ALGORITHMS[kind], "env": env_id, "env_kwargs": env_kwargs or {},
                "shaping": shaping, "imitate_policy": imitate_policy, "imitation_agreement": agreement,
                "imitation_steps": imitation_steps if imitate_policy is not None else 0,
                "timesteps": int(model.num_timesteps), "n_envs": n_envs, "seed": seed, "seconds": seconds,
                "frames_per_second": model.num_timesteps / seconds, "held_out_seed": HELD_OUT_SEED,
                "eval_episodes": eval_episodes, "best": best, "final": curve[-1],
+               "held_out_baselines": callback.baselines,
                "files": {"best_model": MODEL_FILES["best"], "final_model": MODEL_FILES["final"],
                          "learning_curve": "learning_curve.png", "tensorboard": "tensorboard"}}
     (out / "evaluation.json").write_text(json.dumps(summary, indent=2) + "\n")

@@ -182,6 +182,7 @@ def test_train_scheduling_from_a_cloned_greedy_scores_the_clone_first(tmp_path):
     assert summary["imitate_policy"] == "greedy" and summary["imitation_steps"] == 200 and summary["shaping"] == 1.0
     assert 0.0 <= summary["imitation_agreement"] <= 1.0
     assert json.loads((out / "learning_curve.json").read_text())[0]["timesteps"] == 0   # the clone, scored
+    assert set(summary["held_out_baselines"]) == {"greedy", "round-robin", "random"}     # drawn on the curve
 
 
 def test_training_defaults_are_the_measured_best_where_the_environment_allows_them():
