@@ -589,7 +589,8 @@ def build_parser() -> argparse.ArgumentParser:
                         help="train a sensor-scheduling (PPO) or placement (MaskablePPO) agent (needs the rl extra)")
     tr.add_argument("task", choices=["placement", "scheduling"])
     tr.add_argument("--timesteps", type=_whole(1, TIMESTEPS_MAX), default=None,
-                    help="environment steps (default: 20000)")
+                    help="environment steps (default: 30000 for scheduling, after 30000 steps of imitation; 20000 "
+                         "for placement)")
     tr.add_argument("--env", default=None, metavar="ID",
                     help="environment id (default: shipsense/ArrayDesign-v1 for placement, shipsense/Passage-v1 for "
                          "scheduling)")
@@ -607,7 +608,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="scheduling: first clone this baseline of the environment by behaviour cloning, then "
                          "train PPO from it; 'none': PPO from scratch (default: greedy where the environment "
                          "offers it)")
-    tr.add_argument("--imitation-steps", type=_whole(64, TIMESTEPS_MAX), default=20_000, metavar="STEPS",
+    tr.add_argument("--imitation-steps", type=_whole(64, TIMESTEPS_MAX), default=30_000, metavar="STEPS",
                     help="environment steps of the baseline that --imitate clones (default: %(default)s)")
     tr.add_argument("--out", default=None, help="output directory (default: results/train-TASK)")
     tr.add_argument("--seed", type=SEED, default=0)

@@ -26,7 +26,7 @@ DEFAULT_ENVS = {   # kind: (env id, its arguments when --env is not given)
     "scheduling": ("shipsense/Passage-v1", {}),
     "placement": ("shipsense/ArrayDesign-v1", {}),
 }
-DEFAULT_TIMESTEPS = {"scheduling": 20_000, "placement": 20_000}
+DEFAULT_TIMESTEPS = {"scheduling": 30_000, "placement": 20_000}
 HELD_OUT_SEED = 1_000_000
 """Seeds of the periodic held-out evaluation (training environments are seeded from ``seed``, 0 by default)."""
 POLICY_KWARGS = {"net_arch": {"pi": [256, 256], "vf": [256, 256]}}
@@ -254,7 +254,7 @@ def plot_learning_curve(curve, path, title, baselines=None):
 
 
 def train(kind, env_id=None, timesteps=None, out=None, seed=0, n_envs=8, eval_every=None, eval_episodes=20,
-          env_kwargs=None, progress=True, shaping=None, imitate_policy=None, imitation_steps=20_000):
+          env_kwargs=None, progress=True, shaping=None, imitate_policy=None, imitation_steps=30_000):
     """Train the ``kind``'s agent on ``env_id`` (default :data:`DEFAULT_ENVS`) and write its files to ``out``.
 
     ``shaping`` > 0 adds potential-based reward shaping with the environment's ``potential`` and that weight
