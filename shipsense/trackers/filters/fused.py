@@ -263,6 +263,18 @@ def _tria(M, S, A, v):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
+def _whitened(Ls, eps, w):
+    """``(eps^T S^-1 eps, log det S)`` from ``S = Ls Ls^T``; ``w`` gets ``Ls^-1 eps``."""
+    _forward(Ls, eps, w)
+    nis = 0.0
+    logdet = 0.0
+    for i in range(Ls.shape[0]):
+        nis += w[i] * w[i]
+        logdet += 2.0 * math.log(Ls[i, i])
+    return nis, logdet
+
+
+@njit(cache=True, error_model="numpy", inline="always")
 def _gain(x, P, eps, Pxy, S, n, m, Ls, W, w, mean, Pout):
     """Kalman update ``x+ = x + Pxy S^-1 eps``, ``P+ = P - Pxy S^-1 Pxy^T`` into ``mean``, ``Pout``.
 
@@ -276,12 +288,7 @@ def _gain(x, P, eps, Pxy, S, n, m, Ls, W, w, mean, Pout):
             for k in range(i):
                 t -= Ls[i, k] * W[k, a]
             W[i, a] = t / Ls[i, i]
-    _forward(Ls, eps, w)
-    nis = 0.0
-    logdet = 0.0
-    for i in range(m):
-        nis += w[i] * w[i]
-        logdet += 2.0 * math.log(Ls[i, i])
+    nis, logdet = _whitened(Ls, eps, w)
     for a in range(n):
         t = x[a]
         for i in range(m):
@@ -511,12 +518,7 @@ def _srcdkf_gain(x, L, eps, Y1, Y2, Pxy, R, My, Ls, Asc, vsc, W, w, Mx, S, mean,
     for a in range(n):
         if not Pout[a, a] > 0.0:
             ok = False
-    _forward(Ls, eps, w)
-    nis = 0.0
-    logdet = 0.0
-    for i in range(m):
-        nis += w[i] * w[i]
-        logdet += 2.0 * math.log(Ls[i, i])
+    nis, logdet = _whitened(Ls, eps, w)
     for i in range(m):
         for j in range(i + 1):
             t = 0.0
@@ -578,11 +580,7 @@ def _ekf_gain(subs, x, P0, present, y, R, spec, sc, mean, Pout, eps_out, S_out):
     if subs > 1:   # the statistics of the first innovation
         ok = _chol(S_out, Ls)
         if ok:
-            _forward(Ls, eps_out, w)
-            nis, logdet = 0.0, 0.0
-            for i in range(m):
-                nis += w[i] * w[i]
-                logdet += 2.0 * math.log(Ls[i, i])
+            nis, logdet = _whitened(Ls, eps_out, w)
     return ok, nis, logdet
 
 
