@@ -386,6 +386,10 @@ def _json_kwargs(flag, text):
     return value
 
 
+_TRAIN_FLAGS = {"imitation_steps": "--imitation-steps", "imitate_policy": "--imitate", "shaping": "--shaping",
+                "env_kwargs": "--env-kwargs", "env_id": "--env"}
+
+
 def cmd_train(args) -> int:
     from shipsense import budget
     from shipsense.atomic import staged_directory
@@ -405,7 +409,12 @@ def cmd_train(args) -> int:
                                args.eval_episodes, env_kwargs, progress=not _QUIET["on"], shaping=args.shaping,
                                imitate_policy=args.imitate, imitation_steps=args.imitation_steps)
     except (RuntimeError, ValueError) as err:
-        raise _BadInput(str(err)) from None
+        message = str(err)
+        for name, flag in _TRAIN_FLAGS.items():   # the library names its arguments; the command, its flags
+            if message.startswith(name):
+                message = flag + message[len(name):]
+                break
+        raise _BadInput(message) from None
     best, final = s["best"], s["final"]
     print(f"{s['algorithm']} on {s['env']}: {s['timesteps']} steps in {s['seconds']:.0f} s "
           f"({s['frames_per_second']:.0f} frames/s, {s['n_envs']} envs)")

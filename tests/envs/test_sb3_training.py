@@ -185,6 +185,16 @@ def test_train_scheduling_from_a_cloned_greedy_scores_the_clone_first(tmp_path):
     assert set(summary["held_out_baselines"]) == {"greedy", "round-robin", "random"}     # drawn on the curve
 
 
+@pytest.mark.parametrize("args, flag", [(["--imitate", "oracle"], "--imitate"), (["--shaping", "-2"], "--shaping")])
+def test_train_names_the_flag_of_a_bad_value(args, flag, tmp_path, capsys):
+    from shipsense.cli import main
+
+    assert main(["train", "scheduling", "--env", "shipsense/PassageEasy-v1", "--timesteps", "64", *args,
+                 "--out", str(tmp_path / "x")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"error: {flag}" in err and not (tmp_path / "x").exists()
+
+
 def test_training_defaults_are_the_measured_best_where_the_environment_allows_them():
     from shipsense.envs.training import training_defaults
 
