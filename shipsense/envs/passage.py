@@ -310,7 +310,8 @@ class PassageVectorEnv(VectorEnv):
     """Native vector version of ``shipsense/Passage-v0``: the same :class:`PassageCore` on a batch.
 
     Sub-environment ``i`` reset with ``seed`` behaves exactly like a single
-    :class:`PassageEnv` reset with ``seed + i``.  Autoreset mode: next step.
+    :class:`PassageEnv` reset with ``seed + i``.  Autoreset mode: next step; ``reset(options={"reset_mask":
+    mask})`` resets only the masked sub-environments (gymnasium's partial reset, what SB3's adapter calls).
     With many environments a step makes temporaries of 0.1-1 MB; on glibc,
     call :func:`shipsense.tune_allocator` once in the training process (about
     25 % more steps per second at 64 environments; ``shipsense train`` does).

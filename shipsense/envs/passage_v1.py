@@ -543,7 +543,9 @@ class PassageV1VectorEnv(VectorEnv):
     sub-environment terminated resets it, ignores its action and returns its first observation with reward 0,
     ``terminated`` and ``truncated`` False.  ``info`` holds, per key, an (num_envs,) array and the ``_key``
     mask of the sub-environments it is valid for (those that stepped); ``info["episode_metrics"]`` (with its
-    own masks) for those that terminated.
+    own masks) for those that terminated.  ``reset(options={"reset_mask": mask})`` (gymnasium's partial reset)
+    resets only the masked sub-environments, each from its own stream: SB3's adapter
+    (:class:`~shipsense.envs.sb3.VectorEnvAdapter`) calls it in the step an episode ends.
     """
 
     metadata = {"render_modes": ["rgb_array"], "autoreset_mode": AutoresetMode.NEXT_STEP}
