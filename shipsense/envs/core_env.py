@@ -45,3 +45,19 @@ def reset_rows(options, num_envs):
         raise ValueError(f"options['reset_mask'] must be a boolean array of shape ({num_envs},), "
                          f"got {mask.dtype} {mask.shape}")
     return np.flatnonzero(mask)
+
+
+def stream_generators(seed, num_envs, high=2**31 - 1):
+    """One generator per sub-environment of a native vector env: ``seed`` an int (sub-environment ``i`` draws
+    from ``seed + i``, as a single env reset with ``seed + i``), None (fresh entropy), or a list of
+    ``num_envs`` seeds (None entries: fresh entropy; what SB3's ``VecEnv.seed`` hands over)."""
+    if seed is None or isinstance(seed, (int, np.integer)):
+        base = np.random.SeedSequence().entropy % high if seed is None else int(seed)
+        seeds = [base + i for i in range(num_envs)]
+    else:
+        seeds = list(seed)
+        if len(seeds) != num_envs:
+            raise ValueError(f"seed must be an int or a list of {num_envs} seeds (one per environment), "
+                             f"got {len(seeds)}")
+        seeds = [np.random.SeedSequence().entropy % high if s is None else int(s) for s in seeds]
+    return [np.random.Generator(np.random.PCG64(np.random.SeedSequence(s))) for s in seeds]

@@ -81,7 +81,7 @@ from gymnasium.vector.utils import batch_space
 
 from shipsense.config import load_scenario
 from shipsense.envs.arguments import number
-from shipsense.envs.core_env import RebuiltOnUnpickle, reset_rows
+from shipsense.envs.core_env import RebuiltOnUnpickle, reset_rows, stream_generators
 from shipsense.simulator import simulate
 from shipsense.trackers import Tracker
 
@@ -332,12 +332,7 @@ class PassageVectorEnv(VectorEnv):
         self._prev_done = np.zeros(self.num_envs, dtype=bool)
 
     def _reseed(self, seed):
-        if seed is None:
-            base = np.random.SeedSequence().entropy % SEED_HIGH
-        else:
-            base = int(seed)
-        self._rngs = [np.random.Generator(np.random.PCG64(np.random.SeedSequence(base + i)))
-                      for i in range(self.num_envs)]
+        self._rngs = stream_generators(seed, self.num_envs, SEED_HIGH)
 
     def reset(self, *, seed=None, options=None):
         fresh = seed is not None or self._rngs is None

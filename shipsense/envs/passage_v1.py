@@ -140,7 +140,7 @@ from gymnasium.vector.utils import batch_space
 
 from shipsense.config import load_scenario
 from shipsense.envs.arguments import number
-from shipsense.envs.core_env import ClosesItsFigure, RebuiltOnUnpickle, reset_rows
+from shipsense.envs.core_env import ClosesItsFigure, RebuiltOnUnpickle, reset_rows, stream_generators
 from shipsense.simulator import simulate
 from shipsense.trackers import Tracker
 from shipsense.trackers.tracker import INITIALISING, NO_DATA
@@ -568,17 +568,7 @@ class PassageV1VectorEnv(VectorEnv):
         self._prev_done = np.zeros(self.num_envs, dtype=bool)
 
     def _reseed(self, seed):
-        n = self.num_envs
-        if seed is None or isinstance(seed, (int, np.integer)):
-            base = np.random.SeedSequence().entropy % SEED_HIGH if seed is None else int(seed)
-            seeds = [base + i for i in range(n)]
-        else:
-            seeds = list(seed)
-            if len(seeds) != n:
-                raise ValueError(f"seed must be an int or a list of {n} seeds (one per environment), "
-                                 f"got {len(seeds)}")
-            seeds = [np.random.SeedSequence().entropy % SEED_HIGH if s is None else int(s) for s in seeds]
-        self._rngs = [np.random.Generator(np.random.PCG64(np.random.SeedSequence(s))) for s in seeds]
+        self._rngs = stream_generators(seed, self.num_envs, SEED_HIGH)
 
     def reset(self, *, seed=None, options=None):
         fresh = seed is not None or self._rngs is None

@@ -195,3 +195,29 @@ def test_resets_with_missing_first_samples_never_crash_and_the_observer_is_the_t
     assert bank.unwrapped.core.H == 12
     for seed in range(25):
         bank.reset(seed=seed)
+
+
+def test_sb3_adapter_serves_the_native_vector_env_through_list_seeds_and_partial_resets():
+    """``shipsense train --env shipsense/Passage-v0`` runs the native env under SB3's adapter: ``VecEnv.seed``
+    hands a list of seeds, an ended episode is reset with ``reset_mask``; each sub-environment equals a single
+    env seeded alike."""
+    pytest.importorskip("stable_baselines3")
+    from shipsense.envs.sb3 import VectorEnvAdapter
+
+    kw = {"scenario": "S2", "overrides": {"steps": 30}}
+    venv = VectorEnvAdapter(PassageVectorEnv(num_envs=2, **kw))
+    singles = [PassageEnv(**kw) for _ in range(2)]
+    venv.seed(4)
+    np.testing.assert_allclose(venv.reset(), [s.reset(seed=4 + i)[0] for i, s in enumerate(singles)], atol=1e-6)
+    ended = 0
+    for _ in range(40):
+        actions = np.ones((2, venv.action_space.shape[0]), dtype=np.int8)
+        obs, rewards, dones, _ = venv.step(actions)
+        for i, s in enumerate(singles):
+            o, r, t, _, _ = s.step(actions[i])
+            assert dones[i] == t and rewards[i] == pytest.approx(r, abs=1e-5)
+            if t:
+                ended += 1
+                o, _ = s.reset()
+            np.testing.assert_allclose(obs[i], o, atol=1e-6)
+    assert ended >= 2
