@@ -263,6 +263,24 @@ def _tria(M, S, A, v):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
+def _cho_solve(L, B, X):
+    """Solve ``L L^T X = B`` (``L`` lower triangular (k, k), ``B`` and ``X`` (k, c)) by forward then backward
+    substitution, column by column."""
+    k = L.shape[0]
+    for j in range(B.shape[1]):
+        for a in range(k):
+            t = B[a, j]
+            for q in range(a):
+                t -= L[a, q] * X[q, j]
+            X[a, j] = t / L[a, a]
+        for a in range(k - 1, -1, -1):
+            t = X[a, j]
+            for q in range(a + 1, k):
+                t -= L[q, a] * X[q, j]
+            X[a, j] = t / L[a, a]
+
+
+@njit(cache=True, error_model="numpy", inline="always")
 def _whitened(Ls, eps, w):
     """``(eps^T S^-1 eps, log det S)`` from ``S = Ls Ls^T``; ``w`` gets ``Ls^-1 eps``."""
     _forward(Ls, eps, w)
@@ -414,17 +432,7 @@ def _huber_reweight(L, present, R, eps, Pxy, Pyy, S, gamma, iterations, Ls, w, H
     weights settle (at most ``iterations``).  ``L`` is the prior's factor.  False if ``S`` is not positive
     definite."""
     n, m = L.shape[0], eps.shape[0]
-    for j in range(m):   # H^T = P^-1 Pxy through the prior's factor
-        for a in range(n):
-            t = Pxy[a, j]
-            for q in range(a):
-                t -= L[a, q] * Ht[q, j]
-            Ht[a, j] = t / L[a, a]
-        for a in range(n - 1, -1, -1):
-            t = Ht[a, j]
-            for q in range(a + 1, n):
-                t -= L[q, a] * Ht[q, j]
-            Ht[a, j] = t / L[a, a]
+    _cho_solve(L, Pxy, Ht)   # H^T = P^-1 Pxy through the prior's factor
     for j in range(m):
         Reff[j] = R[j]
     for _ in range(iterations):
@@ -485,18 +493,7 @@ def _srcdkf_gain(x, L, eps, Y1, Y2, Pxy, R, My, Ls, Asc, vsc, W, w, Mx, S, mean,
             ok = False
     if not ok:
         return False, 0.0, 0.0
-    for i in range(m):      # W = Sy^-1 Pxy^T, then K^T = Sy^-T W
-        for a in range(n):
-            t = Pxy[a, i]
-            for q in range(i):
-                t -= Ls[i, q] * W[q, a]
-            W[i, a] = t / Ls[i, i]
-    for i in range(m - 1, -1, -1):
-        for a in range(n):
-            t = W[i, a]
-            for q in range(i + 1, m):
-                t -= Ls[q, i] * W[q, a]
-            W[i, a] = t / Ls[i, i]
+    _cho_solve(Ls, Pxy.T, W)   # K^T = Sy^-T Sy^-1 Pxy^T
     for a in range(n):
         t = x[a]
         for i in range(m):
