@@ -48,6 +48,9 @@ from shipsense.trackers.filters._core import (
     _sqrt_psd,
     prior_health,
 )
+from shipsense.trackers.filters.cdkf import H_STIRLING
+from shipsense.trackers.filters.huber_ukf import GAMMA
+from shipsense.trackers.filters.ukf import merwe_weights
 
 # -- the model's compiled measurement function ------------------------------------------------------------------
 
@@ -219,24 +222,25 @@ def _forward(L, b, out):
 def _tria(M, S, A, v):
     """Lower-triangular ``S`` (n, n) with ``S S^T = M M^T`` for ``M`` (n, k), k >= n, non-negative diagonal.
 
-    Householder triangularisation of ``M^T`` specialised to one small matrix (the numpy path calls a
-    batched LAPACK QR); ``A`` (k, n) and ``v`` (k,) are scratch.  False if the result is not finite.
+    Householder triangularisation (an LQ decomposition of ``M``, the QR of ``M^T``) specialised to one small
+    matrix (the numpy path calls a batched LAPACK QR), working on rows so that every inner loop is
+    contiguous; ``A`` (at least (n, k)) and ``v`` (k,) are scratch.  False if the result is not finite.
     """
     n, k = M.shape
-    for i in range(k):
-        for j in range(n):
-            A[i, j] = M[j, i]
+    for j in range(n):
+        for i in range(k):
+            A[j, i] = M[j, i]
     for j in range(n):
         norm2 = 0.0
         for i in range(j, k):
-            norm2 += A[i, j] * A[i, j]
+            norm2 += A[j, i] * A[j, i]
         if norm2 == 0.0:
             continue
         norm = math.sqrt(norm2)
         alpha = -norm if A[j, j] >= 0 else norm
         vn2 = 0.0
         for i in range(j, k):
-            v[i] = A[i, j]
+            v[i] = A[j, i]
         v[j] -= alpha
         for i in range(j, k):
             vn2 += v[i] * v[i]
@@ -244,19 +248,19 @@ def _tria(M, S, A, v):
             continue
         A[j, j] = alpha
         for i in range(j + 1, k):
-            A[i, j] = 0.0
+            A[j, i] = 0.0
         for c in range(j + 1, n):
             t = 0.0
             for i in range(j, k):
-                t += v[i] * A[i, c]
+                t += v[i] * A[c, i]
             t *= 2.0 / vn2
             for i in range(j, k):
-                A[i, c] -= t * v[i]
+                A[c, i] -= t * v[i]
     ok = True
     for j in range(n):
         sgn = -1.0 if A[j, j] < 0 else 1.0
         for i in range(n):
-            S[i, j] = sgn * A[j, i] if i >= j else 0.0
+            S[i, j] = sgn * A[i, j] if i >= j else 0.0
             if not math.isfinite(S[i, j]):
                 ok = False
     return ok
@@ -598,8 +602,8 @@ def _update_kernel(filt, X, Ls_in, P_in, Yobs, mask, Rm, spec, spread, center, W
     """One measurement update of every batch element (``filt``: UKF/CKF, CDKF, HUBER, EKF, PUEKF, SRCDKF).
 
     The covariance-form filters also write the posterior's factor into ``L_out`` (the SR-CDKF's factor is
-    ``P_out``); ``ok_out`` is False where a factorisation failed or a result is not finite.  Allocates the
-    scratch; the loop over the batch is :func:`_update_loop`.
+    ``P_out``); ``ok_out`` is False where a factorisation failed or a result is not finite; returns whether
+    every element is ok.  Allocates the scratch; the loop over the batch is :func:`_update_loop`.
     """
     n = X.shape[1]
     m = Yobs.shape[1]
@@ -610,13 +614,14 @@ def _update_kernel(filt, X, Ls_in, P_in, Yobs, mask, Rm, spec, spread, center, W
     Pxy, Pyy, S, Ls = np.empty((n, m)), np.empty((m, m)), np.empty((m, m)), np.zeros((m, m))
     W, Y1, Y2, Ht = np.empty((m, n)), np.empty((n, m)), np.empty((n, m)), np.empty((n, m))
     pt, dx, Reff, new = np.empty(n), np.empty(n), np.empty(m), np.empty(m)
-    My, Mx, Asc, vsc = np.zeros((m, k)), np.empty((n, k)), np.empty((k, max(n, m))), np.empty(k)
+    My, Mx, Asc, vsc = np.zeros((m, k)), np.empty((n, k)), np.empty((max(n, m), k)), np.empty(k)
     B = np.empty(3)
     ekf = (np.empty(n), np.empty((n, n)), np.empty((n, n)), np.empty((m, n)), yhat, eps, Pxy, Pyy, S, Ls, W, w,
            np.empty(3), np.empty(3), B, np.empty((3, 3)), np.empty((3, 3)))
     work = (present, y, R, yhat, eps, w, Y, dY, Pxy, Pyy, S, Ls, W, Y1, Y2, Ht, pt, dx, Reff, new, My, Mx, Asc, vsc, B)
     _update_loop(filt, X, Ls_in, P_in, Yobs, mask, Rm, spec, spread, center, Wm, Wc, h, gamma, iterations, n_pu,
                  mean_out, P_out, L_out, eps_out, S_out, loglik, nis_out, m_out, ok_out, work, ekf)
+    return ok_out.all()
 
 
 @_loop_jit
@@ -632,7 +637,7 @@ def _update_loop(filt, X, Ls_in, P_in, Yobs, mask, Rm, spec, spread, center, Wm,
         L = Ls_in[b]
         cnt = 0
         for j in range(m):
-            present[j] = math.isfinite(Yobs[b, j]) and mask[b, j]
+            present[j] = math.isfinite(Yobs[b, j]) and mask[b if mask.shape[0] > 1 else 0, j]
             y[j] = Yobs[b, j] if present[j] else 0.0
             R[j] = Rm[j] if present[j] else 1.0
             cnt += present[j]
@@ -679,15 +684,17 @@ def _predict_kernel(X, P_in, A, Q, sqQ, square_root, mean_out, P_out, L_out, ok_
     """``x = A x``; ``P = A P A^T + Q`` and its factor, or (``square_root``) the factor ``tria([A L, Q^(1/2)])``.
 
     ``A``, ``Q`` and ``sqQ`` have a leading axis of 1 (shared) or of the batch.  ``P_in`` is the covariance, or
-    with ``square_root`` the factor.  Allocates the scratch; the loop over the batch is :func:`_predict_loop`.
+    with ``square_root`` the factor.  Returns whether every element is ok.  Allocates the scratch; the loop over
+    the batch is :func:`_predict_loop`.
     """
     nb, n = X.shape
     kq = sqQ.shape[2]
     AP = np.empty((n, n))
     M = np.empty((n, n + kq))
-    Asc = np.empty((n + kq, n))
+    Asc = np.empty((n, n + kq))
     vsc = np.empty(n + kq)
     _predict_loop(X, P_in, A, Q, sqQ, square_root, mean_out, P_out, L_out, ok_out, AP, M, Asc, vsc)
+    return ok_out.all()
 
 
 @_loop_jit
@@ -705,12 +712,14 @@ def _predict_loop(X, P_in, A, Q, sqQ, square_root, mean_out, P_out, L_out, ok_ou
                 t += Ab[i, j] * X[b, j]
             mean_out[b, i] = t
         Pb = P_in[b]
-        for i in range(n):
+        for i in range(n):      # A P, skipping A's zeros (a transition matrix is sparse; the sums are the same)
             for j in range(n):
-                t = 0.0
-                for c in range(n):
-                    t += Ab[i, c] * Pb[c, j]
-                AP[i, j] = t
+                AP[i, j] = 0.0
+            for c in range(n):
+                a = Ab[i, c]
+                if a != 0.0:
+                    for j in range(n):
+                        AP[i, j] += a * Pb[c, j]
         if square_root:
             for i in range(n):
                 for j in range(n):
@@ -724,7 +733,9 @@ def _predict_loop(X, P_in, A, Q, sqQ, square_root, mean_out, P_out, L_out, ok_ou
                 for j in range(i + 1):
                     t = 0.0
                     for c in range(n):
-                        t += AP[i, c] * Ab[j, c]
+                        a = Ab[j, c]
+                        if a != 0.0:
+                            t += AP[i, c] * a
                     Pout[i, j] = t + Q[iq, i, j]
                     Pout[j, i] = t + Q[iq, j, i]
             ok_out[b] = _chol(Pout, L_out[b])
@@ -732,14 +743,38 @@ def _predict_loop(X, P_in, A, Q, sqQ, square_root, mean_out, P_out, L_out, ok_ou
 
 # -- numpy-facing steps ---------------------------------------------------------------------------------------
 
+def _batch(*shapes):
+    """The broadcast of batch shapes (the common case, all equal, without numpy's general machinery)."""
+    shapes = [sh for sh in shapes if sh]      # () broadcasts to anything
+    first = shapes[0] if shapes else ()
+    for other in shapes[1:]:
+        if other != first:
+            return np.broadcast_shapes(*shapes)
+    return first
+
+
+def _shaped(a, batch):
+    """A kernel's (B, ...) output with its batch axes restored."""
+    return a if len(batch) == 1 else a.reshape(batch + a.shape[1:])
+
+
+def _flag(ok, batch):
+    """A copy of the health flag ``ok`` broadcast to ``batch``."""
+    ok = np.asarray(ok)
+    return ok.copy() if ok.shape == batch else np.broadcast_to(ok, batch).copy()
+
+
 def _flat(a, batch, tail):
     """``a`` broadcast to ``batch + tail`` as a writable C-contiguous (B, *tail) array (one compiled signature)."""
     a = np.asarray(a)
-    if a.shape != batch + tail:
-        a = np.broadcast_to(a, batch + tail).copy()
+    full = batch + tail
+    if a.shape != full:
+        if a.shape[len(a.shape) - len(tail):] == tail and a.size == math.prod(full):   # only axes of length 1 added
+            return np.array(a, order="C").reshape((-1,) + tail)
+        a = np.broadcast_to(a, full).copy()
     elif not (a.flags.c_contiguous and a.flags.writeable):
         a = a.copy()
-    return a.reshape((-1,) + tail)
+    return a if len(batch) == 1 else a.reshape((-1,) + tail)
 
 
 def _per_element(a, batch, n):
@@ -756,7 +791,7 @@ def predict(belief: Belief, model, square_root: bool = False):
     mean = np.asarray(belief.mean, dtype=float)
     n = mean.shape[-1]
     A = np.asarray(model.A, dtype=float)
-    batch = np.broadcast_shapes(mean.shape[:-1], A.shape[:-2])
+    batch = _batch(mean.shape[:-1], A.shape[:-2])
     if square_root:
         src = belief.chol
         Q = np.asarray(model.Q, dtype=float)
@@ -777,29 +812,23 @@ def predict(belief: Belief, model, square_root: bool = False):
     P_out = np.empty((B, n, n)) if not square_root else np.empty((1, n, n))
     L_out = np.zeros((B, n, n))
     ok = np.empty(B, dtype=bool)
-    _predict_kernel(X, _flat(src, batch, (n, n)), _per_element(A, batch, n), Qf, sqQ, square_root,
-                    mean_out, P_out, L_out, ok)
-    if not ok.all():
+    if not _predict_kernel(X, _flat(src, batch, (n, n)), _per_element(A, batch, n), Qf, sqQ, square_root,
+                           mean_out, P_out, L_out, ok):
         return None
-    mean_out = mean_out.reshape(batch + (n,))
-    L_out = L_out.reshape(batch + (n, n))
+    mean_out, L_out = _shaped(mean_out, batch), _shaped(L_out, batch)
     if square_root:
-        return Belief(mean_out, L_out, np.broadcast_to(belief.ok, batch).copy())
-    return _BeliefWithCov.with_cov(mean_out, L_out, np.broadcast_to(prior_health(belief), batch).copy(),
-                                   P_out.reshape(batch + (n, n)))
+        return Belief(mean_out, L_out, _flag(belief.ok, batch))
+    return _BeliefWithCov.with_cov(mean_out, L_out, _flag(prior_health(belief), batch), _shaped(P_out, batch))
 
 
 def update(name, belief: Belief, y, model, spec, mask=None, **options):
     """The compiled measurement update of filter ``name`` (same result as its module's ``update``); None if an
     element failed numerically (the caller then runs the numpy step, which flags and repairs it)."""
-    from shipsense.trackers.filters.cdkf import H_STIRLING
-    from shipsense.trackers.filters.huber_ukf import GAMMA
-    from shipsense.trackers.filters.ukf import merwe_weights
-
     mean = np.asarray(belief.mean, dtype=float)
     y = np.asarray(y, dtype=float)
     n, m = mean.shape[-1], y.shape[-1]
-    batch = np.broadcast_shapes(mean.shape[:-1], y.shape[:-1], np.shape(mask)[:-1] if mask is not None else ())
+    batch = (_batch(mean.shape[:-1], y.shape[:-1]) if mask is None
+             else _batch(mean.shape[:-1], y.shape[:-1], np.shape(mask)[:-1]))
     spread, center, Wm, Wc = 1.0, 1, _NO_WEIGHTS, _NO_WEIGHTS
     h, gamma, iterations, n_pu = H_STIRLING, GAMMA, 10, 1
     if name in ("ukf", "huber_ukf"):
@@ -824,9 +853,7 @@ def update(name, belief: Belief, y, model, spec, mask=None, **options):
     P = belief.cov if cov_form else _NO_COV
     X = _flat(mean, batch, (n,))
     nb = X.shape[0]
-    mask_f = np.ones((1, m), dtype=bool) if mask is None else _flat(np.asarray(mask, dtype=bool), batch, (m,))
-    if mask_f.shape[0] != nb:
-        mask_f = np.ascontiguousarray(np.broadcast_to(mask_f, (nb, m)))
+    mask_f = _all_read(m) if mask is None else _flat(np.asarray(mask, dtype=bool), batch, (m,))
     mean_out = np.empty((nb, n))
     P_out = np.empty((nb, n, n))
     L_out = np.zeros((nb, n, n)) if cov_form else _NO_COV
@@ -837,19 +864,27 @@ def update(name, belief: Belief, y, model, spec, mask=None, **options):
     cnt = np.empty(nb, dtype=np.int64)
     ok = np.empty(nb, dtype=bool)
     L = belief.chol if filt not in (EKF, PUEKF) else P   # the linearised filters do not read the factor
-    _update_kernel(filt, X, _flat(L, batch, (n, n)), _flat(P, batch, (n, n)) if cov_form else _NO_COV,
-                   _flat(y, batch, (m,)), mask_f, np.array(model.R, dtype=float), spec, spread, center,
-                   Wm, Wc, h, gamma, iterations, n_pu, mean_out, P_out, L_out, eps, S, loglik, nis, cnt, ok)
-    if not ok.all():
+    if not _update_kernel(filt, X, _flat(L, batch, (n, n)), _flat(P, batch, (n, n)) if cov_form else _NO_COV,
+                          _flat(y, batch, (m,)), mask_f, _noise(model), spec, spread, center, Wm, Wc, h, gamma,
+                          iterations, n_pu, mean_out, P_out, L_out, eps, S, loglik, nis, cnt, ok):
         return None
-    inn = Innovation(eps.reshape(batch + (m,)), S.reshape(batch + (m, m)), loglik.reshape(batch),
-                     nis.reshape(batch), cnt.reshape(batch))
-    mean_out = mean_out.reshape(batch + (n,))
-    P_out = P_out.reshape(batch + (n, n))
+    inn = Innovation(_shaped(eps, batch), _shaped(S, batch), _shaped(loglik, batch), _shaped(nis, batch),
+                     _shaped(cnt, batch))
+    mean_out, P_out = _shaped(mean_out, batch), _shaped(P_out, batch)
     if filt == SRCDKF:
-        return Belief(mean_out, P_out, np.broadcast_to(belief.ok, batch).copy()), inn
-    return _BeliefWithCov.with_cov(mean_out, L_out.reshape(batch + (n, n)),
-                                   np.broadcast_to(prior_health(belief), batch).copy(), P_out), inn
+        return Belief(mean_out, P_out, _flag(belief.ok, batch)), inn
+    return _BeliefWithCov.with_cov(mean_out, _shaped(L_out, batch), _flag(prior_health(belief), batch), P_out), inn
+
+
+def _noise(model):
+    """The model's measurement noise variances as a contiguous float array (no copy when they are one)."""
+    return np.ascontiguousarray(model.R, dtype=float)
+
+
+@lru_cache(maxsize=64)
+def _all_read(m):
+    """The mask of a step that reads every channel: one row, which the kernel uses for every element."""
+    return np.ones((1, m), dtype=bool)
 
 
 _NO_WEIGHTS = np.zeros(1)
