@@ -189,3 +189,36 @@ def test_an_option_a_unit_does_not_take_is_refused_by_name():
     with pytest.raises(ValueError, match="ekf: unknown option 'n_pu'"):
         get_filter("ekf", n_pu=3)
     assert get_filter("huber_ukf", gamma=2.0, iterations=3).options == {"gamma": 2.0, "iterations": 3}
+
+
+@pytest.mark.parametrize("name", ["ukf", "srcdkf", "ekf"])
+def test_a_large_batch_split_across_threads_equals_one_thread_bit_for_bit(name, s0, monkeypatch):
+    """Batches of SPLIT_MIN elements or more run as chunks in threads; every element is independent."""
+    model, y, x0, P0 = s0
+    rng = np.random.default_rng(5)
+    B = fused.SPLIT_MIN + 37           # chunks of unequal size
+    xb = x0[rng.integers(0, 3, B)] + rng.normal(0, 1, (B, 7)) * np.array([5, 5, 0.2, 0.2, 0, 0, 0])
+    yb = y[rng.integers(0, 3, B), :6]
+    mask = rng.random(yb.shape) > 0.1
+    empty = np.empty
+
+    def poisoned(shape, dtype=float, **kw):     # an element no chunk writes would keep NaN (not a stale result)
+        out = empty(shape, dtype, **kw)
+        out.fill(np.nan if out.dtype.kind == "f" else 0)
+        return out
+
+    monkeypatch.setattr(np, "empty", poisoned)
+    runs = {}
+    for threads in ("1", "3"):
+        monkeypatch.setenv("SHIPSENSE_THREADS", threads)
+        runs[threads] = fused_run(name, model, yb, xb, P0, {}, mask)
+    for a, b in zip(runs["1"], runs["3"]):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_the_thread_count_setting_is_checked(monkeypatch):
+    monkeypatch.setenv("SHIPSENSE_THREADS", "two")
+    with pytest.raises(ValueError, match="SHIPSENSE_THREADS"):
+        fused.threads()
+    monkeypatch.setenv("SHIPSENSE_THREADS", "2")
+    assert fused.threads() == 2

@@ -425,9 +425,9 @@ UKF, CDKF, HUBER, EKF, PUEKF, SRCDKF = range(6)
 # of a UKF update at batch 2400.  ``_nrt`` is a numba option that is not part of its documented API; a numba
 # without it gets the counted loops (same results, slower).
 try:
-    _loop_jit = njit(cache=True, error_model="numpy", _nrt=False)
+    _loop_jit = njit(cache=True, error_model="numpy", nogil=True, _nrt=False)
 except (KeyError, TypeError, ValueError):      # pragma: no cover - a numba without the option
-    _loop_jit = njit(cache=True, error_model="numpy")
+    _loop_jit = njit(cache=True, error_model="numpy", nogil=True)
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -596,7 +596,7 @@ def _ekf_gain(subs, x, P0, present, y, R, spec, sc, mean, Pout, eps_out, S_out):
     return ok, nis, logdet
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", nogil=True)
 def _update_kernel(filt, X, Ls_in, P_in, Yobs, mask, Rm, spec, spread, center, Wm, Wc, h, gamma, iterations, n_pu,
                    mean_out, P_out, L_out, eps_out, S_out, loglik, nis_out, m_out, ok_out):
     """One measurement update of every batch element (``filt``: UKF/CKF, CDKF, HUBER, EKF, PUEKF, SRCDKF).
@@ -679,7 +679,7 @@ def _update_loop(filt, X, Ls_in, P_in, Yobs, mask, Rm, spec, spread, center, Wm,
         ok_out[b] = ok
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", nogil=True)
 def _predict_kernel(X, P_in, A, Q, sqQ, square_root, mean_out, P_out, L_out, ok_out):
     """``x = A x``; ``P = A P A^T + Q`` and its factor, or (``square_root``) the factor ``tria([A L, Q^(1/2)])``.
 
@@ -739,6 +739,58 @@ def _predict_loop(X, P_in, A, Q, sqQ, square_root, mean_out, P_out, L_out, ok_ou
                     Pout[i, j] = t + Q[iq, i, j]
                     Pout[j, i] = t + Q[iq, j, i]
             ok_out[b] = _chol(Pout, L_out[b])
+
+
+# -- threads --------------------------------------------------------------------------------------------------
+
+_PREDICT_ROWS = frozenset({0, 1, 2, 3, 4, 6, 7, 8, 9})    # the kernels' arguments with a row per batch element
+_UPDATE_ROWS = frozenset({1, 2, 3, 4, 5, 16, 17, 18, 19, 20, 21, 22, 23, 24})
+SPLIT_MIN = 512
+"""Batches of at least this many elements are split across threads (a chunk of 256 elements is ~250 us of work;
+handing one to a thread costs tens of microseconds)."""
+_pool = None
+
+
+def threads() -> int:
+    """Threads a large batch step is split across: ``SHIPSENSE_THREADS`` if set, else the CPUs this process may use.
+
+    The kernels release the GIL and every element is independent, so results do not depend on it.
+    """
+    import os
+
+    value = os.environ.get("SHIPSENSE_THREADS", "").strip()
+    if value:
+        try:
+            return max(1, int(value))
+        except ValueError:
+            raise ValueError(f"SHIPSENSE_THREADS must be a whole number >= 1, got {value!r}") from None
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:    # pragma: no cover - not Linux
+        return os.cpu_count() or 1
+
+
+def _split(kernel, rows, *args):
+    """``kernel(*args)`` (True if every element is ok), over contiguous chunks of the batch in threads when the
+    batch is large: the arguments at positions ``rows`` that have a row per element are sliced."""
+    global _pool
+    nb = args[1 if kernel is _update_kernel else 0].shape[0]
+    parts = min(threads(), nb // (SPLIT_MIN // 2)) if nb >= SPLIT_MIN else 1
+    if parts <= 1:
+        return kernel(*args)
+    if _pool is None:
+        from concurrent.futures import ThreadPoolExecutor
+
+        _pool = ThreadPoolExecutor(thread_name_prefix="shipsense-filter")
+    edges = [nb * i // parts for i in range(parts + 1)]
+
+    def chunk(i):
+        lo, hi = edges[i], edges[i + 1]
+        return kernel(*(a[lo:hi] if i_arg in rows and a.shape[0] == nb else a for i_arg, a in enumerate(args)))
+
+    futures = [_pool.submit(chunk, i) for i in range(1, parts)]
+    ok = chunk(0)
+    return all([f.result() for f in futures]) and ok
 
 
 # -- numpy-facing steps ---------------------------------------------------------------------------------------
@@ -812,8 +864,8 @@ def predict(belief: Belief, model, square_root: bool = False):
     P_out = np.empty((B, n, n)) if not square_root else np.empty((1, n, n))
     L_out = np.zeros((B, n, n))
     ok = np.empty(B, dtype=bool)
-    if not _predict_kernel(X, _flat(src, batch, (n, n)), _per_element(A, batch, n), Qf, sqQ, square_root,
-                           mean_out, P_out, L_out, ok):
+    if not _split(_predict_kernel, _PREDICT_ROWS, X, _flat(src, batch, (n, n)), _per_element(A, batch, n), Qf, sqQ,
+                  square_root, mean_out, P_out, L_out, ok):
         return None
     mean_out, L_out = _shaped(mean_out, batch), _shaped(L_out, batch)
     if square_root:
@@ -864,9 +916,10 @@ def update(name, belief: Belief, y, model, spec, mask=None, **options):
     cnt = np.empty(nb, dtype=np.int64)
     ok = np.empty(nb, dtype=bool)
     L = belief.chol if filt not in (EKF, PUEKF) else P   # the linearised filters do not read the factor
-    if not _update_kernel(filt, X, _flat(L, batch, (n, n)), _flat(P, batch, (n, n)) if cov_form else _NO_COV,
-                          _flat(y, batch, (m,)), mask_f, _noise(model), spec, spread, center, Wm, Wc, h, gamma,
-                          iterations, n_pu, mean_out, P_out, L_out, eps, S, loglik, nis, cnt, ok):
+    if not _split(_update_kernel, _UPDATE_ROWS, filt, X, _flat(L, batch, (n, n)),
+                  _flat(P, batch, (n, n)) if cov_form else _NO_COV, _flat(y, batch, (m,)), mask_f, _noise(model), spec,
+                  spread, center, Wm, Wc, h, gamma, iterations, n_pu, mean_out, P_out, L_out, eps, S, loglik, nis,
+                  cnt, ok):
         return None
     inn = Innovation(_shaped(eps, batch), _shaped(S, batch), _shaped(loglik, batch), _shaped(nis, batch),
                      _shaped(cnt, batch))
