@@ -219,12 +219,14 @@ def _forward(L, b, out):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _tria(M, S, A, v):
+def _tria(M, S, A, v, nz):
     """Lower-triangular ``S`` (n, n) with ``S S^T = M M^T`` for ``M`` (n, k), k >= n, non-negative diagonal.
 
     Householder triangularisation (an LQ decomposition of ``M``, the QR of ``M^T``) specialised to one small
     matrix (the numpy path calls a batched LAPACK QR), working on rows so that every inner loop is
-    contiguous; ``A`` (at least (n, k)) and ``v`` (k,) are scratch.  False if the result is not finite.
+    contiguous, and only over the reflector's nonzero entries (``[A L, Q^(1/2)]`` is mostly zeros; skipping
+    exact zeros leaves every sum the same); ``A`` (at least (n, k)), ``v`` (k,) and the integer ``nz`` (k,) are
+    scratch.  False if the result is not finite.
     """
     n, k = M.shape
     for j in range(n):
@@ -249,13 +251,18 @@ def _tria(M, S, A, v):
         A[j, j] = alpha
         for i in range(j + 1, k):
             A[j, i] = 0.0
+        q = 0
+        for i in range(j, k):
+            if v[i] != 0.0:
+                nz[q] = i
+                q += 1
         for c in range(j + 1, n):
             t = 0.0
-            for i in range(j, k):
-                t += v[i] * A[c, i]
+            for r in range(q):
+                t += v[nz[r]] * A[c, nz[r]]
             t *= 2.0 / vn2
-            for i in range(j, k):
-                A[c, i] -= t * v[i]
+            for r in range(q):
+                A[c, nz[r]] -= t * v[nz[r]]
     ok = True
     for j in range(n):
         sgn = -1.0 if A[j, j] < 0 else 1.0
@@ -492,7 +499,7 @@ def _difference_cov(Y1, Y2, R, S):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _srcdkf_gain(x, L, eps, Y1, Y2, Pxy, R, My, Ls, Asc, vsc, W, w, Mx, S, mean, Pout):
+def _srcdkf_gain(x, L, eps, Y1, Y2, Pxy, R, My, Ls, Asc, vsc, nzs, W, w, Mx, S, mean, Pout):
     """The SR-CDKF update: ``Sy = tria([Y1^T, Y2^T, R^(1/2)])``, ``K = Pxy Sy^-T Sy^-1``, ``Sx = tria([L - K Y1^T,
     K Y2^T, K R^(1/2)])`` into ``mean``, ``Pout`` (the factor) and ``S = Sy Sy^T``.  Returns
     ``(ok, nis, log det S)``."""
@@ -502,7 +509,7 @@ def _srcdkf_gain(x, L, eps, Y1, Y2, Pxy, R, My, Ls, Asc, vsc, W, w, Mx, S, mean,
             My[i, a] = Y1[a, i]
             My[i, n + a] = Y2[a, i]
         My[i, 2 * n + i] = math.sqrt(R[i])
-    ok = _tria(My, Ls, Asc, vsc)
+    ok = _tria(My, Ls, Asc, vsc, nzs)
     for i in range(m):
         if not Ls[i, i] > 0.0:
             ok = False
@@ -526,7 +533,7 @@ def _srcdkf_gain(x, L, eps, Y1, Y2, Pxy, R, My, Ls, Asc, vsc, W, w, Mx, S, mean,
             Mx[a, n + c] = t2
         for i in range(m):
             Mx[a, 2 * n + i] = W[i, a] * My[i, 2 * n + i]
-    ok = ok and _tria(Mx, Pout, Asc, vsc)
+    ok = ok and _tria(Mx, Pout, Asc, vsc, nzs)
     for a in range(n):
         if not Pout[a, a] > 0.0:
             ok = False
@@ -615,10 +622,12 @@ def _update_kernel(filt, X, Ls_in, P_in, Yobs, mask, Rm, spec, spread, center, W
     W, Y1, Y2, Ht = np.empty((m, n)), np.empty((n, m)), np.empty((n, m)), np.empty((n, m))
     pt, dx, Reff, new = np.empty(n), np.empty(n), np.empty(m), np.empty(m)
     My, Mx, Asc, vsc = np.zeros((m, k)), np.empty((n, k)), np.empty((max(n, m), k)), np.empty(k)
+    nzs = np.empty(k, np.int64)
     B = np.empty(3)
     ekf = (np.empty(n), np.empty((n, n)), np.empty((n, n)), np.empty((m, n)), yhat, eps, Pxy, Pyy, S, Ls, W, w,
            np.empty(3), np.empty(3), B, np.empty((3, 3)), np.empty((3, 3)))
-    work = (present, y, R, yhat, eps, w, Y, dY, Pxy, Pyy, S, Ls, W, Y1, Y2, Ht, pt, dx, Reff, new, My, Mx, Asc, vsc, B)
+    work = (present, y, R, yhat, eps, w, Y, dY, Pxy, Pyy, S, Ls, W, Y1, Y2, Ht, pt, dx, Reff, new, My, Mx, Asc, vsc,
+            nzs, B)
     _update_loop(filt, X, Ls_in, P_in, Yobs, mask, Rm, spec, spread, center, Wm, Wc, h, gamma, iterations, n_pu,
                  mean_out, P_out, L_out, eps_out, S_out, loglik, nis_out, m_out, ok_out, work, ekf)
     return ok_out.all()
@@ -628,7 +637,8 @@ def _update_kernel(filt, X, Ls_in, P_in, Yobs, mask, Rm, spec, spread, center, W
 def _update_loop(filt, X, Ls_in, P_in, Yobs, mask, Rm, spec, spread, center, Wm, Wc, h, gamma, iterations, n_pu,
                  mean_out, P_out, L_out, eps_out, S_out, loglik, nis_out, m_out, ok_out, work, ekf):
     """:func:`_update_kernel`'s loop over the batch, on its scratch ``work`` and ``ekf``."""
-    present, y, R, yhat, eps, w, Y, dY, Pxy, Pyy, S, Ls, W, Y1, Y2, Ht, pt, dx, Reff, new, My, Mx, Asc, vsc, B = work
+    (present, y, R, yhat, eps, w, Y, dY, Pxy, Pyy, S, Ls, W, Y1, Y2, Ht, pt, dx, Reff, new, My, Mx, Asc, vsc,
+     nzs, B) = work
     nb, n = X.shape
     m = Yobs.shape[1]
     axial = spec[9]
@@ -662,7 +672,7 @@ def _update_loop(filt, X, Ls_in, P_in, Yobs, mask, Rm, spec, spread, center, Wm,
                 _difference_cov(Y1, Y2, R, S)
                 ok, nis, logdet = _gain(x, P_in[b], eps, Pxy, S, n, m, Ls, W, w, mean_out[b], P_out[b])
             else:
-                ok, nis, logdet = _srcdkf_gain(x, L, eps, Y1, Y2, Pxy, R, My, Ls, Asc, vsc, W, w, Mx, S,
+                ok, nis, logdet = _srcdkf_gain(x, L, eps, Y1, Y2, Pxy, R, My, Ls, Asc, vsc, nzs, W, w, Mx, S,
                                                mean_out[b], P_out[b])
         else:   # EKF, PUEKF: n_pu sub-updates with R n_pu, re-linearised; the innovation is the first one's
             ok, nis, logdet = _ekf_gain(1 if filt == EKF else n_pu, x, P_in[b], present, y, R, spec, ekf,
@@ -693,12 +703,13 @@ def _predict_kernel(X, P_in, A, Q, sqQ, square_root, mean_out, P_out, L_out, ok_
     M = np.empty((n, n + kq))
     Asc = np.empty((n, n + kq))
     vsc = np.empty(n + kq)
-    _predict_loop(X, P_in, A, Q, sqQ, square_root, mean_out, P_out, L_out, ok_out, AP, M, Asc, vsc)
+    nzs = np.empty(n + kq, np.int64)
+    _predict_loop(X, P_in, A, Q, sqQ, square_root, mean_out, P_out, L_out, ok_out, AP, M, Asc, vsc, nzs)
     return ok_out.all()
 
 
 @_loop_jit
-def _predict_loop(X, P_in, A, Q, sqQ, square_root, mean_out, P_out, L_out, ok_out, AP, M, Asc, vsc):
+def _predict_loop(X, P_in, A, Q, sqQ, square_root, mean_out, P_out, L_out, ok_out, AP, M, Asc, vsc, nzs):
     """:func:`_predict_kernel`'s loop over the batch, on its scratch."""
     nb, n = X.shape
     kq = sqQ.shape[2]
@@ -726,7 +737,7 @@ def _predict_loop(X, P_in, A, Q, sqQ, square_root, mean_out, P_out, L_out, ok_ou
                     M[i, j] = AP[i, j]
                 for j in range(kq):
                     M[i, n + j] = sqQ[b if sqQ.shape[0] > 1 else 0, i, j]
-            ok_out[b] = _tria(M, L_out[b], Asc, vsc)
+            ok_out[b] = _tria(M, L_out[b], Asc, vsc, nzs)
         else:
             Pout = P_out[b]
             for i in range(n):
