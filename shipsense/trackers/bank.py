@@ -19,9 +19,9 @@ argmax.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
-from scipy import stats
 
 from shipsense.trackers.filters import Belief, FilterUnit, get_filter
 from shipsense.trackers.selection import mixture_mse
@@ -114,6 +114,8 @@ class BankRun:
     def diverged(self, window: int = 10, confidence: float = 0.999) -> np.ndarray:
         """Divergence flag (R, H, K): lost covariance, or mean NIS over the last ``window`` steps
         above its ``confidence`` chi-square bound."""
+        from scipy import stats  # here: scipy.stats is ~70 MB and 0.3 s to import, and only this needs it
+
         nis = np.where(self.active, self.nis, 0.0)
         m = np.where(self.active, self.m, 0)
         cs_n = np.cumsum(nis, axis=-1)
@@ -327,10 +329,11 @@ def run_bank(unit, model, measurements, seeds, P0, *, prune_nats=None, progress=
     R, K, m = y.shape
     H, n = seeds.shape[1:]
     state = BankState(unit, model, seeds, P0, initial_loglik)
-    means = np.full((R, H, K, n), np.nan)
-    pos_cov = np.full((R, H, K, 2, 2), np.nan)
-    loglik = np.full((R, H, K), np.nan)
-    nis = np.full((R, H, K), np.nan)
+    blank = np.empty if prune_nats is None else partial(np.full, fill_value=np.nan)   # unpruned: every entry written
+    means = blank((R, H, K, n))
+    pos_cov = blank((R, H, K, 2, 2))
+    loglik = blank((R, H, K))
+    nis = blank((R, H, K))
     used = np.zeros((R, H, K), dtype=int)
     ok = np.zeros((R, H, K), dtype=bool)
     active = np.zeros((R, H, K), dtype=bool)
