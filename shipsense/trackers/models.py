@@ -205,6 +205,13 @@ class FieldModel:
         """``(h(x), H(x))`` from one pass of the kernels (the Jacobian's pass yields the readings too), for
         callers that need both at the same states (least-squares fits).  With the series electric path
         (``electric_method="series"``) the readings are :meth:`h`'s, evaluated apart."""
+        from shipsense.trackers.filters import fused
+
+        compiled = fused.h_and_jacobian(self, x)     # magnetometers and bearings: the filters' compiled kernel
+        return compiled if compiled is not None else self._h_and_H_numpy(x)
+
+    def _h_and_H_numpy(self, x):
+        """:meth:`h_and_H` through the numpy kernels of :mod:`shipsense.physics` (every sensor type)."""
         x = np.asarray(x, dtype=float)
         d = self._d
         q, moment, dipole = self._source(x)

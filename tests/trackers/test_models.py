@@ -151,3 +151,26 @@ def test_process_noise_is_si_so_the_internal_scale_does_not_change_the_estimates
     scale = np.abs(ra.means).max(axis=(0, 1))          # each state component against its own magnitude
     assert np.isfinite(ra.means).all()
     np.testing.assert_allclose(rb.means / scale, ra.means / scale, rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("name", ["S0", "S2"])
+def test_compiled_readings_and_jacobian_equal_the_numpy_kernels(name):
+    """Models with a compiled kernel (magnetometers, bearings) fit through it; the numpy kernels of physics/
+    are the independent reference (and every sensor type's path)."""
+    from shipsense.trackers.filters import fused
+
+    model = model_from_scenario(name)
+    assert fused.kernel_of(model) is not None
+    rng = np.random.default_rng(6)
+    x = np.zeros((4, 3, model.n))     # two batch axes
+    x[..., :2] = rng.uniform(-150, 150, (4, 3, 2))
+    x[..., 2:4] = rng.uniform(-8, 8, (4, 3, 2))
+    if model.n == 7:
+        x[..., 4:] = rng.uniform(-1e6, 1e6, (4, 3, 3))
+    x = model.to_internal(x)
+    y, H = model.h_and_H(x)
+    y_np, H_np = model._h_and_H_numpy(x)
+    assert y.shape == y_np.shape and H.shape == H_np.shape
+    np.testing.assert_allclose(y, y_np, rtol=1e-12, atol=1e-13 * np.abs(y_np).max())
+    np.testing.assert_allclose(H, H_np, rtol=1e-12, atol=1e-13 * np.abs(H_np).max())
+    np.testing.assert_allclose(y, model.h(x), rtol=1e-12, atol=1e-13 * np.abs(y_np).max())

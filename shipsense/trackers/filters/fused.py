@@ -752,10 +752,53 @@ def _predict_loop(X, P_in, A, Q, sqQ, square_root, mean_out, P_out, L_out, ok_ou
             ok_out[b] = _chol(Pout, L_out[b])
 
 
+@njit(cache=True, error_model="numpy", nogil=True)
+def _jacobian_kernel(X, spec, out, J):
+    """``h`` (B, m) and its Jacobian (B, m, n) of every internal state in ``X`` (B, n) into ``out`` and ``J``."""
+    n, m = X.shape[1], out.shape[1]
+    _jacobian_loop(X, spec, out, J, np.empty(n), np.empty(m), np.empty((m, n)), np.empty(3), np.empty(3),
+                   np.empty(3), np.empty((3, 3)), np.empty((3, 3)))
+    return True
+
+
+@_loop_jit
+def _jacobian_loop(X, spec, out, J, x, yhat, H, r3, m3, B, dBq, dBm):
+    nb, n = X.shape
+    m = out.shape[1]
+    for b in range(nb):
+        for a in range(n):
+            x[a] = X[b, a]
+        _h_jac(x, spec, yhat, H, r3, m3, B, dBq, dBm)
+        for i in range(m):
+            out[b, i] = yhat[i]
+            for a in range(n):
+                J[b, i, a] = H[i, a]
+
+
+def h_and_jacobian(model, x):
+    """``(h(x), dh/dx)`` of internal states ``x`` (..., n) through the compiled measurement kernel -- the
+    readings (..., m) and the Jacobian (..., m, n) in internal units, as
+    :meth:`~shipsense.trackers.models.FieldModel.h_and_H` -- or None if the model has no compiled kernel."""
+    spec = kernel_of(model)
+    if spec is None or spec[0] != FIELD:
+        return None
+    x = np.asarray(x, dtype=float)
+    batch, n = x.shape[:-1], x.shape[-1]
+    m = model.m
+    X = np.ascontiguousarray(x.reshape(-1, n))
+    if not X.flags.writeable:
+        X = X.copy()
+    out = np.empty((X.shape[0], m))
+    J = np.empty((X.shape[0], m, n))
+    _split(_jacobian_kernel, _JACOBIAN_ROWS, X, spec, out, J)
+    return out.reshape(batch + (m,)), J.reshape(batch + (m, n))
+
+
 # -- threads --------------------------------------------------------------------------------------------------
 
 _PREDICT_ROWS = frozenset({0, 1, 2, 3, 4, 6, 7, 8, 9})    # the kernels' arguments with a row per batch element
 _UPDATE_ROWS = frozenset({1, 2, 3, 4, 5, 16, 17, 18, 19, 20, 21, 22, 23, 24})
+_JACOBIAN_ROWS = frozenset({0, 2, 3})
 SPLIT_MIN = 512
 """Batches of at least this many elements are split across threads (a chunk of 256 elements is ~250 us of work;
 handing one to a thread costs tens of microseconds)."""
