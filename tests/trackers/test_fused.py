@@ -111,9 +111,10 @@ def test_compiled_steps_equal_the_numpy_steps_with_scalar_rotated_sensors_and_ma
     P0 = np.diag([50.0, 50.0, 2.0, 2.0, 100.0, 100.0, 100.0])
     options = OPTIONS.get(name, {})
     # the posteriors' condition numbers reach 1e6 here: rounding of P - K S K^T is ~1e-16 x 1e6 in correlation
-    # units (measured 1.3e-10 at most, 3e-8 nats; the SR-CDKF's factors agree to 6e-13)
+    # units (measured 1.3e-10 at most, 3e-8 nats; the SR-CDKF's factors agree to 6e-13); the PUEKF's three
+    # re-linearised sub-updates reach 6.3e-10 in one NIS of 704 (the second step's)
     assert_same(fused_run(name, model, ys, x0, P0, options, mask), numpy_run(name, model, ys, x0, P0, options, mask),
-                5e-10, nats=1e-7)
+                1e-9 if name == "puekf" else 5e-10, nats=1e-7)
 
 
 @pytest.mark.parametrize("name", FILTER_NAMES)
