@@ -33,7 +33,9 @@ from shipsense.sweep.store import write_table
 
 SCHEDULER_TIMEOUT_S = 5.0
 """How long to wait for a ``--scheduler`` address to answer."""
-ONE_THREAD = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+ONE_THREAD = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "SHIPSENSE_THREADS": "1"}
+"""A local cluster runs a single-threaded worker per core: BLAS, OpenMP and the compiled filter steps held to one
+thread in each."""
 OWN_FILES = ("sweep.json", "results.parquet", "results.csv", "passages.parquet", "chunks")
 
 
