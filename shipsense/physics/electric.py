@@ -362,13 +362,20 @@ class FastHED:
     def _evaluate(self, sensors, sources, moments, derivatives):
         """The fused kernel over the broadcast points: E (..., 3) and, with ``derivatives``, dE/dq (..., 3, 3)
         and G (..., 3, 2), all in V/m units (the 1/(4 pi sigma1) applied)."""
+        from shipsense.parallel import in_chunks
         from shipsense.physics.hed_kernel import hed_points  # numba is imported with the first electric field
 
         rx, ry, zs, zt, px, py = (np.ascontiguousarray(v).ravel() for v in _split(sensors, sources, moments))
         shape = np.broadcast_shapes(*(np.shape(v)[:-1] for v in (sensors, sources, moments)))
-        E, dE, G = hed_points(rx, ry, zs, zt, px, py, self._table, self._nx, self._nw, self._a, self._x0,
-                               self._hx, self._w0, self._hw, self.rho_max, self.medium.water_depth,
-                               self.medium.eta, 1.0 / (4.0 * np.pi * self.medium.sigma_water), derivatives)
+
+        def points(lo, hi):    # the kernel releases the GIL: a large batch runs in chunks on the CPUs
+            return hed_points(rx[lo:hi], ry[lo:hi], zs[lo:hi], zt[lo:hi], px[lo:hi], py[lo:hi], self._table,
+                              self._nx, self._nw, self._a, self._x0, self._hx, self._w0, self._hw, self.rho_max,
+                              self.medium.water_depth, self.medium.eta, 1.0 / (4.0 * np.pi * self.medium.sigma_water),
+                              derivatives)
+
+        parts = in_chunks(points, rx.size)
+        E, dE, G = parts[0] if len(parts) == 1 else (np.concatenate(a) for a in zip(*parts))
         if not derivatives:
             return E.reshape(shape + (3,))
         return E.reshape(shape + (3,)), dE.reshape(shape + (3, 3)), G.reshape(shape + (3, 2))

@@ -227,3 +227,23 @@ def test_magnitude_jacobian_matches_finite_differences_and_is_zero_at_a_null():
     # at a null of the field the magnitude has a cone: the derivative is the zero subgradient, not NaN
     e0, de0 = magnitude_jacobian(np.zeros((2, 3)), dE[:2])
     assert np.all(e0 == 0) and np.all(de0 == 0)
+
+
+def test_fast_path_split_across_threads_equals_one_thread_bit_for_bit(monkeypatch):
+    """A batch of SPLIT_MIN points or more runs as chunks in threads (every point is independent)."""
+    from shipsense import parallel
+
+    medium = Medium(SIG1, 0.04, 15.0)
+    rng = np.random.default_rng(8)
+    n = parallel.SPLIT_MIN + 101
+    s = np.column_stack([rng.uniform(-300, 300, (n, 2)), np.full(n, -15.0)])
+    q = np.column_stack([np.zeros((n, 2)), rng.uniform(-10, -1, n)])
+    p = np.column_stack([rng.uniform(-100, 100, (n, 2)), np.zeros(n)])
+    kernel = FastHED(medium)
+    out = {}
+    for threads in ("1", "3"):
+        monkeypatch.setenv("SHIPSENSE_THREADS", threads)
+        out[threads] = (kernel(s, q, p), *kernel.field_jacobian(s, q, p))
+    for a, b in zip(out["1"], out["3"]):
+        assert a.shape == b.shape
+        np.testing.assert_array_equal(a, b)

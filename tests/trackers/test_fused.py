@@ -10,7 +10,7 @@ import pytest
 from reference import kalman_reference
 from scaled import assert_cov_close, assert_loglik_close, close
 
-from shipsense import load_scenario, simulate
+from shipsense import load_scenario, parallel, simulate
 from shipsense.physics.array import SensorArray
 from shipsense.physics.magnetic import earth_field_direction
 from shipsense.trackers.filters import FILTER_NAMES, UPDATES, Belief, fused, get_filter, predict
@@ -197,7 +197,7 @@ def test_a_large_batch_split_across_threads_equals_one_thread_bit_for_bit(name, 
     """Batches of SPLIT_MIN elements or more run as chunks in threads; every element is independent."""
     model, y, x0, P0 = s0
     rng = np.random.default_rng(5)
-    B = fused.SPLIT_MIN + 37           # chunks of unequal size
+    B = parallel.SPLIT_MIN + 37        # chunks of unequal size
     xb = x0[rng.integers(0, 3, B)] + rng.normal(0, 1, (B, 7)) * np.array([5, 5, 0.2, 0.2, 0, 0, 0])
     yb = y[rng.integers(0, 3, B), :6]
     mask = rng.random(yb.shape) > 0.1
@@ -220,6 +220,9 @@ def test_a_large_batch_split_across_threads_equals_one_thread_bit_for_bit(name, 
 def test_the_thread_count_setting_is_checked(monkeypatch):
     monkeypatch.setenv("SHIPSENSE_THREADS", "two")
     with pytest.raises(ValueError, match="SHIPSENSE_THREADS"):
-        fused.threads()
+        parallel.threads()
+    monkeypatch.setenv("SHIPSENSE_THREADS", "0")
+    with pytest.raises(ValueError, match="SHIPSENSE_THREADS"):
+        parallel.threads()
     monkeypatch.setenv("SHIPSENSE_THREADS", "2")
-    assert fused.threads() == 2
+    assert parallel.threads() == 2

@@ -26,9 +26,9 @@ element alone.
 
 One step per batch element, with no Python objects, no temporaries and no
 reference counting in the loop: the per-step cost is about 20 microseconds of
-call overhead plus the arithmetic.  A batch of :data:`SPLIT_MIN` elements or
-more runs as contiguous chunks in threads (:func:`threads`; the loops release
-the GIL).  The first call compiles (``cache=True``: once per machine, the
+call overhead plus the arithmetic.  A batch of ``shipsense.parallel.SPLIT_MIN`` (512) elements
+or more runs as contiguous chunks in threads (:mod:`shipsense.parallel`; the loops
+release the GIL).  The first call compiles (``cache=True``: once per machine, the
 compiled code is kept next to this file and reused by later processes).
 """
 
@@ -41,6 +41,7 @@ from functools import lru_cache
 import numpy as np
 from numba import njit
 
+from shipsense.parallel import in_chunks
 from shipsense.physics.kernels import dipole_point, dipole_point_jacobian
 from shipsense.trackers.filters._core import (
     LOG_2PI,
@@ -801,52 +802,20 @@ def h_and_jacobian(model, x):
 _PREDICT_ROWS = frozenset({0, 1, 2, 3, 4, 6, 7, 8, 9})    # the kernels' arguments with a row per batch element
 _UPDATE_ROWS = frozenset({1, 2, 3, 4, 5, 16, 17, 18, 19, 20, 21, 22, 23, 24})
 _JACOBIAN_ROWS = frozenset({0, 2, 3})
-SPLIT_MIN = 512
-"""Batches of at least this many elements are split across threads (a chunk of 256 elements is ~250 us of work;
-handing one to a thread costs tens of microseconds)."""
-_pool = None
-
-
-def threads() -> int:
-    """Threads a large batch step is split across: ``SHIPSENSE_THREADS`` if set, else the CPUs this process may use.
-
-    The kernels release the GIL and every element is independent, so results do not depend on it.
-    """
-    import os
-
-    value = os.environ.get("SHIPSENSE_THREADS", "").strip()
-    if value:
-        try:
-            return max(1, int(value))
-        except ValueError:
-            raise ValueError(f"SHIPSENSE_THREADS must be a whole number >= 1, got {value!r}") from None
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:    # pragma: no cover - not Linux
-        return os.cpu_count() or 1
 
 
 def _split(kernel, rows, *args):
     """``kernel(*args)`` (True if every element is ok), over contiguous chunks of the batch in threads when the
-    batch is large: the arguments at positions ``rows`` that have a row per element are sliced."""
-    global _pool
+    batch is large (:func:`shipsense.parallel.in_chunks`): the arguments at positions ``rows`` that have a row per
+    element are sliced."""
     nb = args[1 if kernel is _update_kernel else 0].shape[0]
-    parts = min(threads(), nb // (SPLIT_MIN // 2)) if nb >= SPLIT_MIN else 1
-    if parts <= 1:
-        return kernel(*args)
-    if _pool is None:
-        from concurrent.futures import ThreadPoolExecutor
 
-        _pool = ThreadPoolExecutor(thread_name_prefix="shipsense-filter")
-    edges = [nb * i // parts for i in range(parts + 1)]
+    def chunk(lo, hi):
+        if lo == 0 and hi == nb:
+            return kernel(*args)
+        return kernel(*(a[lo:hi] if i in rows and a.shape[0] == nb else a for i, a in enumerate(args)))
 
-    def chunk(i):
-        lo, hi = edges[i], edges[i + 1]
-        return kernel(*(a[lo:hi] if i_arg in rows and a.shape[0] == nb else a for i_arg, a in enumerate(args)))
-
-    futures = [_pool.submit(chunk, i) for i in range(1, parts)]
-    ok = chunk(0)
-    return all([f.result() for f in futures]) and ok
+    return all(in_chunks(chunk, nb))
 
 
 # -- numpy-facing steps ---------------------------------------------------------------------------------------

@@ -1,0 +1,53 @@
+"""Threads for the compiled kernels: a large batch split into contiguous chunks, each run by a kernel that
+releases the GIL (numba ``nogil=True``).
+
+The filter steps (:mod:`shipsense.trackers.filters.fused`) and the fast HED field
+(:mod:`shipsense.physics.electric`) treat every element independently, so a split changes no result; it
+only spreads a large batch over the CPUs this process may use (``SHIPSENSE_THREADS`` overrides; 1 keeps
+every step on the calling thread).
+"""
+
+from __future__ import annotations
+
+import os
+
+SPLIT_MIN = 512
+"""Batches of at least this many elements are split (chunks of at least half of it: a chunk is then hundreds
+of microseconds of work, and handing one to a thread costs tens of microseconds)."""
+
+_pool = None
+
+
+def threads() -> int:
+    """Threads a large batch is split across: ``SHIPSENSE_THREADS`` if set, else the CPUs this process may use."""
+    value = os.environ.get("SHIPSENSE_THREADS", "").strip()
+    if value:
+        try:
+            count = int(value)
+        except ValueError:
+            count = 0
+        if count < 1:
+            raise ValueError(f"SHIPSENSE_THREADS must be a whole number >= 1, got {value!r}")
+        return count
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:    # pragma: no cover - not Linux
+        return os.cpu_count() or 1
+
+
+def in_chunks(fn, n, split_min=SPLIT_MIN):
+    """``[fn(lo, hi), ...]`` over contiguous chunks ``[lo, hi)`` covering ``range(n)``, in order: one chunk (the
+    whole range, called here) below ``split_min``, else up to :func:`threads` chunks, the first run on the
+    calling thread and the others in a shared pool."""
+    global _pool
+    parts = min(threads(), n // (split_min // 2)) if n >= split_min else 1
+    if parts <= 1:
+        return [fn(0, n)]
+    if _pool is None:
+        from concurrent.futures import ThreadPoolExecutor
+
+        _pool = ThreadPoolExecutor(thread_name_prefix="shipsense")
+    edges = [n * i // parts for i in range(parts + 1)]
+    futures = [_pool.submit(fn, edges[i], edges[i + 1]) for i in range(1, parts)]
+    first = fn(edges[0], edges[1])
+    return [first] + [f.result() for f in futures]
