@@ -205,10 +205,27 @@ class FieldModel:
         """``(h(x), H(x))`` from one pass of the kernels (the Jacobian's pass yields the readings too), for
         callers that need both at the same states (least-squares fits).  With the series electric path
         (``electric_method="series"``) the readings are :meth:`h`'s, evaluated apart."""
-        from shipsense.trackers.filters import fused
+        from shipsense.trackers.measurement import h_and_jacobian
 
-        compiled = fused.h_and_jacobian(self, x)     # magnetometers and bearings: the filters' compiled kernel
+        compiled = h_and_jacobian(self, x)     # magnetometers and bearings: the filters' compiled kernel
         return compiled if compiled is not None else self._h_and_H_numpy(x)
+
+    def kernel_spec(self):
+        """The compiled measurement kernel's description of this model (:mod:`shipsense.trackers.measurement`):
+        magnetometers of every kind and seismic bearings, without electrodes; None otherwise (the numpy path)."""
+        from shipsense.trackers.measurement import FIELD
+
+        a = self.array
+        if "electrode" in a.types or self.labels not in (("x", "y", "vx", "vy", "mx", "my", "mz"),
+                                                         ("x", "y", "vx", "vy")):
+            return None
+        code = np.array([{"vector": 0, "magnitude": 1, "tmi": 2, "bearing": 3}[k] for k in a.kinds], dtype=np.int64)
+        width = np.where(code == 0, 3, 1)
+        offs = np.concatenate([[0], np.cumsum(width)[:-1]]).astype(np.int64)
+        earth = np.zeros(3) if a.earth_direction is None else np.asarray(a.earth_direction, dtype=float)
+        return (FIELD, np.array(a.positions, dtype=float), np.array(a.orientations, dtype=float),
+                code, earth, offs, np.zeros((1, 1)), self.moment_unit / CHANNEL_UNIT["magnetometer"],
+                float(self.source_z), np.array(a.axial, dtype=np.int64))
 
     def _h_and_H_numpy(self, x):
         """:meth:`h_and_H` through the numpy kernels of :mod:`shipsense.physics` (every sensor type)."""
@@ -274,6 +291,14 @@ class LinearModel:
 
     def residual(self, a, b):
         return np.asarray(a) - np.asarray(b)
+
+    def kernel_spec(self):
+        """The compiled measurement kernel's description of ``y = C x`` (:mod:`shipsense.trackers.measurement`)."""
+        from shipsense.trackers.measurement import LINEAR
+
+        C = np.array(self.C, dtype=float)
+        return (LINEAR, np.zeros((1, 3)), np.zeros((1, 3, 3)), np.zeros(1, np.int64), np.zeros(3),
+                np.zeros(1, np.int64), C, 0.0, 0.0, np.zeros(C.shape[0], np.int64))
 
 
 def subset_array(array: SensorArray, keep) -> SensorArray:

@@ -14,6 +14,7 @@ from shipsense import load_scenario, parallel, simulate
 from shipsense.physics.array import SensorArray
 from shipsense.physics.magnetic import earth_field_direction
 from shipsense.trackers.filters import FILTER_NAMES, UPDATES, Belief, fused, get_filter, predict
+from shipsense.trackers.measurement import kernel_of
 from shipsense.trackers.models import FieldModel, LinearModel, model_from_scenario
 
 OPTIONS = {"ukf": {"alpha": 0.7, "beta": 2.0, "kappa": 1.0}, "cdkf": {"h": 1.6}, "srcdkf": {"h": 1.6},
@@ -74,8 +75,8 @@ def s0():
 
 
 def test_the_s0_model_has_a_compiled_kernel_and_electrodes_do_not(s0):
-    assert fused.kernel_of(s0[0]) is not None
-    assert fused.kernel_of(model_from_scenario("S1-P1")) is None      # electrodes: the numpy path
+    assert kernel_of(s0[0]) is not None
+    assert kernel_of(model_from_scenario("S1-P1")) is None      # electrodes: the numpy path
 
 
 @pytest.mark.parametrize("name", FILTER_NAMES)
@@ -154,7 +155,7 @@ def test_an_element_that_fails_runs_the_numpy_step_and_is_flagged(s0):
     chol = np.broadcast_to(np.linalg.cholesky(P0), (3, 7, 7)).copy()
     chol[1] = np.nan                                  # a broken element: no valid innovation covariance
     b = Belief(x0, chol, np.array([True, False, True]))
-    assert fused.update("ukf", b, y[:, 0], model, fused.kernel_of(model)) is None
+    assert fused.update("ukf", b, y[:, 0], model, kernel_of(model)) is None
     new, inn = unit.update(b, y[:, 0], model)
     ref, ref_inn = UPDATES["ukf"](b, y[:, 0], model, None)
     np.testing.assert_array_equal(new.ok, ref.ok)
@@ -167,7 +168,7 @@ def test_compiled_steps_equal_the_numpy_steps_with_bearings(name):
     """S2: two vector magnetometers and a seismic bearing (axial: averaged and differenced modulo pi)."""
     sc = load_scenario("S2")
     model = model_from_scenario(sc)
-    assert model.axial.any() and fused.kernel_of(model) is not None
+    assert model.axial.any() and kernel_of(model) is not None
     sim = simulate(sc, runs=2, seed=4)
     truth = model.to_internal(model.state_from_truth(sim.truth))
     x0 = truth[:, 0] + np.array([10.0, -10.0, 0.5, 0.5, 0, 0, 0])

@@ -157,10 +157,10 @@ def test_process_noise_is_si_so_the_internal_scale_does_not_change_the_estimates
 def test_compiled_readings_and_jacobian_equal_the_numpy_kernels(name):
     """Models with a compiled kernel (magnetometers, bearings) fit through it; the numpy kernels of physics/
     are the independent reference (and every sensor type's path)."""
-    from shipsense.trackers.filters import fused
+    from shipsense.trackers.measurement import kernel_of
 
     model = model_from_scenario(name)
-    assert fused.kernel_of(model) is not None
+    assert kernel_of(model) is not None
     rng = np.random.default_rng(6)
     x = np.zeros((4, 3, model.n))     # two batch axes
     x[..., :2] = rng.uniform(-150, 150, (4, 3, 2))

@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 
 from shipsense.trackers.filters import cdkf, ckf, ekf, fused, huber_ukf, puekf, srcdkf, ukf
 from shipsense.trackers.filters._core import Belief, Innovation, predict, safe_cholesky, tria
+from shipsense.trackers.measurement import kernel_of
 
 UPDATES: dict[str, Callable] = {
     "ekf": ekf.update, "ukf": ukf.update, "ckf": ckf.update, "cdkf": cdkf.update,
@@ -46,7 +47,7 @@ class FilterUnit:
         Compiled (:mod:`~shipsense.trackers.filters.fused`) for models with a compiled kernel, numpy otherwise.
         """
         square_root = self.name == "srcdkf"
-        if fused.kernel_of(model) is not None:
+        if kernel_of(model) is not None:
             out = fused.predict(belief, model, square_root)
             if out is not None:
                 return out
@@ -58,7 +59,7 @@ class FilterUnit:
         Compiled (:mod:`~shipsense.trackers.filters.fused`) for models with a compiled kernel; the numpy
         update of the filter's module otherwise, and for a step in which an element failed numerically.
         """
-        spec = fused.kernel_of(model)
+        spec = kernel_of(model)
         if spec is not None:
             out = fused.update(self.name, belief, y, model, spec, mask, **self.options)
             if out is not None:

@@ -3,7 +3,7 @@ r"""Compiled filter steps: each filter's predict and update fused into one numba
 Who gets which implementation.  :class:`~shipsense.trackers.filters.FilterUnit`
 (what :func:`~shipsense.trackers.driver.run_filter`, the bank and the tracker
 call) runs these compiled steps whenever the model has a compiled measurement
-kernel (:func:`kernel_of`):
+kernel (:func:`shipsense.trackers.measurement.kernel_of`):
 
 * a :class:`~shipsense.trackers.models.FieldModel` without electrodes:
   magnetometers (vector, magnitude or tmi readings; the S0 model) and seismic
@@ -35,14 +35,12 @@ compiled code is kept next to this file and reused by later processes).
 from __future__ import annotations
 
 import math
-import weakref
 from functools import lru_cache
 
 import numpy as np
 from numba import njit
 
 from shipsense.parallel import in_chunks
-from shipsense.physics.kernels import dipole_point, dipole_point_jacobian
 from shipsense.trackers.filters._core import (
     LOG_2PI,
     Belief,
@@ -54,132 +52,7 @@ from shipsense.trackers.filters._core import (
 from shipsense.trackers.filters.cdkf import H_STIRLING
 from shipsense.trackers.filters.huber_ukf import GAMMA
 from shipsense.trackers.filters.ukf import merwe_weights
-
-# -- the model's compiled measurement function ------------------------------------------------------------------
-
-FIELD, LINEAR = 0, 1
-_KERNELS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
-
-
-def kernel_of(model):
-    """The compiled measurement kernel's description of ``model`` (a tuple of arrays and numbers), or None.
-
-    None means the model has no compiled kernel and the filters run their numpy steps.
-    """
-    base = getattr(model, "_model", model)    # a stepped model measures as its base model
-    try:
-        return _KERNELS[base]
-    except (KeyError, TypeError):
-        pass
-    spec = _build_kernel(base)
-    try:
-        _KERNELS[base] = spec
-    except TypeError:
-        pass
-    return spec
-
-
-def _build_kernel(model):
-    from shipsense.trackers.models import CHANNEL_UNIT, FieldModel, LinearModel
-
-    if isinstance(model, LinearModel):
-        C = np.array(model.C, dtype=float)
-        return (LINEAR, np.zeros((1, 3)), np.zeros((1, 3, 3)), np.zeros(1, np.int64), np.zeros(3),
-                np.zeros(1, np.int64), C, 0.0, 0.0, np.zeros(C.shape[0], np.int64))
-    if not isinstance(model, FieldModel):
-        return None
-    a = model.array
-    if "electrode" in a.types or model.labels not in (("x", "y", "vx", "vy", "mx", "my", "mz"), ("x", "y", "vx", "vy")):
-        return None
-    code = np.array([{"vector": 0, "magnitude": 1, "tmi": 2, "bearing": 3}[k] for k in a.kinds], dtype=np.int64)
-    width = np.where(code == 0, 3, 1)
-    offs = np.concatenate([[0], np.cumsum(width)[:-1]]).astype(np.int64)
-    earth = np.zeros(3) if a.earth_direction is None else np.asarray(a.earth_direction, dtype=float)
-    return (FIELD, np.array(a.positions, dtype=float), np.array(a.orientations, dtype=float),
-            code, earth, offs, np.zeros((1, 1)), model.moment_unit / CHANNEL_UNIT["magnetometer"],
-            float(model.source_z), np.array(a.axial, dtype=np.int64))
-
-
-@njit(cache=True, error_model="numpy", inline="always")
-def _wrap(a):
-    """An axial angle (defined modulo pi) wrapped into [-pi/2, pi/2) (:func:`~shipsense.physics.seismic.wrap_axial`)."""
-    return a - math.pi * math.floor((a + 0.5 * math.pi) / math.pi)
-
-
-@njit(cache=True, error_model="numpy", inline="always")
-def _h(x, spec, out, B):
-    """Predicted measurements of one internal state ``x`` into ``out`` (m,); ``B`` (3,) is scratch."""
-    kind, sens, orient, code, earth, offs, C, mscale, zsrc, axial = spec
-    if kind == LINEAR:
-        for i in range(C.shape[0]):
-            acc = 0.0
-            for j in range(C.shape[1]):
-                acc += C[i, j] * x[j]
-            out[i] = acc
-        return
-    for s in range(sens.shape[0]):
-        k = offs[s]
-        c = code[s]
-        if c == 3:
-            out[k] = _wrap(math.atan2(x[1] - sens[s, 1], x[0] - sens[s, 0]))
-            continue
-        dipole_point(sens[s, 0] - x[0], sens[s, 1] - x[1], sens[s, 2] - zsrc, x[4] * mscale, x[5] * mscale,
-                     x[6] * mscale, B)
-        if c == 0:
-            for i in range(3):
-                out[k + i] = orient[s, 0, i] * B[0] + orient[s, 1, i] * B[1] + orient[s, 2, i] * B[2]
-        elif c == 1:
-            out[k] = math.sqrt(B[0] * B[0] + B[1] * B[1] + B[2] * B[2])
-        else:
-            out[k] = B[0] * earth[0] + B[1] * earth[1] + B[2] * earth[2]
-
-
-@njit(cache=True, error_model="numpy", inline="always")
-def _h_jac(x, spec, out, J, r, mom, B, dBq, dBm):
-    """``h(x)`` into ``out`` (m,) and its Jacobian into ``J`` (m, n); the last five arguments are scratch."""
-    kind, sens, orient, code, earth, offs, C, mscale, zsrc, axial = spec
-    if kind == LINEAR:
-        _h(x, spec, out, B)
-        for i in range(C.shape[0]):
-            for j in range(C.shape[1]):
-                J[i, j] = C[i, j]
-        return
-    J[:, :] = 0.0
-    for s in range(sens.shape[0]):
-        k = offs[s]
-        c = code[s]
-        if c == 3:      # d atan2(dy, dx) / d(x, y) = (-dy, dx) / (dx^2 + dy^2)
-            dx, dy = x[0] - sens[s, 0], x[1] - sens[s, 1]
-            out[k] = _wrap(math.atan2(dy, dx))
-            r2 = dx * dx + dy * dy
-            J[k, 0] = -dy / r2
-            J[k, 1] = dx / r2
-            continue
-        mom[0], mom[1], mom[2] = x[4] * mscale, x[5] * mscale, x[6] * mscale
-        r[0], r[1], r[2] = sens[s, 0] - x[0], sens[s, 1] - x[1], sens[s, 2] - zsrc
-        dipole_point_jacobian(r, mom, B, dBq, dBm)
-        if c == 0:
-            for i in range(3):
-                out[k + i] = orient[s, 0, i] * B[0] + orient[s, 1, i] * B[1] + orient[s, 2, i] * B[2]
-                for j in range(2):
-                    J[k + i, j] = (orient[s, 0, i] * dBq[0, j] + orient[s, 1, i] * dBq[1, j]
-                                   + orient[s, 2, i] * dBq[2, j])
-                for j in range(3):
-                    J[k + i, 4 + j] = mscale * (orient[s, 0, i] * dBm[0, j] + orient[s, 1, i] * dBm[1, j]
-                                                + orient[s, 2, i] * dBm[2, j])
-        else:
-            if c == 1:
-                nb = math.sqrt(B[0] * B[0] + B[1] * B[1] + B[2] * B[2])
-                d = nb if nb > 0 else 1.0
-                w0, w1, w2 = B[0] / d, B[1] / d, B[2] / d
-            else:
-                w0, w1, w2 = earth[0], earth[1], earth[2]
-            out[k] = w0 * B[0] + w1 * B[1] + w2 * B[2]
-            for j in range(2):
-                J[k, j] = w0 * dBq[0, j] + w1 * dBq[1, j] + w2 * dBq[2, j]
-            for j in range(3):
-                J[k, 4 + j] = mscale * (w0 * dBm[0, j] + w1 * dBm[1, j] + w2 * dBm[2, j])
-
+from shipsense.trackers.measurement import _h, _h_jac, _loop_jit, _wrap
 
 # -- small dense linear algebra, one element at a time ----------------------------------------------------------
 
@@ -427,18 +300,6 @@ def _difference_stats(x, L, present, spec, h, pt, Y, yhat, Y1, Y2, Pxy, B):
 
 
 UKF, CDKF, HUBER, EKF, PUEKF, SRCDKF = range(6)
-
-# The loops over the batch are compiled without numba's reference counting (``_nrt=False``; they allocate
-# nothing: the kernels that call them allocate the scratch).  With it, every array handed to an inlined helper,
-# unpacked from a tuple or sliced as a view costs an atomic increment and decrement that numba does not always
-# prune in a loop with branches: measured, 8x the cost of the measurement function and about three quarters
-# of a UKF update at batch 2400.  ``_nrt`` is a numba option that is not part of its documented API; a numba
-# without it gets the counted loops (same results, slower).
-try:
-    _loop_jit = njit(cache=True, error_model="numpy", nogil=True, _nrt=False)
-except (KeyError, TypeError, ValueError):      # pragma: no cover - a numba without the option
-    _loop_jit = njit(cache=True, error_model="numpy", nogil=True)
-
 
 @njit(cache=True, error_model="numpy", inline="always")
 def _backward(L, w):
@@ -755,53 +616,10 @@ def _predict_loop(X, P_in, A, Q, sqQ, square_root, mean_out, P_out, L_out, ok_ou
             ok_out[b] = _chol(Pout, L_out[b])
 
 
-@njit(cache=True, error_model="numpy", nogil=True)
-def _jacobian_kernel(X, spec, out, J):
-    """``h`` (B, m) and its Jacobian (B, m, n) of every internal state in ``X`` (B, n) into ``out`` and ``J``."""
-    n, m = X.shape[1], out.shape[1]
-    _jacobian_loop(X, spec, out, J, np.empty(n), np.empty(m), np.empty((m, n)), np.empty(3), np.empty(3),
-                   np.empty(3), np.empty((3, 3)), np.empty((3, 3)))
-    return True
-
-
-@_loop_jit
-def _jacobian_loop(X, spec, out, J, x, yhat, H, r3, m3, B, dBq, dBm):
-    nb, n = X.shape
-    m = out.shape[1]
-    for b in range(nb):
-        for a in range(n):
-            x[a] = X[b, a]
-        _h_jac(x, spec, yhat, H, r3, m3, B, dBq, dBm)
-        for i in range(m):
-            out[b, i] = yhat[i]
-            for a in range(n):
-                J[b, i, a] = H[i, a]
-
-
-def h_and_jacobian(model, x):
-    """``(h(x), dh/dx)`` of internal states ``x`` (..., n) through the compiled measurement kernel -- the
-    readings (..., m) and the Jacobian (..., m, n) in internal units, as
-    :meth:`~shipsense.trackers.models.FieldModel.h_and_H` -- or None if the model has no compiled kernel."""
-    spec = kernel_of(model)
-    if spec is None or spec[0] != FIELD:
-        return None
-    x = np.asarray(x, dtype=float)
-    batch, n = x.shape[:-1], x.shape[-1]
-    m = model.m
-    X = np.ascontiguousarray(x.reshape(-1, n))
-    if not X.flags.writeable:
-        X = X.copy()
-    out = np.empty((X.shape[0], m))
-    J = np.empty((X.shape[0], m, n))
-    _split(_jacobian_kernel, _JACOBIAN_ROWS, X, spec, out, J)
-    return out.reshape(batch + (m,)), J.reshape(batch + (m, n))
-
-
 # -- threads --------------------------------------------------------------------------------------------------
 
 _PREDICT_ROWS = frozenset({0, 1, 2, 3, 4, 6, 7, 8, 9})    # the kernels' arguments with a row per batch element
 _UPDATE_ROWS = frozenset({1, 2, 3, 4, 5, 16, 17, 18, 19, 20, 21, 22, 23, 24})
-_JACOBIAN_ROWS = frozenset({0, 2, 3})
 
 
 def _split(kernel, rows, *args):

@@ -1,0 +1,177 @@
+"""The models' compiled measurement functions: readings and Jacobians of one state at a time, for numba loops.
+
+A model with a compiled kernel describes itself to it by ``kernel_spec()`` (a tuple of arrays and numbers:
+:meth:`~shipsense.trackers.models.FieldModel.kernel_spec` for magnetometers and seismic bearings without
+electrodes, :meth:`~shipsense.trackers.models.LinearModel.kernel_spec`); :func:`kernel_of` caches it per model.
+The filters' compiled steps (:mod:`shipsense.trackers.filters.fused`) call :func:`_h` and :func:`_h_jac` inside
+their loops; :func:`h_and_jacobian` is the same kernel over a batch of states (what
+:meth:`~shipsense.trackers.models.FieldModel.h_and_H` runs for those models).  The numpy kernels of
+:mod:`shipsense.physics` are the independent reference (tests/trackers/test_models.py, test_fused.py).
+"""
+
+from __future__ import annotations
+
+import math
+import weakref
+
+import numpy as np
+from numba import njit
+
+from shipsense.parallel import in_chunks
+from shipsense.physics.kernels import dipole_point, dipole_point_jacobian
+
+FIELD, LINEAR = 0, 1
+_KERNELS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+# The loops over the batch are compiled without numba's reference counting (``_nrt=False``; they allocate
+# nothing: the kernels that call them allocate the scratch).  With it, every array handed to an inlined helper,
+# unpacked from a tuple or sliced as a view costs an atomic increment and decrement that numba does not always
+# prune in a loop with branches: measured, 8x the cost of the measurement function and about three quarters
+# of a UKF update at batch 2400.  ``_nrt`` is a numba option that is not part of its documented API; a numba
+# without it gets the counted loops (same results, slower).
+try:
+    _loop_jit = njit(cache=True, error_model="numpy", nogil=True, _nrt=False)
+except (KeyError, TypeError, ValueError):      # pragma: no cover - a numba without the option
+    _loop_jit = njit(cache=True, error_model="numpy", nogil=True)
+
+
+def kernel_of(model):
+    """The compiled measurement kernel's description of ``model`` (its ``kernel_spec()``), or None.
+
+    None means the model has no compiled kernel and the filters run their numpy steps.
+    """
+    base = getattr(model, "_model", model)    # a stepped model measures as its base model
+    try:
+        return _KERNELS[base]
+    except (KeyError, TypeError):
+        pass
+    describe = getattr(base, "kernel_spec", None)
+    spec = describe() if describe is not None else None
+    try:
+        _KERNELS[base] = spec
+    except TypeError:
+        pass
+    return spec
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _wrap(a):
+    """An axial angle (defined modulo pi) wrapped into [-pi/2, pi/2) (:func:`~shipsense.physics.seismic.wrap_axial`)."""
+    return a - math.pi * math.floor((a + 0.5 * math.pi) / math.pi)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _h(x, spec, out, B):
+    """Predicted measurements of one internal state ``x`` into ``out`` (m,); ``B`` (3,) is scratch."""
+    kind, sens, orient, code, earth, offs, C, mscale, zsrc, axial = spec
+    if kind == LINEAR:
+        for i in range(C.shape[0]):
+            acc = 0.0
+            for j in range(C.shape[1]):
+                acc += C[i, j] * x[j]
+            out[i] = acc
+        return
+    for s in range(sens.shape[0]):
+        k = offs[s]
+        c = code[s]
+        if c == 3:
+            out[k] = _wrap(math.atan2(x[1] - sens[s, 1], x[0] - sens[s, 0]))
+            continue
+        dipole_point(sens[s, 0] - x[0], sens[s, 1] - x[1], sens[s, 2] - zsrc, x[4] * mscale, x[5] * mscale,
+                     x[6] * mscale, B)
+        if c == 0:
+            for i in range(3):
+                out[k + i] = orient[s, 0, i] * B[0] + orient[s, 1, i] * B[1] + orient[s, 2, i] * B[2]
+        elif c == 1:
+            out[k] = math.sqrt(B[0] * B[0] + B[1] * B[1] + B[2] * B[2])
+        else:
+            out[k] = B[0] * earth[0] + B[1] * earth[1] + B[2] * earth[2]
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _h_jac(x, spec, out, J, r, mom, B, dBq, dBm):
+    """``h(x)`` into ``out`` (m,) and its Jacobian into ``J`` (m, n); the last five arguments are scratch."""
+    kind, sens, orient, code, earth, offs, C, mscale, zsrc, axial = spec
+    if kind == LINEAR:
+        _h(x, spec, out, B)
+        for i in range(C.shape[0]):
+            for j in range(C.shape[1]):
+                J[i, j] = C[i, j]
+        return
+    J[:, :] = 0.0
+    for s in range(sens.shape[0]):
+        k = offs[s]
+        c = code[s]
+        if c == 3:      # d atan2(dy, dx) / d(x, y) = (-dy, dx) / (dx^2 + dy^2)
+            dx, dy = x[0] - sens[s, 0], x[1] - sens[s, 1]
+            out[k] = _wrap(math.atan2(dy, dx))
+            r2 = dx * dx + dy * dy
+            J[k, 0] = -dy / r2
+            J[k, 1] = dx / r2
+            continue
+        mom[0], mom[1], mom[2] = x[4] * mscale, x[5] * mscale, x[6] * mscale
+        r[0], r[1], r[2] = sens[s, 0] - x[0], sens[s, 1] - x[1], sens[s, 2] - zsrc
+        dipole_point_jacobian(r, mom, B, dBq, dBm)
+        if c == 0:
+            for i in range(3):
+                out[k + i] = orient[s, 0, i] * B[0] + orient[s, 1, i] * B[1] + orient[s, 2, i] * B[2]
+                for j in range(2):
+                    J[k + i, j] = (orient[s, 0, i] * dBq[0, j] + orient[s, 1, i] * dBq[1, j]
+                                   + orient[s, 2, i] * dBq[2, j])
+                for j in range(3):
+                    J[k + i, 4 + j] = mscale * (orient[s, 0, i] * dBm[0, j] + orient[s, 1, i] * dBm[1, j]
+                                                + orient[s, 2, i] * dBm[2, j])
+        else:
+            if c == 1:
+                nb = math.sqrt(B[0] * B[0] + B[1] * B[1] + B[2] * B[2])
+                d = nb if nb > 0 else 1.0
+                w0, w1, w2 = B[0] / d, B[1] / d, B[2] / d
+            else:
+                w0, w1, w2 = earth[0], earth[1], earth[2]
+            out[k] = w0 * B[0] + w1 * B[1] + w2 * B[2]
+            for j in range(2):
+                J[k, j] = w0 * dBq[0, j] + w1 * dBq[1, j] + w2 * dBq[2, j]
+            for j in range(3):
+                J[k, 4 + j] = mscale * (w0 * dBm[0, j] + w1 * dBm[1, j] + w2 * dBm[2, j])
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def _jacobian_kernel(X, spec, out, J):
+    """``h`` (B, m) and its Jacobian (B, m, n) of every internal state in ``X`` (B, n) into ``out`` and ``J``."""
+    n, m = X.shape[1], out.shape[1]
+    _jacobian_loop(X, spec, out, J, np.empty(n), np.empty(m), np.empty((m, n)), np.empty(3), np.empty(3),
+                   np.empty(3), np.empty((3, 3)), np.empty((3, 3)))
+    return True
+
+
+@_loop_jit
+def _jacobian_loop(X, spec, out, J, x, yhat, H, r3, m3, B, dBq, dBm):
+    nb, n = X.shape
+    m = out.shape[1]
+    for b in range(nb):
+        for a in range(n):
+            x[a] = X[b, a]
+        _h_jac(x, spec, yhat, H, r3, m3, B, dBq, dBm)
+        for i in range(m):
+            out[b, i] = yhat[i]
+            for a in range(n):
+                J[b, i, a] = H[i, a]
+
+
+def h_and_jacobian(model, x):
+    """``(h(x), dh/dx)`` of internal states ``x`` (..., n) through the compiled measurement kernel -- the
+    readings (..., m) and the Jacobian (..., m, n) in internal units, as
+    :meth:`~shipsense.trackers.models.FieldModel.h_and_H` -- or None if the model has no compiled kernel."""
+    spec = kernel_of(model)
+    if spec is None or spec[0] != FIELD:
+        return None
+    x = np.asarray(x, dtype=float)
+    batch, n = x.shape[:-1], x.shape[-1]
+    m = model.m
+    X = np.ascontiguousarray(x.reshape(-1, n))
+    if not X.flags.writeable:
+        X = X.copy()
+    out = np.empty((X.shape[0], m))
+    J = np.empty((X.shape[0], m, n))
+    in_chunks(lambda lo, hi: _jacobian_kernel(X[lo:hi], spec, out[lo:hi], J[lo:hi]), X.shape[0])
+    return out.reshape(batch + (m,)), J.reshape(batch + (m, n))
