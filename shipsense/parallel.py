@@ -43,11 +43,11 @@ def in_chunks(fn, n, split_min=SPLIT_MIN):
     parts = min(threads(), n // (split_min // 2)) if n >= split_min else 1
     if parts <= 1:
         return [fn(0, n)]
-    if _pool is None:
+    if _pool is None or _pool[0] != os.getpid():     # a forked child has the pool object but not its threads
         from concurrent.futures import ThreadPoolExecutor
 
-        _pool = ThreadPoolExecutor(thread_name_prefix="shipsense")
+        _pool = (os.getpid(), ThreadPoolExecutor(thread_name_prefix="shipsense"))
     edges = [n * i // parts for i in range(parts + 1)]
-    futures = [_pool.submit(fn, edges[i], edges[i + 1]) for i in range(1, parts)]
+    futures = [_pool[1].submit(fn, edges[i], edges[i + 1]) for i in range(1, parts)]
     first = fn(edges[0], edges[1])
     return [first] + [f.result() for f in futures]
