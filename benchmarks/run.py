@@ -32,6 +32,7 @@ import gymnasium as gym
 import numpy as np
 
 import shipsense
+from shipsense import parallel
 from shipsense.trackers.filters import FILTER_NAMES, get_filter
 
 
@@ -39,7 +40,7 @@ def filter_table(steps, batches=(1, 24, 2400)):
     base = filter_bench.time_filterpy(24, steps)
     print(f"1. Filter steps, S0 model (n=7, m=3): microseconds per filter-step (speed-up over FilterPy's UKF "
           f"loop, {base:.1f} us per filter-step here)")
-    print(f"   threads for a batch >= 512: {shipsense.trackers.filters.fused.threads()}\n")
+    print(f"   threads for a batch >= {parallel.SPLIT_MIN}: {parallel.threads()}\n")
     for name in FILTER_NAMES:      # compile or load the compiled steps before timing
         filter_bench.time_batched(get_filter(name), 2, 1, repeats=1)
     cols = [f"B={b}" for b in batches] + [f"B={batches[-1]}, 1 thread"]
