@@ -13,9 +13,11 @@ checked by a chi-square goodness-of-fit test (:func:`chi2_limit`).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from shipsense.trackers.batchfit import fit_passages, powers
 
@@ -186,30 +188,92 @@ def fit_end(model, measurements, k0, window, through_peak=None):
 def _grid_fit_masked(model, yw_all, offset, G, std, max_bytes, clamp):
     """Moment-eliminated chi-square (R, C) and moments (R, C, P) of every candidate, general case.
 
-    Handles bearing channels (non-zero offsets) and missing samples (each
-    passage its own masked design); passages in chunks so that the
-    (chunk, C, W', m, P) arrays stay near ``max_bytes``.
+    Handles bearing channels (non-zero offsets) and missing samples (each passage its own masked design): for
+    every passage and candidate, the least-squares parameters of ``G`` against the whitened residuals of the
+    samples present (:func:`_grid_fit_kernel`, compiled; the candidates in chunks on the CPUs).  ``max_bytes``
+    is unused (the compiled fit keeps nothing per candidate; the argument stays for callers).
     """
-    R, Wn, m = yw_all.shape
+    from shipsense.parallel import in_chunks
+
+    R = yw_all.shape[0]
     C, P = G.shape[0], G.shape[-1]
     chi2 = np.empty((R, C))
     params = np.empty((R, C, P))
-    chunk = max(1, int(max_bytes // (8 * C * Wn * m * max(P, 1) * 3)))
-    for lo in range(0, R, chunk):
-        yw = yw_all[lo:lo + chunk]
-        present = np.isfinite(yw)
-        d = model.residual(np.where(present, yw, 0.0)[:, None], offset[None]) / std      # (r, C, W', m)
-        d = np.where(present[:, None], d, 0.0)
-        Gm = G[None] * present[:, None, ..., None]                                        # (r, C, W', m, P)
-        A = np.einsum("rcwmp,rcwmq->rcpq", Gm, Gm) + 1e-9 * np.eye(P)
-        b = np.einsum("rcwmp,rcwm->rcp", Gm, d)
-        par = np.linalg.solve(A, b[..., None])[..., 0]
-        if clamp:
-            par[..., -1] = np.maximum(par[..., -1], 0.0)
-        fit = d - np.einsum("rcwmp,rcp->rcwm", Gm, par)
-        chi2[lo:lo + chunk] = np.sum(fit * fit, axis=(-1, -2))
-        params[lo:lo + chunk] = par
+    yw = np.ascontiguousarray(yw_all, dtype=float)
+    args = (yw, np.ascontiguousarray(offset, dtype=float), np.ascontiguousarray(G, dtype=float),
+            np.ascontiguousarray(std, dtype=float), np.ascontiguousarray(model.axial, dtype=np.bool_), bool(clamp),
+            chi2, params)
+    in_chunks(lambda lo, hi: _grid_fit_kernel(*args, lo, hi), C, split_min=64)
     return chi2, params
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def _grid_fit_kernel(yw, offset, G, std, axial, clamp, chi2, params, c_lo, c_hi):
+    """:func:`_grid_fit_masked` for candidates ``c_lo:c_hi``: per passage ``r`` and candidate ``c``, with the
+    whitened residuals ``d = (y - offset) / std`` of the samples present (bearings wrapped modulo pi), solve
+    ``(G^T G + 1e-9 I) par = G^T d`` (Gaussian elimination with partial pivoting, as LAPACK's ``gesv``), clamp
+    the last parameter at 0 if asked, and sum the squared fit residuals."""
+    R, W, m = yw.shape
+    P = G.shape[3]
+    A = np.empty((P, P))
+    b = np.empty(P)
+    d = np.empty((W, m))
+    for r in range(R):
+        for c in range(c_lo, c_hi):
+            for p in range(P):
+                b[p] = 0.0
+                for q in range(P):
+                    A[p, q] = 0.0
+            for w in range(W):
+                for j in range(m):
+                    y = yw[r, w, j]
+                    if not math.isfinite(y):
+                        d[w, j] = 0.0
+                        continue
+                    e = y - offset[c, w, j]
+                    if axial[j]:
+                        e = e - math.pi * math.floor((e + 0.5 * math.pi) / math.pi)
+                    e = e / std[j]
+                    d[w, j] = e
+                    for p in range(P):
+                        g = G[c, w, j, p]
+                        b[p] += g * e
+                        for q in range(p + 1):
+                            A[p, q] += g * G[c, w, j, q]
+            for p in range(P):
+                A[p, p] += 1e-9
+                for q in range(p):
+                    A[q, p] = A[p, q]
+            for k in range(P):              # Gaussian elimination with partial pivoting
+                piv = k
+                for i in range(k + 1, P):
+                    if abs(A[i, k]) > abs(A[piv, k]):
+                        piv = i
+                if piv != k:
+                    for q in range(P):
+                        A[k, q], A[piv, q] = A[piv, q], A[k, q]
+                    b[k], b[piv] = b[piv], b[k]
+                for i in range(k + 1, P):
+                    f = A[i, k] / A[k, k]
+                    for q in range(k, P):
+                        A[i, q] -= f * A[k, q]
+                    b[i] -= f * b[k]
+            for k in range(P - 1, -1, -1):
+                t = b[k]
+                for q in range(k + 1, P):
+                    t -= A[k, q] * params[r, c, q]
+                params[r, c, k] = t / A[k, k]
+            if clamp and params[r, c, P - 1] < 0.0:
+                params[r, c, P - 1] = 0.0
+            s = 0.0
+            for w in range(W):
+                for j in range(m):
+                    if math.isfinite(yw[r, w, j]):
+                        f = d[w, j]
+                        for p in range(P):
+                            f -= G[c, w, j, p] * params[r, c, p]
+                        s += f * f
+            chi2[r, c] = s
 
 
 def depth_prior(model, z_std, source_z=None):

@@ -290,3 +290,32 @@ def test_distinct_rows_is_the_greedy_selection_of_every_row():
             assert idx[r].tolist() == _distinct(chi2[r], pos[r], M, 15.0)
     assert idx[0].tolist() == [5] * M and found[0].tolist() == [True, False, False, False]
     assert np.all(found.sum(axis=1) == np.array([len(set(i)) for i in idx.tolist()]))
+
+
+def test_the_compiled_masked_grid_fit_equals_a_least_squares_solve_per_candidate():
+    """Bearings (wrapped residuals against non-zero offsets), missing samples and the clamp, candidate by
+    candidate against numpy's solve of the masked normal equations."""
+    from shipsense.trackers.initialiser import _grid_fit_masked
+    from shipsense.trackers.models import model_from_scenario
+
+    model = model_from_scenario("S2")
+    ax = model.axial
+    rng = np.random.default_rng(2)
+    R, C, W, P = 2, 150, 12, 3           # 150 candidates: chunks in threads
+    yw = rng.normal(size=(R, W, model.m))
+    yw[..., ax] = rng.uniform(-1.5, 1.5, (R, W, ax.sum()))
+    yw[rng.random(yw.shape) < 0.2] = np.nan
+    offset = rng.uniform(-1.5, 1.5, (C, W, model.m)) * ax
+    G = rng.normal(size=(C, W, model.m, P)) * ~ax[:, None]
+    std = np.sqrt(model.R)
+    chi2, params = _grid_fit_masked(model, yw, offset, G, std, 512e6, True)
+    for r in range(R):
+        present = np.isfinite(yw[r])
+        for c in range(0, C, 7):
+            d = model.residual(np.where(present, yw[r], 0.0), offset[c]) / std
+            d = np.where(present, d, 0.0).ravel()
+            g = (G[c] * present[..., None]).reshape(-1, P)
+            par = np.linalg.solve(g.T @ g + 1e-9 * np.eye(P), g.T @ d)
+            par[-1] = max(par[-1], 0.0)
+            np.testing.assert_allclose(params[r, c], par, rtol=1e-10, atol=1e-12)
+            np.testing.assert_allclose(chi2[r, c], np.sum((d - g @ par) ** 2), rtol=1e-10)
