@@ -185,22 +185,23 @@ def fit_end(model, measurements, k0, window, through_peak=None):
     return np.where(past.any(axis=1), np.argmax(past, axis=1), end)
 
 
-def _grid_fit_masked(model, yw_all, offset, G, std, max_bytes, clamp):
+def _grid_fit_masked(model, yw_all, offset, basis, std, max_bytes, clamp):
     """Moment-eliminated chi-square (R, C) and moments (R, C, P) of every candidate, general case.
 
     Handles bearing channels (non-zero offsets) and missing samples (each passage its own masked design): for
-    every passage and candidate, the least-squares parameters of ``G`` against the whitened residuals of the
-    samples present (:func:`_grid_fit_kernel`, compiled; the candidates in chunks on the CPUs).  ``max_bytes``
-    is unused (the compiled fit keeps nothing per candidate; the argument stays for callers).
+    every passage and candidate, the least-squares parameters of the whitened basis ``G = basis / std``
+    against the whitened residuals of the samples present (:func:`_grid_fit_kernel`, compiled; the
+    candidates in chunks on the CPUs).  ``max_bytes`` is unused (the compiled fit keeps nothing per
+    candidate; the argument stays for callers).
     """
     from shipsense.parallel import in_chunks
 
     R = yw_all.shape[0]
-    C, P = G.shape[0], G.shape[-1]
+    C, P = basis.shape[0], basis.shape[-1]
     chi2 = np.empty((R, C))
     params = np.empty((R, C, P))
     yw = np.ascontiguousarray(yw_all, dtype=float)
-    args = (yw, np.ascontiguousarray(offset, dtype=float), np.ascontiguousarray(G, dtype=float),
+    args = (yw, np.ascontiguousarray(offset, dtype=float), np.ascontiguousarray(basis, dtype=float),
             np.ascontiguousarray(std, dtype=float), np.ascontiguousarray(model.axial, dtype=np.bool_), bool(clamp),
             chi2, params)
     in_chunks(lambda lo, hi: _grid_fit_kernel(*args, lo, hi), C, split_min=64)
@@ -208,16 +209,18 @@ def _grid_fit_masked(model, yw_all, offset, G, std, max_bytes, clamp):
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
-def _grid_fit_kernel(yw, offset, G, std, axial, clamp, chi2, params, c_lo, c_hi):
+def _grid_fit_kernel(yw, offset, basis, std, axial, clamp, chi2, params, c_lo, c_hi):
     """:func:`_grid_fit_masked` for candidates ``c_lo:c_hi``: per passage ``r`` and candidate ``c``, with the
-    whitened residuals ``d = (y - offset) / std`` of the samples present (bearings wrapped modulo pi), solve
-    ``(G^T G + 1e-9 I) par = G^T d`` (Gaussian elimination with partial pivoting, as LAPACK's ``gesv``), clamp
-    the last parameter at 0 if asked, and sum the squared fit residuals."""
+    whitened residuals ``d = (y - offset) / std`` of the samples present (bearings wrapped modulo pi) and the
+    whitened basis ``G = basis / std``, solve ``(G^T G + 1e-9 I) par = G^T d`` (Gaussian elimination with
+    partial pivoting, as LAPACK's ``gesv``), clamp the last parameter at 0 if asked, and sum the squared fit
+    residuals."""
     R, W, m = yw.shape
-    P = G.shape[3]
+    P = basis.shape[3]
     A = np.empty((P, P))
     b = np.empty(P)
     d = np.empty((W, m))
+    G = np.empty((W, m, P))     # the candidate's whitened basis
     for r in range(R):
         for c in range(c_lo, c_hi):
             for p in range(P):
@@ -236,10 +239,12 @@ def _grid_fit_kernel(yw, offset, G, std, axial, clamp, chi2, params, c_lo, c_hi)
                     e = e / std[j]
                     d[w, j] = e
                     for p in range(P):
-                        g = G[c, w, j, p]
+                        G[w, j, p] = basis[c, w, j, p] / std[j]
+                    for p in range(P):
+                        g = G[w, j, p]
                         b[p] += g * e
                         for q in range(p + 1):
-                            A[p, q] += g * G[c, w, j, q]
+                            A[p, q] += g * G[w, j, q]
             for p in range(P):
                 A[p, p] += 1e-9
                 for q in range(p):
@@ -271,7 +276,7 @@ def _grid_fit_kernel(yw, offset, G, std, axial, clamp, chi2, params, c_lo, c_hi)
                     if math.isfinite(yw[r, w, j]):
                         f = d[w, j]
                         for p in range(P):
-                            f -= G[c, w, j, p] * params[r, c, p]
+                            f -= G[w, j, p] * params[r, c, p]
                         s += f * f
             chi2[r, c] = s
 
@@ -417,11 +422,11 @@ def grid_search(model, yw, grid, window, stride, max_bytes=512e6):
     R, Wn, m = yw.shape
     std = np.sqrt(model.R)
     offset, basis = linear_basis(model, grid, window, stride)                             # (C, W', m[, P])
-    G = basis / std[:, None]                                                              # (C, W', m, P)
-    C, P = G.shape[0], G.shape[-1]
     clamp = "p" in model.labels                                   # the envelope needs p >= 0
     if np.any(offset) or not np.isfinite(yw).all():
-        return _grid_fit_masked(model, yw, offset, G, std, max_bytes, clamp)
+        return _grid_fit_masked(model, yw, offset, basis, std, max_bytes, clamp)
+    G = basis / std[:, None]                                                              # (C, W', m, P)
+    C, P = G.shape[0], G.shape[-1]
     # no offset (no bearing channels) and nothing missing: the whitened data d are the same for every
     # candidate, so b = G^T d is one matmul and chi2 = |d|^2 - 2 par.b + par^T A par (no fit formed)
     Gf = G.reshape(C, Wn * m, P)                                                          # (C, W'm, P)

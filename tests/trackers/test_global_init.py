@@ -306,9 +306,10 @@ def test_the_compiled_masked_grid_fit_equals_a_least_squares_solve_per_candidate
     yw[..., ax] = rng.uniform(-1.5, 1.5, (R, W, ax.sum()))
     yw[rng.random(yw.shape) < 0.2] = np.nan
     offset = rng.uniform(-1.5, 1.5, (C, W, model.m)) * ax
-    G = rng.normal(size=(C, W, model.m, P)) * ~ax[:, None]
+    basis = rng.normal(size=(C, W, model.m, P)) * ~ax[:, None]
     std = np.sqrt(model.R)
-    chi2, params = _grid_fit_masked(model, yw, offset, G, std, 512e6, True)
+    G = basis / std[:, None]
+    chi2, params = _grid_fit_masked(model, yw, offset, basis, std, 512e6, True)
     for r in range(R):
         present = np.isfinite(yw[r])
         for c in range(0, C, 7):
