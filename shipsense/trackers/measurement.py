@@ -4,8 +4,8 @@ A model with a compiled kernel describes itself to it by ``kernel_spec()`` (a tu
 :meth:`~shipsense.trackers.models.FieldModel.kernel_spec` for magnetometers and seismic bearings without
 electrodes, :meth:`~shipsense.trackers.models.LinearModel.kernel_spec`); :func:`kernel_of` caches it per model.
 The filters' compiled steps (:mod:`shipsense.trackers.filters.fused`) call :func:`_h` and :func:`_h_jac` inside
-their loops; :func:`h_and_jacobian` is the same kernel over a batch of states (what
-:meth:`~shipsense.trackers.models.FieldModel.h_and_H` runs for those models).  The numpy kernels of
+their loops; :func:`readings` and :func:`h_and_jacobian` are the same kernel over a batch of states (what
+:meth:`~shipsense.trackers.models.FieldModel.h` and ``h_and_H`` run for those models).  The numpy kernels of
 :mod:`shipsense.physics` are the independent reference (tests/trackers/test_models.py, test_fused.py).
 """
 
@@ -175,3 +175,40 @@ def h_and_jacobian(model, x):
     J = np.empty((X.shape[0], m, n))
     in_chunks(lambda lo, hi: _jacobian_kernel(X[lo:hi], spec, out[lo:hi], J[lo:hi]), X.shape[0])
     return out.reshape(batch + (m,)), J.reshape(batch + (m, n))
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def _readings_kernel(X, spec, out):
+    """``h`` (B, m) of every internal state in ``X`` (B, n) into ``out``."""
+    _readings_loop(X, spec, out, np.empty(X.shape[1]), np.empty(out.shape[1]), np.empty(3))
+    return True
+
+
+@_loop_jit
+def _readings_loop(X, spec, out, x, yhat, B):
+    nb, n = X.shape
+    m = out.shape[1]
+    for b in range(nb):
+        for a in range(n):
+            x[a] = X[b, a]
+        _h(x, spec, yhat, B)
+        for i in range(m):
+            out[b, i] = yhat[i]
+
+
+def readings(model, x):
+    """``h(x)`` of real internal states ``x`` (..., n) through the compiled measurement kernel (..., m), as
+    :meth:`~shipsense.trackers.models.FieldModel.h`; None if the model has no compiled kernel or ``x`` is
+    complex (complex-step derivatives run the numpy kernels)."""
+    spec = kernel_of(model)
+    x = np.asarray(x)
+    if spec is None or spec[0] != FIELD or x.dtype.kind not in "fiub":
+        return None
+    x = x.astype(float, copy=False)
+    batch, n = x.shape[:-1], x.shape[-1]
+    X = np.ascontiguousarray(x.reshape(-1, n))
+    if not X.flags.writeable:
+        X = X.copy()
+    out = np.empty((X.shape[0], model.m))
+    in_chunks(lambda lo, hi: _readings_kernel(X[lo:hi], spec, out[lo:hi]), X.shape[0])
+    return out.reshape(batch + (model.m,))

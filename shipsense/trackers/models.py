@@ -190,7 +190,16 @@ class FieldModel:
         electric dipole (vector, magnitude and tmi fields; the field and its
         envelope) or independent of them (bearings, in radians already), so
         the channel units are folded into the sources: no pass over the output.
+        Magnetometer and bearing models of real states run the compiled kernel
+        (:func:`shipsense.trackers.measurement.readings`); the rest the numpy kernels.
         """
+        from shipsense.trackers.measurement import readings
+
+        compiled = readings(self, x)
+        return compiled if compiled is not None else self._h_numpy(x)
+
+    def _h_numpy(self, x):
+        """:meth:`h` through the numpy kernels of :mod:`shipsense.physics` (every sensor type, complex states)."""
         x = np.asarray(x)
         x = x.astype(np.result_type(x, float), copy=False)
         q, moment, dipole = self._source(x, self.moment_unit / CHANNEL_UNIT["magnetometer"],
