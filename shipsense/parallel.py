@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import os
 
+from shipsense.errors import ShipsenseError
+
 SPLIT_MIN = 512
 """Batches of at least this many elements are split (chunks of at least half of it: a chunk is then hundreds
 of microseconds of work, and handing one to a thread costs tens of microseconds)."""
@@ -27,7 +29,8 @@ def threads() -> int:
         except ValueError:
             count = 0
         if count < 1:
-            raise ValueError(f"SHIPSENSE_THREADS must be a whole number >= 1, got {value!r}")
+            raise ShipsenseError(f"the environment variable SHIPSENSE_THREADS must be a whole number >= 1, "
+                                 f"got {value!r}")
         return count
     try:
         return len(os.sched_getaffinity(0))

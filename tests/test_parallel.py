@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from shipsense import parallel
+from shipsense.errors import ShipsenseError
 
 
 @pytest.mark.parametrize(("n", "threads", "parts"), [(10, "4", 1), (parallel.SPLIT_MIN, "4", 2),
@@ -42,3 +43,15 @@ def test_a_forked_child_gets_its_own_pool(monkeypatch):
         os.waitpid(pid, 0)
         pytest.fail("the forked child hung on its parent's thread pool")
     assert os.waitstatus_to_exitcode(status) == 0
+
+
+def test_the_thread_count_setting_is_checked(monkeypatch):
+    """A bad value is input the user can fix (the command line: one line, exit 2)."""
+    monkeypatch.setenv("SHIPSENSE_THREADS", "two")
+    with pytest.raises(ShipsenseError, match="SHIPSENSE_THREADS"):
+        parallel.threads()
+    monkeypatch.setenv("SHIPSENSE_THREADS", "0")
+    with pytest.raises(ShipsenseError, match="SHIPSENSE_THREADS"):
+        parallel.threads()
+    monkeypatch.setenv("SHIPSENSE_THREADS", "2")
+    assert parallel.threads() == 2

@@ -216,14 +216,3 @@ def test_a_large_batch_split_across_threads_equals_one_thread_bit_for_bit(name, 
         runs[threads] = fused_run(name, model, yb, xb, P0, {}, mask)
     for a, b in zip(runs["1"], runs["3"]):
         np.testing.assert_array_equal(a, b)
-
-
-def test_the_thread_count_setting_is_checked(monkeypatch):
-    monkeypatch.setenv("SHIPSENSE_THREADS", "two")
-    with pytest.raises(ValueError, match="SHIPSENSE_THREADS"):
-        parallel.threads()
-    monkeypatch.setenv("SHIPSENSE_THREADS", "0")
-    with pytest.raises(ValueError, match="SHIPSENSE_THREADS"):
-        parallel.threads()
-    monkeypatch.setenv("SHIPSENSE_THREADS", "2")
-    assert parallel.threads() == 2
