@@ -90,15 +90,7 @@ def main(argv=None):
     print(f"{'CartPole-v1 (single)':<44}{cart:>12,.0f}")
     print(f"{f'CartPole-v1 (native vector, {n} envs)':<44}{cart_vec:>12,.0f}")
     if not args.skip_passage:
-        env = gym.make("shipsense/Passage-v0", **kwargs)
-        single = single_rate(env, args.steps, np.ones(3, dtype=np.int8))
-        venv = gym.make_vec("shipsense/Passage-v0", num_envs=n, vectorization_mode="vector_entry_point", **kwargs)
-        vec = vector_rate(venv, max(args.steps // 10, 20), np.ones((n, 3), dtype=np.int8))
-        env1 = gym.make(args.v1_id)
-        full = int(env1.unwrapped.core.full[0])
-        single1 = single_rate(env1, args.steps, full)
-        venv1 = gym.make_vec(args.v1_id, num_envs=n, vectorization_mode="vector_entry_point")
-        vec1 = vector_rate(venv1, max(args.steps // 10, 20), np.full(n, full))
+        single, vec, single1, vec1 = passage_rates(args.steps, n, kwargs, args.v1_id)
         print(f"{f'shipsense/Passage-v0 (single, {args.observer})':<44}{single:>12,.0f}")
         print(f"{f'shipsense/Passage-v0 (vector, {n} envs)':<44}{vec:>12,.0f}")
         print(f"{f'{args.v1_id} (single)':<44}{single1:>12,.0f}")
@@ -111,6 +103,22 @@ def main(argv=None):
     v1 = d["shipsense/ArrayDesign-v1 (single)"]
     print(f"ArrayDesign-v1 / v0: {v1 / d['shipsense/ArrayDesign-v0 (single)']:.0f}x; "
           f"ArrayDesign-v1 / CartPole-v1: {v1 / cart:.4f}")
+
+
+def passage_rates(steps, n, kwargs=None, v1_id="shipsense/Passage-v1"):
+    """Steps per second of Passage-v0 (single, native vector of ``n``; all-ones actions, made with ``kwargs``)
+    and of ``v1_id`` (single, native vector; the first k-subset every step)."""
+    kwargs = kwargs or {}
+    env = gym.make("shipsense/Passage-v0", **kwargs)
+    single = single_rate(env, steps, np.ones(3, dtype=np.int8))
+    venv = gym.make_vec("shipsense/Passage-v0", num_envs=n, vectorization_mode="vector_entry_point", **kwargs)
+    vec = vector_rate(venv, max(steps // 10, 20), np.ones((n, 3), dtype=np.int8))
+    env1 = gym.make(v1_id)
+    full = int(env1.unwrapped.core.full[0])
+    single1 = single_rate(env1, steps, full)
+    venv1 = gym.make_vec(v1_id, num_envs=n, vectorization_mode="vector_entry_point")
+    vec1 = vector_rate(venv1, max(steps // 10, 20), np.full(n, full))
+    return single, vec, single1, vec1
 
 
 def design_rates(steps, num_envs):

@@ -61,19 +61,12 @@ def env_table(steps, n=64):
     cart = env_bench.single_rate(gym.make("CartPole-v1"), steps, 1)
     cart_vec = env_bench.vector_rate(gym.make_vec("CartPole-v1", num_envs=n, vectorization_mode="vector_entry_point"),
                                      steps // 10, np.ones(n, dtype=np.int64))
-    rows = [("CartPole-v1 (single)", cart, cart), (f"CartPole-v1 (native vector, {n} envs)", cart_vec, cart_vec)]
-    env = gym.make("shipsense/Passage-v0")
-    rows.append(("shipsense/Passage-v0 (single, tracker)", env_bench.single_rate(env, steps, np.ones(3, np.int8)),
-                 cart))
-    venv = gym.make_vec("shipsense/Passage-v0", num_envs=n, vectorization_mode="vector_entry_point")
-    rows.append((f"shipsense/Passage-v0 (native vector, {n} envs)",
-                 env_bench.vector_rate(venv, max(steps // 10, 20), np.ones((n, 3), np.int8)), cart_vec))
-    env1 = gym.make("shipsense/Passage-v1")
-    full = int(env1.unwrapped.core.full[0])
-    rows.append(("shipsense/Passage-v1 (single)", env_bench.single_rate(env1, steps, full), cart))
-    venv1 = gym.make_vec("shipsense/Passage-v1", num_envs=n, vectorization_mode="vector_entry_point")
-    rows.append((f"shipsense/Passage-v1 (native vector, {n} envs)",
-                 env_bench.vector_rate(venv1, max(steps // 10, 20), np.full(n, full)), cart_vec))
+    single, vec, single1, vec1 = env_bench.passage_rates(steps, n)
+    rows = [("CartPole-v1 (single)", cart, cart), (f"CartPole-v1 (native vector, {n} envs)", cart_vec, cart_vec),
+            ("shipsense/Passage-v0 (single, tracker)", single, cart),
+            (f"shipsense/Passage-v0 (native vector, {n} envs)", vec, cart_vec),
+            ("shipsense/Passage-v1 (single)", single1, cart),
+            (f"shipsense/Passage-v1 (native vector, {n} envs)", vec1, cart_vec)]
     print(f"{'environment':<46}{'steps/s':>12}{'/ CartPole':>14}")
     for name, rate, ref in rows:
         print(f"{name:<46}{rate:>12,.0f}{rate / ref:>14.4f}")

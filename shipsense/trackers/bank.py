@@ -345,22 +345,13 @@ def run_bank(unit, model, measurements, seeds, P0, *, prune_nats=None, progress=
     for k in steps:
         inn = state.step(y[:, k], predict=k > 0)
         if len(state.idx) == R * H:     # every hypothesis active: plain slices (fancy indexing costs more)
-            means[:, :, k] = state.means().reshape(R, H, n)
-            pos_cov[:, :, k] = state.position_cov().reshape(R, H, 2, 2)
-            loglik[:, :, k] = inn.loglik.reshape(R, H)
-            nis[:, :, k] = inn.nis.reshape(R, H)
-            used[:, :, k] = inn.m.reshape(R, H)
-            ok[:, :, k] = state.belief.ok.reshape(R, H)
-            active[:, :, k] = True
+            at, rows = (slice(None), slice(None), k), (R, H)
         else:
-            r, h = state.run_of, state.hyp_of
-            means[r, h, k] = state.means()
-            pos_cov[r, h, k] = state.position_cov()
-            loglik[r, h, k] = inn.loglik
-            nis[r, h, k] = inn.nis
-            used[r, h, k] = inn.m
-            ok[r, h, k] = state.belief.ok
-            active[r, h, k] = True
+            at, rows = (state.run_of, state.hyp_of, k), (-1,)
+        for record, value in ((means, state.means()), (pos_cov, state.position_cov()), (loglik, inn.loglik),
+                              (nis, inn.nis), (used, inn.m), (ok, state.belief.ok)):
+            record[at] = value.reshape(rows + value.shape[1:])
+        active[at] = True
         if prune_nats is not None:
             state.prune(prune_nats)
     init = np.zeros((R, H)) if initial_loglik is None else np.asarray(initial_loglik, float)

@@ -185,14 +185,13 @@ def fit_end(model, measurements, k0, window, through_peak=None):
     return np.where(past.any(axis=1), np.argmax(past, axis=1), end)
 
 
-def _grid_fit_masked(model, yw_all, offset, basis, std, max_bytes, clamp):
+def _grid_fit_masked(model, yw_all, offset, basis, std, clamp):
     """Moment-eliminated chi-square (R, C) and moments (R, C, P) of every candidate, general case.
 
     Handles bearing channels (non-zero offsets) and missing samples (each passage its own masked design): for
     every passage and candidate, the least-squares parameters of the whitened basis ``G = basis / std``
     against the whitened residuals of the samples present (:func:`_grid_fit_kernel`, compiled; the
-    candidates in chunks on the CPUs).  ``max_bytes`` is unused (the compiled fit keeps nothing per
-    candidate; the argument stays for callers).
+    candidates in chunks on the CPUs; it keeps nothing per candidate).
     """
     from shipsense.parallel import in_chunks
 
@@ -413,7 +412,7 @@ class WindowFits:
         return distinct_loglik(self.chi2, self.found)
 
 
-def grid_search(model, yw, grid, window, stride, max_bytes=512e6):
+def grid_search(model, yw, grid, window, stride):
     """Moment-eliminated chi-square (R, C) and best parameters (R, C, P) of every grid candidate.
 
     ``yw`` (R, W', m) are the window's samples at steps ``0, stride, ...`` (internal units, NaN = missing);
@@ -424,7 +423,7 @@ def grid_search(model, yw, grid, window, stride, max_bytes=512e6):
     offset, basis = linear_basis(model, grid, window, stride)                             # (C, W', m[, P])
     clamp = "p" in model.labels                                   # the envelope needs p >= 0
     if np.any(offset) or not np.isfinite(yw).all():
-        return _grid_fit_masked(model, yw, offset, basis, std, max_bytes, clamp)
+        return _grid_fit_masked(model, yw, offset, basis, std, clamp)
     G = basis / std[:, None]                                                              # (C, W', m, P)
     C, P = G.shape[0], G.shape[-1]
     # no offset (no bearing channels) and nothing missing: the whitened data d are the same for every
@@ -497,8 +496,8 @@ def refine_minima(model, yfit, grid, chi2_grid, params, *, stages, keep, distinc
 
 
 def window_fits(model, yfit, *, ranges, speeds, taus=None, bearing_step_deg=15.0, course_step_deg=30.0,
-                grid_samples=16, keep=5, distinct_m=15.0, source_z=None, max_bytes=512e6, z_std=None, refine=None,
-                gof=0.01, explore_samples=None, huber=None):
+                grid_samples=16, keep=5, distinct_m=15.0, source_z=None, z_std=None, refine=None, gof=0.01,
+                explore_samples=None, huber=None):
     """Global fits of given windows ``yfit`` (R, W, m) (internal units, NaN = missing): the grid search on
     about ``grid_samples`` of their samples, then :func:`refine_minima`.  ``taus`` (R, W), optional: the
     samples' times (s) after each window's first (irregular sampling; the grid search then uses the nominal
@@ -507,7 +506,7 @@ def window_fits(model, yfit, *, ranges, speeds, taus=None, bearing_step_deg=15.0
     stride = max(1, W // grid_samples)
     grid = candidate_grid(model, ranges, np.arange(0.0, 360.0, bearing_step_deg),
                           np.arange(0.0, 360.0, course_step_deg), speeds, source_z)
-    chi2, params = grid_search(model, yfit[:, ::stride], grid, W, stride, max_bytes)
+    chi2, params = grid_search(model, yfit[:, ::stride], grid, W, stride)
     return refine_minima(model, yfit, grid, chi2, params, stages=_refine_stages(refine, keep), keep=keep,
                          distinct_m=distinct_m, prior=depth_prior(model, z_std, source_z), gof=gof,
                          explore_samples=explore_samples, taus=taus, huber=huber)
@@ -515,8 +514,8 @@ def window_fits(model, yfit, *, ranges, speeds, taus=None, bearing_step_deg=15.0
 
 def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, course_step_deg=30.0,
                 window_s=15.0, grid_samples=16, keep=5, distinct_m=15.0, snr_start=5.0, inflate=2.0,
-                source_z=None, common_start=False, max_bytes=512e6, through_peak=None, z_std=None, refine=None,
-                gof=0.01, explore_samples=None, huber=None):
+                source_z=None, common_start=False, through_peak=None, z_std=None, refine=None, gof=0.01,
+                explore_samples=None, huber=None):
     """Global initialisation of passages from a grid search with the moment eliminated in closed form.
 
     Parameters
@@ -576,8 +575,6 @@ def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, c
     common_start : bool
         Start every passage's window at the latest detection of the batch, so
         that one bank runs them all (:func:`track_with_global_init`).
-    max_bytes : float
-        Memory for the grid stage; passages are processed in chunks within it.
     through_peak : float, optional
         Extend the refinement (not the grid search) past the window until the
         strongest channel has fallen below this fraction of its peak
@@ -602,7 +599,7 @@ def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, c
     yfit = y[np.arange(R)[:, None], k0[:, None] + np.arange(window)[None, :]]           # (R, W, m)
     fits = window_fits(model, yfit, ranges=ranges, speeds=speeds, bearing_step_deg=bearing_step_deg,
                        course_step_deg=course_step_deg, grid_samples=grid_samples, keep=keep, distinct_m=distinct_m,
-                       source_z=source_z, max_bytes=max_bytes, z_std=z_std, refine=refine, gof=gof,
+                       source_z=source_z, z_std=z_std, refine=refine, gof=gof,
                        explore_samples=explore_samples, huber=huber)
     prior = depth_prior(model, z_std, source_z)
     theta, chi2, info, limit = fits.theta.reshape(R * keep, -1), fits.chi2.reshape(-1), fits.info, fits.limit

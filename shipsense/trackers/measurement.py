@@ -136,79 +136,60 @@ def _h_jac(x, spec, out, J, r, mom, B, dBq, dBm):
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
-def _jacobian_kernel(X, spec, out, J):
-    """``h`` (B, m) and its Jacobian (B, m, n) of every internal state in ``X`` (B, n) into ``out`` and ``J``."""
+def _batch_kernel(X, spec, out, J, jacobian):
+    """``h`` (B, m) of every internal state in ``X`` (B, n) into ``out`` and, with ``jacobian``, its Jacobian
+    (B, m, n) into ``J``."""
     n, m = X.shape[1], out.shape[1]
-    _jacobian_loop(X, spec, out, J, np.empty(n), np.empty(m), np.empty((m, n)), np.empty(3), np.empty(3),
-                   np.empty(3), np.empty((3, 3)), np.empty((3, 3)))
+    _batch_loop(X, spec, out, J, jacobian, np.empty(n), np.empty(m), np.empty((m, n)), np.empty(3), np.empty(3),
+                np.empty(3), np.empty((3, 3)), np.empty((3, 3)))
     return True
 
 
 @_loop_jit
-def _jacobian_loop(X, spec, out, J, x, yhat, H, r3, m3, B, dBq, dBm):
+def _batch_loop(X, spec, out, J, jacobian, x, yhat, H, r3, m3, B, dBq, dBm):
     nb, n = X.shape
     m = out.shape[1]
     for b in range(nb):
         for a in range(n):
             x[a] = X[b, a]
-        _h_jac(x, spec, yhat, H, r3, m3, B, dBq, dBm)
+        if jacobian:
+            _h_jac(x, spec, yhat, H, r3, m3, B, dBq, dBm)
+            for i in range(m):
+                for a in range(n):
+                    J[b, i, a] = H[i, a]
+        else:
+            _h(x, spec, yhat, B)
         for i in range(m):
             out[b, i] = yhat[i]
-            for a in range(n):
-                J[b, i, a] = H[i, a]
 
 
-def h_and_jacobian(model, x):
-    """``(h(x), dh/dx)`` of internal states ``x`` (..., n) through the compiled measurement kernel -- the
-    readings (..., m) and the Jacobian (..., m, n) in internal units, as
-    :meth:`~shipsense.trackers.models.FieldModel.h_and_H` -- or None if the model has no compiled kernel."""
+def _evaluate(model, x, jacobian):
+    """:func:`_batch_kernel` over the states ``x`` (..., n), the batch in chunks on the CPUs; None if the model
+    has no compiled field kernel or ``x`` is complex (complex-step derivatives run the numpy kernels)."""
     spec = kernel_of(model)
-    if spec is None or spec[0] != FIELD:
+    x = np.asarray(x)
+    if spec is None or spec[0] != FIELD or x.dtype.kind not in "fiub":
         return None
-    x = np.asarray(x, dtype=float)
-    batch, n = x.shape[:-1], x.shape[-1]
-    m = model.m
-    X = np.ascontiguousarray(x.reshape(-1, n))
+    batch, n, m = x.shape[:-1], x.shape[-1], model.m
+    X = np.ascontiguousarray(x.reshape(-1, n), dtype=float)
     if not X.flags.writeable:
         X = X.copy()
     out = np.empty((X.shape[0], m))
-    J = np.empty((X.shape[0], m, n))
-    in_chunks(lambda lo, hi: _jacobian_kernel(X[lo:hi], spec, out[lo:hi], J[lo:hi]), X.shape[0])
-    return out.reshape(batch + (m,)), J.reshape(batch + (m, n))
+    J = np.empty((X.shape[0], m, n) if jacobian else (1, 1, 1))
+    in_chunks(lambda lo, hi: _batch_kernel(X[lo:hi], spec, out[lo:hi], J[lo:hi] if jacobian else J, jacobian),
+              X.shape[0])
+    return (out.reshape(batch + (m,)), J.reshape(batch + (m, n))) if jacobian else out.reshape(batch + (m,))
 
 
-@njit(cache=True, error_model="numpy", nogil=True)
-def _readings_kernel(X, spec, out):
-    """``h`` (B, m) of every internal state in ``X`` (B, n) into ``out``."""
-    _readings_loop(X, spec, out, np.empty(X.shape[1]), np.empty(out.shape[1]), np.empty(3))
-    return True
-
-
-@_loop_jit
-def _readings_loop(X, spec, out, x, yhat, B):
-    nb, n = X.shape
-    m = out.shape[1]
-    for b in range(nb):
-        for a in range(n):
-            x[a] = X[b, a]
-        _h(x, spec, yhat, B)
-        for i in range(m):
-            out[b, i] = yhat[i]
+def h_and_jacobian(model, x):
+    """``(h(x), dh/dx)`` of real internal states ``x`` (..., n) through the compiled measurement kernel -- the
+    readings (..., m) and the Jacobian (..., m, n) in internal units, as
+    :meth:`~shipsense.trackers.models.FieldModel.h_and_H` -- or None (no compiled kernel, or complex ``x``)."""
+    return _evaluate(model, x, True)
 
 
 def readings(model, x):
     """``h(x)`` of real internal states ``x`` (..., n) through the compiled measurement kernel (..., m), as
     :meth:`~shipsense.trackers.models.FieldModel.h`; None if the model has no compiled kernel or ``x`` is
     complex (complex-step derivatives run the numpy kernels)."""
-    spec = kernel_of(model)
-    x = np.asarray(x)
-    if spec is None or spec[0] != FIELD or x.dtype.kind not in "fiub":
-        return None
-    x = x.astype(float, copy=False)
-    batch, n = x.shape[:-1], x.shape[-1]
-    X = np.ascontiguousarray(x.reshape(-1, n))
-    if not X.flags.writeable:
-        X = X.copy()
-    out = np.empty((X.shape[0], model.m))
-    in_chunks(lambda lo, hi: _readings_kernel(X[lo:hi], spec, out[lo:hi]), X.shape[0])
-    return out.reshape(batch + (model.m,))
+    return _evaluate(model, x, False)

@@ -309,7 +309,7 @@ def test_the_compiled_masked_grid_fit_equals_a_least_squares_solve_per_candidate
     basis = rng.normal(size=(C, W, model.m, P)) * ~ax[:, None]
     std = np.sqrt(model.R)
     G = basis / std[:, None]
-    chi2, params = _grid_fit_masked(model, yw, offset, basis, std, 512e6, True)
+    chi2, params = _grid_fit_masked(model, yw, offset, basis, std, True)
     for r in range(R):
         present = np.isfinite(yw[r])
         for c in range(0, C, 7):
