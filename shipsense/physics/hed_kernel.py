@@ -75,8 +75,7 @@ def _contract(table, r, nw, c, lx, lw, dlx, dlw):
 
 @numba.njit(cache=True, nogil=True)
 def hed_points(rx, ry, zs, zt, px, py, table, nx, nw, a, x0, hx, w0, hw, rho_max, D, eta, c, derivatives):
-    """The HED field (and its derivatives) at N points, one pass: per family ``w`` (u = zs - zt, v = zs + zt)
-    the source and the nearest images exactly (n = 0, and |n| = 1 when eta != 0) plus the tabulated remainder.
+    """The HED field (and its derivatives) at N points: :func:`hed_field_point` or :func:`hed_point` each.
 
     Returns E (N, 3), dE/dq (N, 3, 3) and G = dE/dp (N, 3, 2) (the last two empty without ``derivatives``).
     """
@@ -85,68 +84,106 @@ def hed_points(rx, ry, zs, zt, px, py, table, nx, nw, a, x0, hx, w0, hw, rho_max
     nd = n if derivatives else 0
     dE = np.empty((nd, 3, 3))
     G = np.empty((nd, 3, 2))
+    e, de, g = np.empty(3), np.empty((3, 3)), np.empty((3, 2))
     for p in range(n):
-        x = rx[p]
-        y = ry[p]
-        rho = np.hypot(x, y)
-        # K1, K2, K3 summed over both families, their d/drho, and their d/dz_t = -d/du + d/dv
-        K1 = K2 = K3 = R1 = R2 = R3 = Z1 = Z2 = Z3 = 0.0
-        for f in range(2):
-            w = zs[p] - zt[p] if f == 0 else zs[p] + zt[p]
-            sign = -1.0 if f == 0 else 1.0
-            for m in range(4 if eta != 0.0 else 1):
-                if m == 0:
-                    e = _exact(rho, w, 1.0)
-                elif m == 1:
-                    e = _exact(rho, w + 2.0 * D, eta)
-                elif m == 2:
-                    e = _exact(rho, w - 2.0 * D, eta)
-                else:
-                    e = _remainder(rho, w, table, nx, nw, a, x0, hx, w0, hw, rho_max)
-                K1 += e[0]
-                K2 += e[1]
-                K3 += e[2]
-                R1 += e[3]
-                R2 += e[4]
-                R3 += e[5]
-                Z1 += sign * e[6]
-                Z2 += sign * e[7]
-                Z3 += sign * e[8]
-        g00 = 3.0 * x * x * K2 - K1
-        g01 = 3.0 * x * y * K2
-        g11 = 3.0 * y * y * K2 - K1
-        g20 = 3.0 * x * K3
-        g21 = 3.0 * y * K3
-        mx = px[p]
-        my = py[p]
-        E[p, 0] = c * (g00 * mx + g01 * my)
-        E[p, 1] = c * (g01 * mx + g11 * my)
-        E[p, 2] = c * (g20 * mx + g21 * my)
         if not derivatives:
+            E[p, 0], E[p, 1], E[p, 2] = hed_field_point(rx[p], ry[p], zs[p], zt[p], px[p], py[p], table, nx, nw,
+                                                        a, x0, hx, w0, hw, rho_max, D, eta, c)
             continue
-        G[p, 0, 0] = c * g00
-        G[p, 0, 1] = c * g01
-        G[p, 1, 0] = c * g01
-        G[p, 1, 1] = c * g11
-        G[p, 2, 0] = c * g20
-        G[p, 2, 1] = c * g21
-        ux = x / rho if rho > 0 else 0.0
-        uy = y / rho if rho > 0 else 0.0
-        pr = mx * x + my * y
-        for j in range(2):   # d/drho_j, then d/dq_j = -d/drho_j
-            pj = mx if j == 0 else my
-            uj = ux if j == 0 else uy
-            e0 = 1.0 if j == 0 else 0.0
-            dK1 = R1 * uj
-            dK2 = R2 * uj
-            dK3 = R3 * uj
-            dE[p, 0, j] = -c * (3 * pj * x * K2 + 3 * pr * e0 * K2 + 3 * pr * x * dK2 - mx * dK1)
-            dE[p, 1, j] = -c * (3 * pj * y * K2 + 3 * pr * (1.0 - e0) * K2 + 3 * pr * y * dK2 - my * dK1)
-            dE[p, 2, j] = -c * (3 * pj * K3 + 3 * pr * dK3)
-        dE[p, 0, 2] = c * (3 * pr * x * Z2 - mx * Z1)
-        dE[p, 1, 2] = c * (3 * pr * y * Z2 - my * Z1)
-        dE[p, 2, 2] = c * 3 * pr * Z3
+        hed_point(rx[p], ry[p], zs[p], zt[p], px[p], py[p], table, nx, nw, a, x0, hx, w0, hw, rho_max, D, eta, c,
+                  e, de, g)
+        for i in range(3):
+            E[p, i] = e[i]
+            for j in range(3):
+                dE[p, i, j] = de[i, j]
+            for j in range(2):
+                G[p, i, j] = g[i, j]
     return E, dE, G
+
+
+@numba.njit(cache=True, inline="always")
+def _sums(rho, zs, zt, table, nx, nw, a, x0, hx, w0, hw, rho_max, D, eta):
+    """Per family ``w`` (u = zs - zt, v = zs + zt): the source and the nearest images exactly (n = 0, and
+    |n| = 1 when eta != 0) plus the tabulated remainder.  Returns K1, K2, K3 summed over both families, their
+    d/drho, and their d/dz_t = -d/du + d/dv."""
+    K1 = K2 = K3 = R1 = R2 = R3 = Z1 = Z2 = Z3 = 0.0
+    for f in range(2):
+        w = zs - zt if f == 0 else zs + zt
+        sign = -1.0 if f == 0 else 1.0
+        for m in range(4 if eta != 0.0 else 1):
+            if m == 0:
+                e = _exact(rho, w, 1.0)
+            elif m == 1:
+                e = _exact(rho, w + 2.0 * D, eta)
+            elif m == 2:
+                e = _exact(rho, w - 2.0 * D, eta)
+            else:
+                e = _remainder(rho, w, table, nx, nw, a, x0, hx, w0, hw, rho_max)
+            K1 += e[0]
+            K2 += e[1]
+            K3 += e[2]
+            R1 += e[3]
+            R2 += e[4]
+            R3 += e[5]
+            Z1 += sign * e[6]
+            Z2 += sign * e[7]
+            Z3 += sign * e[8]
+    return K1, K2, K3, R1, R2, R3, Z1, Z2, Z3
+
+
+@numba.njit(cache=True, inline="always")
+def hed_field_point(x, y, zs, zt, mx, my, table, nx, nw, a, x0, hx, w0, hw, rho_max, D, eta, c):
+    """The HED field ``(E_x, E_y, E_z)`` at one point: ``E_h = c (3 (p.rho) rho K2 - p K1)``,
+    ``E_z = 3 c (p.rho) K3``.
+
+    ``(x, y)`` is the horizontal offset sensor - source, ``zs``, ``zt`` the sensor's and the source's heights,
+    ``(mx, my)`` the moment, ``c`` = 1 / (4 pi sigma1) times the unit of the result; the rest is the medium's
+    table (:class:`~shipsense.physics.electric.FastHED`).  With :func:`hed_point`, the one implementation of the
+    fast HED field: :func:`hed_points` (the numpy-facing batch) and the compiled measurement functions of
+    :mod:`shipsense.trackers.measurement` call them.
+    """
+    K1, K2, K3 = _sums(np.hypot(x, y), zs, zt, table, nx, nw, a, x0, hx, w0, hw, rho_max, D, eta)[:3]
+    g01 = 3.0 * x * y * K2      # E = c g p, as :func:`hed_point` forms it (the same rounding)
+    return (c * ((3.0 * x * x * K2 - K1) * mx + g01 * my), c * (g01 * mx + (3.0 * y * y * K2 - K1) * my),
+            c * (3.0 * x * K3 * mx + 3.0 * y * K3 * my))
+
+
+@numba.njit(cache=True, inline="always")
+def hed_point(x, y, zs, zt, mx, my, table, nx, nw, a, x0, hx, w0, hw, rho_max, D, eta, c, E, dE, G):
+    """:func:`hed_field_point` into ``E`` (3,), with dE/dq (source position) into ``dE`` (3, 3) and dE/dp into
+    the first two columns of ``G`` (3, >= 2)."""
+    rho = np.hypot(x, y)
+    K1, K2, K3, R1, R2, R3, Z1, Z2, Z3 = _sums(rho, zs, zt, table, nx, nw, a, x0, hx, w0, hw, rho_max, D, eta)
+    g00 = 3.0 * x * x * K2 - K1
+    g01 = 3.0 * x * y * K2
+    g11 = 3.0 * y * y * K2 - K1
+    g20 = 3.0 * x * K3
+    g21 = 3.0 * y * K3
+    E[0] = c * (g00 * mx + g01 * my)
+    E[1] = c * (g01 * mx + g11 * my)
+    E[2] = c * (g20 * mx + g21 * my)
+    G[0, 0] = c * g00
+    G[0, 1] = c * g01
+    G[1, 0] = c * g01
+    G[1, 1] = c * g11
+    G[2, 0] = c * g20
+    G[2, 1] = c * g21
+    ux = x / rho if rho > 0 else 0.0
+    uy = y / rho if rho > 0 else 0.0
+    pr = mx * x + my * y
+    for j in range(2):   # d/drho_j, then d/dq_j = -d/drho_j
+        pj = mx if j == 0 else my
+        uj = ux if j == 0 else uy
+        e0 = 1.0 if j == 0 else 0.0
+        dK1 = R1 * uj
+        dK2 = R2 * uj
+        dK3 = R3 * uj
+        dE[0, j] = -c * (3 * pj * x * K2 + 3 * pr * e0 * K2 + 3 * pr * x * dK2 - mx * dK1)
+        dE[1, j] = -c * (3 * pj * y * K2 + 3 * pr * (1.0 - e0) * K2 + 3 * pr * y * dK2 - my * dK1)
+        dE[2, j] = -c * (3 * pj * K3 + 3 * pr * dK3)
+    dE[0, 2] = c * (3 * pr * x * Z2 - mx * Z1)
+    dE[1, 2] = c * (3 * pr * y * Z2 - my * Z1)
+    dE[2, 2] = c * 3 * pr * Z3
 
 
 @numba.njit(cache=True, inline="always")

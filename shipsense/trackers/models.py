@@ -28,7 +28,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from shipsense.physics.array import SensorArray, as_slice
+from shipsense.physics.array import CHANNELS, SensorArray, as_slice
 from shipsense.physics.motion import cv_transition, q_dwna, q_identity
 from shipsense.physics.seismic import wrap_axial
 
@@ -190,8 +190,9 @@ class FieldModel:
         electric dipole (vector, magnitude and tmi fields; the field and its
         envelope) or independent of them (bearings, in radians already), so
         the channel units are folded into the sources: no pass over the output.
-        Magnetometer and bearing models of real states run the compiled kernel
-        (:func:`shipsense.trackers.measurement.readings`); the rest the numpy kernels.
+        Real states on the fast HED path run the compiled kernel
+        (:func:`shipsense.trackers.measurement.readings`); complex states and the series HED path the numpy
+        kernels.
         """
         from shipsense.trackers.measurement import readings
 
@@ -216,25 +217,35 @@ class FieldModel:
         (``electric_method="series"``) the readings are :meth:`h`'s, evaluated apart."""
         from shipsense.trackers.measurement import h_and_jacobian
 
-        compiled = h_and_jacobian(self, x)     # magnetometers and bearings: the filters' compiled kernel
+        compiled = h_and_jacobian(self, x)     # the filters' compiled kernel (not the series HED path)
         return compiled if compiled is not None else self._h_and_H_numpy(x)
 
     def kernel_spec(self):
         """The compiled measurement kernel's description of this model (:mod:`shipsense.trackers.measurement`):
-        magnetometers of every kind and seismic bearings, without electrodes; None otherwise (the numpy path)."""
-        from shipsense.trackers.measurement import FIELD
+        every sensor type (magnetometers, seismic bearings, electrodes on the fast HED path); None for the
+        series HED path (``electric_method="series"``), which only the numpy kernels evaluate."""
+        from shipsense.physics.electric import fast_hed
+        from shipsense.trackers.measurement import FIELD, sensor_codes
 
         a = self.array
-        if "electrode" in a.types or self.labels not in (("x", "y", "vx", "vy", "mx", "my", "mz"),
-                                                         ("x", "y", "vx", "vy")):
+        if a.electric_method != "fast" and "electrode" in a.types:
             return None
-        code = np.array([{"vector": 0, "magnitude": 1, "tmi": 2, "bearing": 3}[k] for k in a.kinds], dtype=np.int64)
-        width = np.where(code == 0, 3, 1)
+        code = sensor_codes(a.types, a.kinds)
+        width = np.array([len(CHANNELS[(t, k)]) for t, k in zip(a.types, a.kinds)])
         offs = np.concatenate([[0], np.cumsum(width)[:-1]]).astype(np.int64)
         earth = np.zeros(3) if a.earth_direction is None else np.asarray(a.earth_direction, dtype=float)
+        d = self._d
+        cols = np.array([-1 if d["mom"] is None else d["mom"], -1 if d["z"] is None else d["z"], 1, 1], np.int64)
+        hed, table = np.zeros(9), np.zeros((1, 3))
+        if "electrode" in a.types:
+            k = fast_hed(a.medium)
+            cols[2:] = k._nx, k._nw
+            hed = np.array([k._a, k._x0, k._hx, k._w0, k._hw, k.rho_max, a.medium.water_depth, a.medium.eta,
+                            1.0 / (4.0 * np.pi * a.medium.sigma_water * CHANNEL_UNIT["electrode"])])
+            table = k._table
         return (FIELD, np.array(a.positions, dtype=float), np.array(a.orientations, dtype=float),
                 code, earth, offs, np.zeros((1, 1)), self.moment_unit / CHANNEL_UNIT["magnetometer"],
-                float(self.source_z), np.array(a.axial, dtype=np.int64))
+                float(self.source_z), np.array(a.axial, dtype=np.int64), cols, hed, table)
 
     def _h_and_H_numpy(self, x):
         """:meth:`h_and_H` through the numpy kernels of :mod:`shipsense.physics` (every sensor type)."""
@@ -307,7 +318,8 @@ class LinearModel:
 
         C = np.array(self.C, dtype=float)
         return (LINEAR, np.zeros((1, 3)), np.zeros((1, 3, 3)), np.zeros(1, np.int64), np.zeros(3),
-                np.zeros(1, np.int64), C, 0.0, 0.0, np.zeros(C.shape[0], np.int64))
+                np.zeros(1, np.int64), C, 0.0, 0.0, np.zeros(C.shape[0], np.int64), np.array([-1, -1, 1, 1], np.int64),
+                np.zeros(9), np.zeros((1, 3)))
 
 
 def subset_array(array: SensorArray, keep) -> SensorArray:

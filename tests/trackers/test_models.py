@@ -153,24 +153,53 @@ def test_process_noise_is_si_so_the_internal_scale_does_not_change_the_estimates
     np.testing.assert_allclose(rb.means / scale, ra.means / scale, rtol=0, atol=1e-9)
 
 
-@pytest.mark.parametrize("name", ["S0", "S2"])
+def _every_kind_model():
+    """One model over every sensor type and measurement kind, vector and envelope sensors on rotated axes."""
+    from shipsense.physics.array import SensorArray
+    from shipsense.physics.electric import Medium
+    from shipsense.trackers.models import FieldModel
+
+    c, s = np.cos(0.7), np.sin(0.7)
+    tilt = np.array([[c, -s, 0.0], [s * 0.8, c * 0.8, -0.6], [s * 0.6, c * 0.6, 0.8]])     # orthonormal columns
+    kinds = [("magnetometer", "vector"), ("magnetometer", "magnitude"), ("magnetometer", "tmi"),
+             ("electrode", "vector"), ("electrode", "envelope"), ("electrode", "magnitude"),
+             ("accelerometer", "bearing")]
+    pos = np.array([[-60.0, 10.0, -15.0], [0.0, -40.0, -15.0], [50.0, 30.0, -14.0], [-20.0, 60.0, -15.0],
+                    [35.0, -25.0, -15.0], [90.0, 5.0, -13.0], [-80.0, -50.0, -15.0]])
+    array = SensorArray(ids=[f"s{i}" for i in range(7)], types=[t for t, _ in kinds], kinds=[k for _, k in kinds],
+                        positions=pos, orientations=np.stack([tilt if i in (0, 3, 4) else np.eye(3) for i in range(7)]),
+                        medium=Medium(4.0, 0.3, 15.0), earth_direction=np.array([0.2, 0.4, -0.894427191]))
+    return FieldModel(array, 1.0, np.eye(9), np.ones(array.n_channels), moment_unit=1e6)
+
+
+@pytest.mark.parametrize("name", ["S0", "S2", "S1-P1", "every kind"])
 def test_compiled_readings_and_jacobian_equal_the_numpy_kernels(name):
-    """Models with a compiled kernel (magnetometers, bearings) fit through it; the numpy kernels of physics/
-    are the independent reference (and every sensor type's path)."""
+    """Every model on the fast HED path fits and filters through the compiled kernel; the numpy kernels of
+    physics/ are the independent reference (and the path of complex states and the series HED)."""
     from shipsense.trackers.measurement import kernel_of
 
-    model = model_from_scenario(name)
+    model = _every_kind_model() if name == "every kind" else model_from_scenario(name)
     assert kernel_of(model) is not None
     rng = np.random.default_rng(6)
-    x = np.zeros((4, 3, model.n))     # two batch axes
-    x[..., :2] = rng.uniform(-150, 150, (4, 3, 2))
-    x[..., 2:4] = rng.uniform(-8, 8, (4, 3, 2))
-    if model.n == 7:
-        x[..., 4:] = rng.uniform(-1e6, 1e6, (4, 3, 3))
-    x = model.to_internal(x)
+    truth = np.column_stack([rng.uniform(-150, 150, (12, 2)), rng.uniform(-8, 8, (12, 2)), rng.uniform(-12, -2, 12),
+                             rng.uniform(-1e6, 1e6, (12, 3)), rng.uniform(50, 900, 12)])
+    truth[0, 2:4] = 0.0               # at rest: no keel direction, no dipole
+    x = model.to_internal(model.state_from_truth(truth)).reshape(4, 3, model.n)     # two batch axes
     y, H = model.h_and_H(x)
     y_np, H_np = model._h_and_H_numpy(x)
     assert y.shape == y_np.shape and H.shape == H_np.shape
     np.testing.assert_allclose(y, y_np, rtol=1e-12, atol=1e-13 * np.abs(y_np).max())
     np.testing.assert_allclose(H, H_np, rtol=1e-12, atol=1e-13 * np.abs(H_np).max())
     np.testing.assert_allclose(model.h(x), model._h_numpy(x), rtol=1e-12, atol=1e-13 * np.abs(y_np).max())
+
+
+def test_series_hed_models_have_no_compiled_kernel():
+    """The series HED path is evaluated by the numpy kernels only (the compiled kernel is the fast path's)."""
+    from dataclasses import replace
+
+    from shipsense.trackers.measurement import kernel_of
+    from shipsense.trackers.models import FieldModel
+
+    model = model_from_scenario("S1-P1")
+    series = FieldModel(replace(model.array, electric_method="series"), model.period, model.Q, model.R)
+    assert kernel_of(model) is not None and kernel_of(series) is None

@@ -5,13 +5,14 @@ Who gets which implementation.  :class:`~shipsense.trackers.filters.FilterUnit`
 call) runs these compiled steps whenever the model has a compiled measurement
 kernel (:func:`shipsense.trackers.measurement.kernel_of`):
 
-* a :class:`~shipsense.trackers.models.FieldModel` without electrodes:
-  magnetometers (vector, magnitude or tmi readings; the S0 model) and seismic
-  bearings (S2), also with per-element transitions
+* a :class:`~shipsense.trackers.models.FieldModel` on the fast HED path:
+  magnetometers (vector, magnitude or tmi readings; the S0 model), seismic
+  bearings (S2) and electrodes (vector, envelope or magnitude readings of the
+  HED field; S1, the demo), also with per-element transitions
   (:meth:`~shipsense.trackers.models.FieldModel.stepped`);
 * a :class:`~shipsense.trackers.models.LinearModel`.
 
-Every other model (electrodes: the HED field and its envelope; user models with a Python ``h``)
+Every other model (the series HED path; user models with a Python ``h``)
 runs the generic numpy steps of the filter modules (``ukf.update`` and so on),
 which are also the independent reference the tests compare these steps with.
 An element whose step fails numerically here (an innovation or posterior
