@@ -93,7 +93,7 @@ def bank_summary(bank, truth, centre=(0.0, 0.0)):
     """Per-hypothesis table and selection figures of a bank over runs (truth (R, K, n)).
 
     Seed ranges and bearings are taken from ``centre`` (the array centroid)."""
-    tr = trmse(bank.means, truth[:, None])                       # (R, H)
+    tr = trmse(bank.positions, truth[:, None])                   # (R, H)
     final_ll = bank.cum_loglik[:, :, -1]
     seeds = bank.seeds
     rel = seeds[..., :2] - np.asarray(centre)

@@ -21,6 +21,9 @@ OFFSETS = (10.0, 30.0, 50.0, 100.0, 200.0)
 UNITS = ("ekf", "ukf", "ckf", "cdkf", "srcdkf")
 BASIN_RATE = 0.9
 DENSE_BEARINGS = tuple(float(b) for b in np.arange(0.0, 360.0, 30.0))
+LEAN = ("positions", "loglik", "selected")
+"""What the banks keep: the study reads positions, likelihoods and the selected track (a full record of the dense
+bank at 200 runs is ~245 MB)."""
 
 
 def run(runs=200, out="results/S0", seed=0, progress=True):
@@ -89,8 +92,7 @@ def run(runs=200, out="results/S0", seed=0, progress=True):
     for conv in (bank.bearing_convention, *({"north", "east"} - {bank.bearing_convention})):
         cbank = bank.model_copy(update={"bearing_convention": conv})
         cseeds, _ = seed_hypotheses(model, sim.measurements[:, 0], cbank)
-        cb = run_bank(sc.tracker.filter, model, sim.measurements, cseeds, P0)
-        # a bank's per-hypothesis record is ~80 MB at 200 runs: keep only what later stages read
+        cb = run_bank(sc.tracker.filter, model, sim.measurements, cseeds, P0, store=LEAN)
         readings[conv] = (cb.selected_means, *bank_summary(cb, truth), _reading(conv, cb, cseeds, truth, basin_radius))
         del cb
     selected, summ, tr, main = readings[bank.bearing_convention]
@@ -110,7 +112,7 @@ def run(runs=200, out="results/S0", seed=0, progress=True):
     units, curves = {}, {}
     for name in UNITS:
         t0 = time.perf_counter()
-        bu = run_bank(name, model, sim.measurements, seeds, P0)
+        bu = run_bank(name, model, sim.measurements, seeds, P0, store=("selected",))
         us = 1e6 * (time.perf_counter() - t0) / (runs * seeds.shape[1] * sc.steps)
         units[name] = {"mrmse_r_m": mrmse(bu.selected_means, truth)["r"],
                        "convergence_rate": convergence_rate(bu.selected_means, truth), "us_per_filter_step": us}
@@ -125,7 +127,7 @@ def run(runs=200, out="results/S0", seed=0, progress=True):
     st.step("dense bank")
     dense_bank = bank.model_copy(update={"bearings_deg": list(DENSE_BEARINGS)})
     dseeds, dP0 = seed_hypotheses(model, sim.measurements[:, 0], dense_bank)   # the literal bank's Q: only l changes
-    bd = run_bank(sc.tracker.filter, model, sim.measurements, dseeds, dP0)
+    bd = run_bank(sc.tracker.filter, model, sim.measurements, dseeds, dP0, store=LEAN)
     dsumm, _ = bank_summary(bd, truth)
     dense = {"hypotheses": int(dseeds.shape[1]), "bearings_deg": list(DENSE_BEARINGS),
              "process_noise": "the scenario's (Q = 0.1 I, SI)", "bearing_convention": bank.bearing_convention,
@@ -169,7 +171,7 @@ def _reading(convention, bank, seeds, truth, basin_radius):
             "seed_nearest_hypothesis": int(np.bincount(dist.argmin(axis=1)).argmax()) + 1,
             "seed_inside_basin_rate": float(np.mean(dist.min(axis=1) <= basin_radius)),
             "loglik_top3": [int(h) + 1 for h in top],
-            "top3_mrmse_m": [{"hypothesis": int(h) + 1, **mrmse(bank.means[:, h], truth),
+            "top3_mrmse_m": [{"hypothesis": int(h) + 1, **mrmse(bank.positions[:, h], truth),
                               "mean_loglik": float(ll[h])} for h in top],
             "selected_mrmse_m": mrmse(bank.selected_means, truth),
             "selected_convergence_rate": convergence_rate(bank.selected_means, truth)}

@@ -121,6 +121,10 @@ def huber_cost(r, gamma):
     return np.sum(np.where(a <= gamma, r * r, 2.0 * gamma * a - gamma * gamma), axis=-1)
 
 
+FIT_CHUNK_BYTES = 4 * 2**20
+"""Largest Jacobian (fits x samples x m x n doubles) :func:`fit_passages` forms at once; more fits run in chunks."""
+
+
 def fit_passages(model, y, theta_init, steps, stride=1, iterations=40, return_information=False, tol=1e-9,
                  prior=None, taus=None, huber=None):
     """Batched Levenberg–Marquardt fit of passages to measurements (internal units).
@@ -147,6 +151,16 @@ def fit_passages(model, y, theta_init, steps, stride=1, iterations=40, return_in
     (an accepted step gaining less than the relative ``tol``, or a rejected
     step at a damping of 1e6 or more).
     """
+    B = len(theta_init)
+    rows = max(1, FIT_CHUNK_BYTES // (8 * model.n * model.m * max(1, np.shape(y)[-2])))
+    if B > rows:       # every fit is independent: chunks of rows bound the Jacobians' memory (same results)
+        parts = []
+        for lo in range(0, B, rows):
+            part = slice(lo, lo + rows)
+            chunk_prior = None if prior is None else (_fit_rows(prior[0], part, 2), prior[1])
+            parts.append(fit_passages(model, _fit_rows(y, part), theta_init[part], steps, stride, iterations,
+                                      return_information, tol, chunk_prior, _fit_rows(taus, part), huber))
+        return tuple(np.concatenate(a) for a in zip(*parts))
     noise = None
     if huber is not None:
         noise = huber if isinstance(huber, Huber) else Huber(gamma=float(huber))
@@ -167,6 +181,14 @@ def fit_passages(model, y, theta_init, steps, stride=1, iterations=40, return_in
     if noise is not None:
         JtJ = leverage_information(Jac, JtJ, noise, Jac.shape[1] - (problem.n if prior is not None else 0))
     return theta, cost, JtJ
+
+
+def _fit_rows(a, part, ndim=1):
+    """Rows ``part`` of a per-fit argument of :func:`fit_passages` (None, or shared: a leading axis of 1, or fewer
+    than ``ndim`` axes, stays whole)."""
+    if a is None or np.ndim(a) < ndim or np.shape(a)[0] == 1:
+        return a
+    return a[part]
 
 
 class _Passages:

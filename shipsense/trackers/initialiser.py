@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from shipsense.trackers.batchfit import fit_passages, powers
+from shipsense.trackers.batchfit import FIT_CHUNK_BYTES, fit_passages, powers
 
 
 @dataclass(frozen=True)
@@ -430,14 +430,20 @@ def grid_search(model, yw, grid, window, stride):
     # candidate, so b = G^T d is one matmul and chi2 = |d|^2 - 2 par.b + par^T A par (no fit formed)
     Gf = G.reshape(C, Wn * m, P)                                                          # (C, W'm, P)
     A_all = np.swapaxes(Gf, -1, -2) @ Gf + 1e-9 * np.eye(P)                               # shared by passages
+    A_inv = np.linalg.inv(A_all)
     d = (yw / std).reshape(R, Wn * m)
-    b = np.matmul(np.swapaxes(Gf, -1, -2), d.T)                                           # (C, P, R)
-    par = np.linalg.inv(A_all) @ b
-    if clamp:
-        par[:, -1] = np.maximum(par[:, -1], 0.0)
-    chi2 = (np.sum(d * d, axis=-1)[None] - 2.0 * np.sum(par * b, axis=1)
-            + np.sum(par * (A_all @ par), axis=1)).T                                      # (R, C)
-    return chi2, np.moveaxis(par, -1, 0)                                                  # (R, C, P)
+    chi2, params = np.empty((R, C)), np.empty((R, C, P))
+    rows = max(1, FIT_CHUNK_BYTES // (8 * C * P))        # passages at a time: bounds the (C, P, rows) temporaries
+    for lo in range(0, R, rows):
+        dc = d[lo:lo + rows]
+        b = np.matmul(np.swapaxes(Gf, -1, -2), dc.T)                                      # (C, P, rows)
+        par = A_inv @ b
+        if clamp:
+            par[:, -1] = np.maximum(par[:, -1], 0.0)
+        chi2[lo:lo + rows] = (np.sum(dc * dc, axis=-1)[None] - 2.0 * np.sum(par * b, axis=1)
+                              + np.sum(par * (A_all @ par), axis=1)).T                    # (rows, C)
+        params[lo:lo + rows] = np.moveaxis(par, -1, 0)                                    # (rows, C, P)
+    return chi2, params
 
 
 def refine_minima(model, yfit, grid, chi2_grid, params, *, stages, keep, distinct_m, prior, gof, explore_samples,

@@ -64,6 +64,23 @@ def test_pruning_frees_hypotheses_without_changing_the_survivors(s2_bank):
     assert np.all(pruned.cum_loglik[~alive] == -np.inf)
 
 
+@pytest.mark.parametrize("prune_nats", [None, 50.0])
+def test_a_lean_record_keeps_positions_likelihoods_and_the_selected_track_of_the_full_one(s2_bank, prune_nats):
+    """``store``: the selected track chosen as the bank runs equals the one chosen afterwards from the full record
+    (also with pruning, where the batch shrinks under the record's indices)."""
+    _, model, y, _, seeds, P0 = s2_bank
+    full = run_bank("ukf", model, y, seeds, P0, prune_nats=prune_nats)
+    lean = run_bank("ukf", model, y, seeds, P0, prune_nats=prune_nats, store=("positions", "loglik", "selected"))
+    assert lean.means is None and lean.pos_cov is None and lean.nis is None
+    np.testing.assert_array_equal(lean.positions, full.positions)
+    np.testing.assert_array_equal(lean.cum_loglik, full.cum_loglik)
+    np.testing.assert_array_equal(lean.selected_means, full.selected_means)
+    only = run_bank("ukf", model, y, seeds, P0, prune_nats=prune_nats, store="selected")
+    np.testing.assert_array_equal(only.selected_means, full.selected_means)
+    with pytest.raises(ValueError, match="store: unknown 'mean'; choose from means, pos_cov"):
+        run_bank("ukf", model, y, seeds, P0, store=("mean",))
+
+
 def test_divergence_flags_the_far_hypotheses(s2_bank):
     _, model, y, _, seeds, P0 = s2_bank
     bank = run_bank("ukf", model, y, seeds, P0)

@@ -320,3 +320,27 @@ def test_the_compiled_masked_grid_fit_equals_a_least_squares_solve_per_candidate
             par[-1] = max(par[-1], 0.0)
             np.testing.assert_allclose(params[r, c], par, rtol=1e-10, atol=1e-12)
             np.testing.assert_allclose(chi2[r, c], np.sum((d - g @ par) ** 2), rtol=1e-10)
+
+
+def test_fits_and_grid_in_chunks_of_passages_equal_one_batch(monkeypatch):
+    """The initialiser bounds its memory by fitting (and grid-searching) passages in chunks.  Every fit is
+    independent, so chunked fits give the one batch's results bit for bit; the grid's matrix products over
+    fewer passages round differently (another BLAS path): the fits then stop within their tolerance of each
+    other, 1e-8 (S1-P2: a depth prior, ``p >= 0``)."""
+    import shipsense.trackers.batchfit as batchfit
+    import shipsense.trackers.initialiser as initialiser
+    from shipsense.reproduce.common import prior_grid
+
+    sc = load_scenario("S1-P2")
+    model = model_from_scenario(sc)
+    y = simulate(sc, runs=12, seed=3).measurements
+    whole = global_init(model, y, **prior_grid(sc), snr_start=5.0)
+    monkeypatch.setattr(batchfit, "FIT_CHUNK_BYTES", 200_000)     # fits in chunks of a few passages
+    fits = global_init(model, y, **prior_grid(sc), snr_start=5.0)
+    monkeypatch.setattr(initialiser, "FIT_CHUNK_BYTES", 200_000)  # and the grid search
+    both = global_init(model, y, **prior_grid(sc), snr_start=5.0)
+    for field in ("seeds", "P0", "loglik", "start"):
+        np.testing.assert_array_equal(getattr(fits, field), getattr(whole, field))
+    np.testing.assert_array_equal(both.start, whole.start)
+    np.testing.assert_allclose(both.seeds, whole.seeds, rtol=1e-8, atol=1e-8)
+    np.testing.assert_allclose(both.loglik, whole.loglik, rtol=1e-9, atol=1e-6)
