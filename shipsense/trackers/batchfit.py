@@ -213,9 +213,20 @@ class _Passages:
         # with its residual and kept, so an accepted step's next iteration needs no kernel pass of its own
         self.fused = getattr(model, "h_and_H", None)
 
-    @staticmethod
-    def rows(a, idx):
-        return a if a.shape[0] == 1 else a[idx]
+    def rows(self, a, idx):
+        """Rows ``idx`` (sorted distinct indices, or a slice) of a per-fit array; a shared one (a leading axis of
+        1) or every row whole (no copy).  The gathered rows of the last ``idx`` object are kept: the fitting
+        loop passes the same one while its set of running fits does not change."""
+        if a.shape[0] == 1 or isinstance(idx, slice) or len(idx) == a.shape[0]:
+            return a
+        cache = self.__dict__.setdefault("_gathered", {})
+        if cache.get("idx") is not idx:
+            cache.clear()
+            cache["idx"] = idx
+        hit = cache.get(id(a))
+        if hit is None:
+            hit = cache[id(a)] = a[idx]
+        return hit
 
     def residual(self, th, idx):
         """Whitened residuals (len(idx), rows), the propagated states and (a fused model) their Jacobians."""
@@ -227,7 +238,7 @@ class _Passages:
         r = (self.model.residual(hx, self.rows(self.y, idx)) * self.w * self.rows(self.present, idx)).reshape(
             len(th), -1)
         if self.prior is not None:
-            r = np.concatenate([r, self.root * (th - self.mu[idx])], axis=-1)
+            r = np.concatenate([r, self.root * (th - self.rows(self.mu, idx))], axis=-1)
         return r, X, Hx
 
     def cost(self, r):
@@ -264,10 +275,16 @@ def _levenberg_marquardt(problem, theta, iterations, tol, lo, hi):
     cost = problem.cost(r)
     lam = np.full(B, 1e-2)
     stall = np.zeros(B, dtype=int)
+    every, idx = slice(None), None
     for _ in range(iterations):
         a = np.flatnonzero(stall < 3)
         if a.size == 0:
             break
+        if idx is not None and np.array_equal(a, idx):
+            a = idx              # the same running fits: the problem reuses their gathered rows
+        idx = a
+        if a.size == B:          # every fit still running: views, not gathered copies
+            a = every
         Jac = problem.jacobian(X[a], a, r[a], None if Hs is None else Hs[a])
         JtJ = np.swapaxes(Jac, -1, -2) @ Jac
         g = np.einsum("bmn,bm->bn", Jac, problem.weighted(r[a]))
@@ -281,7 +298,7 @@ def _levenberg_marquardt(problem, theta, iterations, tol, lo, hi):
         cost_t = problem.cost(r_t)
         better = np.isfinite(cost_t) & (cost_t < cost[a])
         gain = np.where(better, (cost[a] - cost_t) / np.maximum(cost[a], 1e-300), 0.0)
-        ok = a[better]
+        ok = idx[better]
         theta[ok] = trial[better]
         r[ok] = r_t[better]
         X[ok] = X_t[better]
