@@ -131,7 +131,11 @@ def _sums(rho, zs, zt, table, nx, nw, a, x0, hx, w0, hw, rho_max, D, eta):
     return K1, K2, K3, R1, R2, R3, Z1, Z2, Z3
 
 
-@numba.njit(cache=True, inline="always")
+# hed_field_point and hed_point are called, not inlined, by the compiled filter steps: inlined at each of the
+# steps' call sites they doubled the first compilation of the steps (86 s against 46 s on the 2-core machine,
+# benchmarks/filters.py) and ran no faster (S1-P1: h_and_H 0.9-1.2 us per state, a PUEKF update 11.4-12.2 us per
+# element either way, one thread).
+@numba.njit(cache=True, nogil=True)
 def hed_field_point(x, y, zs, zt, mx, my, table, nx, nw, a, x0, hx, w0, hw, rho_max, D, eta, c):
     """The HED field ``(E_x, E_y, E_z)`` at one point: ``E_h = c (3 (p.rho) rho K2 - p K1)``,
     ``E_z = 3 c (p.rho) K3``.
@@ -148,7 +152,7 @@ def hed_field_point(x, y, zs, zt, mx, my, table, nx, nw, a, x0, hx, w0, hw, rho_
             c * (3.0 * x * K3 * mx + 3.0 * y * K3 * my))
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, nogil=True)
 def hed_point(x, y, zs, zt, mx, my, table, nx, nw, a, x0, hx, w0, hw, rho_max, D, eta, c, E, dE, G):
     """:func:`hed_field_point` into ``E`` (3,), with dE/dq (source position) into ``dE`` (3, 3) and dE/dp into
     the first two columns of ``G`` (3, >= 2)."""
