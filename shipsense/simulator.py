@@ -241,6 +241,10 @@ def simulate(scenario, runs: int | None = None, seed: int | None = None, *, rand
     return Simulation(sc, array, times, truth, clean, meas, mask)
 
 
+RAW_CHUNK_BYTES = 4 * 2**20
+"""Raw shaft-rate samples the envelope chain simulates at once (runs beyond it go in chunks)."""
+
+
 def _envelope_chain(sc: Scenario, array: SensorArray, x0, streams):
     """Envelopes of the envelope and magnitude electrodes from simulated raw shaft-rate channels.
 
@@ -252,25 +256,34 @@ def _envelope_chain(sc: Scenario, array: SensorArray, x0, streams):
     times = sc.times
     dt = 1.0 / ch.raw_rate_hz
     raw_t = np.arange(times[0] - ch.pad_s, times[-1] + ch.pad_s + 0.5 * dt, dt)
-    src = np.concatenate([cv_positions(x0[:, 0:2], x0[:, 2:4], raw_t), np.broadcast_to(
-        x0[:, None, 4:5], (x0.shape[0], raw_t.size, 1))], axis=-1)
-    dip = keel_dipole(x0[:, None, 2:4], x0[:, None, 8])
     elec = array.group("electrode")
     kinds = np.array([array.kinds[i] for i in elec])
     chained = np.isin(kinds, ("envelope", "magnitude"))
-    E = array.electric_field(src, dip)[..., chained, :]          # (runs, n_raw, S_chain, 3)
-    raw = raw_channels(E.reshape(E.shape[:2] + (-1,)), raw_t, ch.shaft_hz, noise_std=ch.raw_noise_std,
-                       rng=streams["envelope"]).reshape(E.shape)
     is_mag = kinds[chained] == "magnitude"
-    parts, cols = [], []
-    if (~is_mag).any():
-        r = raw[..., ~is_mag, :]
-        parts.append(envelope_chain(r.reshape(r.shape[:2] + (-1,)), raw_t, times, ch.raw_rate_hz, ch.lowpass_hz))
-        cols.append(np.flatnonzero(np.isin(array.channel_sensor, elec[chained][~is_mag])))
-    if is_mag.any():
-        parts.append(magnitude_envelope_chain(raw[..., is_mag, :], raw_t, times, ch.raw_rate_hz, ch.lowpass_hz))
-        cols.append(np.flatnonzero(np.isin(array.channel_sensor, elec[chained][is_mag])))
-    return np.concatenate(cols), np.concatenate(parts, axis=-1)
+    cols = [np.flatnonzero(np.isin(array.channel_sensor, elec[chained][sel])) for sel in (~is_mag, is_mag)
+            if sel.any()]
+    # runs in chunks of about RAW_CHUNK_BYTES of raw samples: every run's chain is its own, and the noise is
+    # drawn run after run (C order), so the chunks give the one batch's envelopes exactly
+    per_run = raw_t.size * int(chained.sum()) * 3 * 8
+    rows = max(1, RAW_CHUNK_BYTES // per_run)
+    envelopes = []
+    for lo in range(0, x0.shape[0], rows):
+        x = x0[lo:lo + rows]
+        src = np.concatenate([cv_positions(x[:, 0:2], x[:, 2:4], raw_t), np.broadcast_to(
+            x[:, None, 4:5], (x.shape[0], raw_t.size, 1))], axis=-1)
+        dip = keel_dipole(x[:, None, 2:4], x[:, None, 8])
+        E = array.electric_field(src, dip)[..., chained, :]          # (runs, n_raw, S_chain, 3)
+        raw = raw_channels(E.reshape(E.shape[:2] + (-1,)), raw_t, ch.shaft_hz, noise_std=ch.raw_noise_std,
+                           rng=streams["envelope"]).reshape(E.shape)
+        parts = []
+        if (~is_mag).any():
+            r = raw[..., ~is_mag, :]
+            parts.append(envelope_chain(r.reshape(r.shape[:2] + (-1,)), raw_t, times, ch.raw_rate_hz,
+                                        ch.lowpass_hz))
+        if is_mag.any():
+            parts.append(magnitude_envelope_chain(raw[..., is_mag, :], raw_t, times, ch.raw_rate_hz, ch.lowpass_hz))
+        envelopes.append(np.concatenate(parts, axis=-1))
+    return np.concatenate(cols), np.concatenate(envelopes)
 
 
 def _seismic_chain(sc: Scenario, array: SensorArray, sources, streams):

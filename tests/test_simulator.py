@@ -138,3 +138,18 @@ def test_default_moment_walk_is_relative_to_the_ship():
     assert np.diag(big.Q)[4] == pytest.approx(0.6069, rel=1e-3)      # the setting measured consistent on S0
     ratio = np.sqrt(np.diag(small.Q)[4] / np.diag(big.Q)[4])
     assert ratio == pytest.approx(np.linalg.norm([1e4] * 3) / np.linalg.norm([8e7, 2e7, 4e7]), rel=1e-9)
+
+
+def test_raw_chain_in_chunks_of_runs_equals_one_batch(monkeypatch):
+    """The raw shaft-rate chain simulates runs in chunks to bound its memory: each run's chain is its own and the
+    noise is drawn run after run, so the chunks give the one batch's envelopes bit for bit (envelope and magnitude
+    electrodes in one array)."""
+    import shipsense.simulator as simulator
+
+    sc = load_scenario("S1-P2")
+    kinds = ["envelope", "magnitude", "envelope"]
+    sc = sc.model_copy(update={"sensors": [s.model_copy(update={"kind": k}) for s, k in zip(sc.sensors, kinds)]})
+    sc = sc.with_updates(envelope_chain={"mode": "raw", "raw_noise_std": 1e-8})
+    whole = simulate(sc, runs=5, seed=3).measurements
+    monkeypatch.setattr(simulator, "RAW_CHUNK_BYTES", 1)           # one run at a time
+    np.testing.assert_array_equal(simulate(sc, runs=5, seed=3).measurements, whole)

@@ -39,8 +39,8 @@ def hypothesis_rates(bank, truth, positions):
     """Per hypothesis (1-based, level-major as the study numbers them): the share of runs in which it
     converges to the truth and to the truth's mirror image across the sensors' line."""
     mirror = mirror_truth(truth, positions)
-    conv = converged(bank.means, truth[:, None]).mean(axis=0)          # (H,): every hypothesis at once
-    mirr = converged(bank.means, mirror[:, None]).mean(axis=0)
+    conv = converged(bank.positions, truth[:, None]).mean(axis=0)      # (H,): every hypothesis at once
+    mirr = converged(bank.positions, mirror[:, None]).mean(axis=0)
     return conv.tolist(), mirr.tolist()
 
 
@@ -97,7 +97,7 @@ def bank_for(sc, runs, seed, unit, o=None, tag=None, chain=None):
     model = model_from_scenario(sc)
     truth = model.state_from_truth(sim.truth)
     seeds, P0 = seed_hypotheses(model, sim.measurements[:, 0], sc.tracker.bank)
-    b = run_bank(unit, model, sim.measurements, seeds, P0)
+    b = run_bank(unit, model, sim.measurements, seeds, P0, store=("positions", "loglik", "selected"))
     summ, _ = bank_summary(b, truth, centre=model.array.positions[:, :2].mean(axis=0))
     amb = b.ambiguities(nats=sc.tracker.bank.ambiguity_nats, distance=sc.tracker.bank.ambiguity_distance)
     counts = {}
