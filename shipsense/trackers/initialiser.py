@@ -92,22 +92,36 @@ def linear_basis(model, theta, steps, stride=1):
 
     The measurements are linear in the moment (and ``p``) for vector, tmi,
     envelope and electrode magnitude (``p >= 0``) channels: ``h = offset + basis @ params``; bearing
-    channels are in the offset.  The last few results are kept (the grid and
-    window are the same for every batch of passages a study initialises);
-    treat them as read-only.
+    channels are in the offset.  The last few grids' results are kept, each
+    for the longest window asked so far (a shorter window is its first
+    ``W`` steps: the same numbers, copied contiguous); a longer one extends
+    it to at least twice its length, so a tracker whose windows vary from
+    passage to passage computes the basis a few times, not once per window.
+    Treat the results as read-only.
     """
     theta = np.ascontiguousarray(theta, dtype=float)
-    key = (id(model), theta.shape, hash(theta.tobytes()), steps, stride)
+    key = (id(model), theta.shape, hash(theta.tobytes()), stride)
     hit = _BASIS_CACHE.get(key)
-    if hit is not None and hit[0] is model:
-        return hit[1], hit[2]
-    offset, basis = _linear_basis(model, theta, steps, stride)
-    offset.flags.writeable = False
-    basis.flags.writeable = False
-    if len(_BASIS_CACHE) >= _BASIS_CACHE_SIZE:
-        _BASIS_CACHE.pop(next(iter(_BASIS_CACHE)))
-    _BASIS_CACHE[key] = (model, offset, basis)
-    return offset, basis
+    if hit is not None and hit["model"] is not model:
+        hit = None
+    if hit is None or hit["steps"] < steps:
+        longest = steps if hit is None else max(steps, 2 * hit["steps"])
+        offset, basis = _linear_basis(model, theta, longest, stride)
+        hit = {"model": model, "steps": longest, "full": (offset, basis), "views": {}}
+        _BASIS_CACHE.pop(key, None)
+        if len(_BASIS_CACHE) >= _BASIS_CACHE_SIZE:
+            _BASIS_CACHE.pop(next(iter(_BASIS_CACHE)))
+        _BASIS_CACHE[key] = hit
+    W = len(range(0, steps, stride))
+    out = hit["views"].get(W)
+    if out is None:
+        out = tuple(np.ascontiguousarray(a[:, :W]) for a in hit["full"])
+        for a in out:
+            a.flags.writeable = False
+        if len(hit["views"]) >= 2:          # the last two windows' copies
+            hit["views"].pop(next(iter(hit["views"])))
+        hit["views"][W] = out
+    return out
 
 
 def _linear_basis(model, theta, steps, stride):

@@ -344,3 +344,20 @@ def test_fits_and_grid_in_chunks_of_passages_equal_one_batch(monkeypatch):
     np.testing.assert_array_equal(both.start, whole.start)
     np.testing.assert_allclose(both.seeds, whole.seeds, rtol=1e-8, atol=1e-8)
     np.testing.assert_allclose(both.loglik, whole.loglik, rtol=1e-9, atol=1e-6)
+
+
+def test_the_basis_cache_serves_shorter_windows_from_a_longer_one_exactly():
+    """linear_basis keeps each grid's longest window and serves shorter ones as its first steps: the same numbers
+    as computing them (bit for bit), contiguous and read-only; a longer window extends the cache."""
+    from shipsense.trackers import initialiser
+    from shipsense.trackers.initialiser import _linear_basis
+
+    model = model_from_scenario("S2")          # magnetometers and a bearing: offset and basis both nonzero
+    grid = candidate_grid(model, [50.0, 150.0], np.arange(0.0, 360.0, 90.0), np.arange(0.0, 360.0, 120.0), [4.0])
+    initialiser._BASIS_CACHE.clear()
+    for steps, stride in ((12, 1), (5, 1), (30, 1), (7, 1), (30, 4), (9, 4)):
+        got = linear_basis(model, grid, steps, stride)
+        for a, b in zip(got, _linear_basis(model, grid, steps, stride)):
+            np.testing.assert_array_equal(a, b)
+            assert a.flags.c_contiguous and not a.flags.writeable
+    assert {v["steps"] for v in initialiser._BASIS_CACHE.values()} == {30}    # 12 -> 30 (stride 1); 30 (stride 4)
