@@ -44,6 +44,8 @@ up part of it).
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 from scipy import special
 
@@ -93,7 +95,17 @@ def statistic(sums):
 
 def threshold(dof, level):
     """The chi-square quantile ``1 - level`` of ``dof`` degrees of freedom (inf at 0)."""
+    dof = np.asarray(dof, dtype=int)
+    table = _quantiles(float(level), max(int(dof.max(initial=0)), 1))
+    return table[dof]
+
+
+@lru_cache(maxsize=32)
+def _quantiles(level, top):
+    """``chi2.isf(level, k)`` for k = 0..top (inf at 0), rounded up to a power of two of entries: the tracker
+    asks every sample for a handful of small degrees of freedom (scipy's call costs ~0.1 ms)."""
     from scipy import stats
 
-    dof = np.asarray(dof)
-    return np.where(dof > 0, stats.chi2.isf(level, np.maximum(dof, 1)), np.inf)
+    size = 1 << int(top).bit_length()
+    k = np.arange(size)
+    return np.where(k > 0, stats.chi2.isf(level, np.maximum(k, 1)), np.inf)
