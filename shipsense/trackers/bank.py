@@ -61,15 +61,25 @@ class BankRun:
     kept_positions: np.ndarray | None = None
     kept_selected: np.ndarray | None = None
 
+    def _kept(self, name):
+        """The record ``name``, or a clear error when :func:`run_bank` was not asked to keep it."""
+        value = getattr(self, name)
+        if value is None:
+            raise ValueError(f"this bank run did not keep {name!r}: run_bank(..., store=) must include it")
+        return value
+
     @property
     def positions(self) -> np.ndarray:
         """Posterior positions (R, H, K, 2), SI."""
-        return self.kept_positions if self.means is None else self.means[..., :2]
+        if self.means is None:
+            return self._kept("kept_positions")
+        return self.means[..., :2]
 
     @property
     def cum_loglik(self) -> np.ndarray:
         """Cumulative log-likelihood (R, H, K) (from ``initial_loglik``); -inf once pruned."""
-        c = np.cumsum(np.where(self.active, self.loglik, 0.0), axis=-1) + np.asarray(self.initial_loglik)[..., None]
+        c = np.cumsum(np.where(self.active, self._kept("loglik"), 0.0), axis=-1)
+        c += np.asarray(self.initial_loglik)[..., None]
         return np.where(self.active, c, -np.inf)
 
     @property
@@ -89,12 +99,12 @@ class BankRun:
         if self.kept_selected is not None:
             return self.kept_selected
         idx = self.selected[:, None, :, None]
-        return np.take_along_axis(self.means, idx, axis=1)[:, 0]
+        return np.take_along_axis(self._kept("means"), idx, axis=1)[:, 0]
 
     @property
     def selected_pos_cov(self) -> np.ndarray:
         idx = self.selected[:, None, :, None, None]
-        return np.take_along_axis(self.pos_cov, idx, axis=1)[:, 0]
+        return np.take_along_axis(self._kept("pos_cov"), idx, axis=1)[:, 0]
 
     @property
     def weights(self) -> np.ndarray:
@@ -106,7 +116,7 @@ class BankRun:
     def fused_means(self) -> np.ndarray:
         """Fused mean ``sum_j mu_j x_j`` (R, K, n)."""
         w = self.weights[..., None]
-        return np.sum(w * np.nan_to_num(self.means), axis=1)
+        return np.sum(w * np.nan_to_num(self._kept("means")), axis=1)
 
     @property
     def fused_pos_cov(self) -> np.ndarray:
@@ -114,7 +124,7 @@ class BankRun:
         w = self.weights[..., None, None]
         d = np.nan_to_num(self.means[..., :2]) - self.fused_means[:, None, :, :2]
         spread = d[..., :, None] * d[..., None, :]
-        return np.sum(w * (np.nan_to_num(self.pos_cov) + spread), axis=1)
+        return np.sum(w * (np.nan_to_num(self._kept("pos_cov")) + spread), axis=1)
 
     @property
     def selected_pos_mse(self) -> np.ndarray:
@@ -122,22 +132,22 @@ class BankRun:
         ``sum_j mu_j (P_j + e_j e_j^T)`` with ``e_j`` the position of hypothesis ``j`` minus the selected
         one's.  Equal to :attr:`selected_pos_cov` when one hypothesis holds all the weight; when
         distant hypotheses explain the data almost as well, it says so."""
-        return mixture_mse(self.weights, self.means[..., :2], self.pos_cov, self.selected_means[:, None, :, :2])
+        return mixture_mse(self.weights, self.positions, self._kept("pos_cov"), self.selected_means[:, None, :, :2])
 
     def diverged(self, window: int = 10, confidence: float = 0.999) -> np.ndarray:
         """Divergence flag (R, H, K): lost covariance, or mean NIS over the last ``window`` steps
         above its ``confidence`` chi-square bound."""
         from scipy import stats  # here: scipy.stats is ~70 MB and 0.3 s to import, and only this needs it
 
-        nis = np.where(self.active, self.nis, 0.0)
-        m = np.where(self.active, self.m, 0)
+        nis = np.where(self.active, self._kept("nis"), 0.0)
+        m = np.where(self.active, self._kept("m"), 0)
         cs_n = np.cumsum(nis, axis=-1)
         cs_m = np.cumsum(m, axis=-1)
         lag = lambda a: np.concatenate([np.zeros_like(a[..., :window]), a[..., :-window]], axis=-1)  # noqa: E731
         win_n = cs_n - lag(cs_n)
         win_m = cs_m - lag(cs_m)
         bound = stats.chi2.ppf(confidence, np.maximum(win_m, 1))
-        return (~self.ok) | ((win_n > bound) & (win_m > 0))
+        return (~self._kept("ok")) | ((win_n > bound) & (win_m > 0))
 
     def ambiguities(self, step: int = -1, nats: float = 3.0, distance: float = 20.0):
         """Near-ties at ``step``: per run, a list of ``(i, j, delta_nats, distance_m)``.

@@ -79,6 +79,8 @@ def test_a_lean_record_keeps_positions_likelihoods_and_the_selected_track_of_the
     np.testing.assert_array_equal(only.selected_means, full.selected_means)
     with pytest.raises(ValueError, match="store: unknown 'mean'; choose from means, pos_cov"):
         run_bank("ukf", model, y, seeds, P0, store=("mean",))
+    with pytest.raises(ValueError, match="did not keep 'loglik': run_bank"):
+        _ = only.cum_loglik
 
 
 def test_divergence_flags_the_far_hypotheses(s2_bank):
