@@ -12,8 +12,8 @@ Run:  PYTHONPATH=. python benchmarks/envs.py [--steps 2000] [--num-envs 64] [--o
 Passage-v0's actions are all-ones (read every sensor) so that every step runs the full
 update; Passage-v1's read the first ``k``-sensor subset (its full budget).  Autoresets are included (for
 Passage-v1 with its run-in: the observer reads every sensor until its first track, about 0.5 s per
-passage of the initialiser's grid search).  Every rate is the best of three timed runs.  PPO frames per
-second are reported by ``shipsense train`` (see EXPERIMENTS.md).
+passage of the initialiser's grid search).  Every rate is over three timed runs together, each from its
+own seed.  PPO frames per second are reported by ``shipsense train`` (see EXPERIMENTS.md).
 """
 
 from __future__ import annotations
@@ -34,20 +34,21 @@ TWELVE = {"tracker": {"filter": "ukf", "process_noise": {"model": "diagonal",
 
 
 REPEATS = 3
-"""Each rate is the best of this many timed runs (the machine is shared; the best run is the least disturbed)."""
+"""Each rate is over this many timed runs together, each reset with its own seed."""
 
 
-def best_rate(reset, run, frames):
-    """Best frames per second of ``REPEATS`` timed calls of ``run()``, each after ``reset(seed)`` with its own
-    seed (0, 1, ...): every repetition meets episodes the process has not seen, so caches keyed on an episode
-    (the tracker's window bases) do not flatter the later ones."""
-    best = 0.0
+def sustained_rate(reset, run, frames):
+    """Frames per second over ``REPEATS`` timed calls of ``run()`` together (total frames over total time), each
+    after ``reset(seed)`` with its own seed (0, 1, ...).  An environment's step cost varies from episode to
+    episode (the tracker's initialisation), so every repetition meets episodes the process has not seen (a
+    process-wide cache of one repetition's episodes does not serve the next) and none is picked as the best."""
+    total = 0.0
     for seed in range(REPEATS):
         reset(seed)
         t0 = time.perf_counter()
         run()
-        best = max(best, frames / (time.perf_counter() - t0))
-    return best
+        total += time.perf_counter() - t0
+    return REPEATS * frames / total
 
 
 def single_rate(env, steps, action):
@@ -57,7 +58,7 @@ def single_rate(env, steps, action):
             if term or trunc:
                 env.reset()
 
-    return best_rate(lambda seed: env.reset(seed=seed), run, steps)
+    return sustained_rate(lambda seed: env.reset(seed=seed), run, steps)
 
 
 def vector_rate(envs, steps, actions):
@@ -65,7 +66,7 @@ def vector_rate(envs, steps, actions):
         for _ in range(steps):
             envs.step(actions)
 
-    return best_rate(lambda seed: envs.reset(seed=seed), run, steps * envs.num_envs)
+    return sustained_rate(lambda seed: envs.reset(seed=seed), run, steps * envs.num_envs)
 
 
 def main(argv=None):
@@ -137,7 +138,7 @@ def design_rates(steps, num_envs):
             if term or trunc:
                 env.reset()
 
-    out = {"shipsense/ArrayDesign-v1 (single)": best_rate(lambda seed: env.reset(seed=seed), single, steps)}
+    out = {"shipsense/ArrayDesign-v1 (single)": sustained_rate(lambda seed: env.reset(seed=seed), single, steps)}
     venv = gym.make_vec("shipsense/ArrayDesign-v1", num_envs=num_envs, vectorization_mode="vector_entry_point")
     vsteps = max(steps // num_envs, 8)
 
@@ -145,8 +146,8 @@ def design_rates(steps, num_envs):
         for _ in range(vsteps):
             venv.step(np.array([rng.choice(np.flatnonzero(m)) for m in venv.unwrapped.action_masks()]))
 
-    out[f"shipsense/ArrayDesign-v1 (vector, {num_envs} envs)"] = best_rate(lambda seed: venv.reset(seed=seed), vector,
-                                                                           vsteps * num_envs)
+    out[f"shipsense/ArrayDesign-v1 (vector, {num_envs} envs)"] = sustained_rate(
+        lambda seed: venv.reset(seed=seed), vector, vsteps * num_envs)
     old = gym.make("shipsense/ArrayDesign-v0")
     old_masks = old.get_wrapper_attr("action_masks")
     k = old.unwrapped.k
@@ -155,7 +156,7 @@ def design_rates(steps, num_envs):
         for _ in range(k):
             old.step(int(rng.choice(np.flatnonzero(old_masks()))))
 
-    out["shipsense/ArrayDesign-v0 (single)"] = best_rate(lambda seed: old.reset(seed=seed), v0, k)
+    out["shipsense/ArrayDesign-v0 (single)"] = sustained_rate(lambda seed: old.reset(seed=seed), v0, k)
     return out
 
 if __name__ == "__main__":

@@ -6,8 +6,9 @@ Prints a table: for sigma_seabed = 0.04 (the target case) and 1.0, the time
 of the series (rtol 1e-12) and of the fast path for N random field
 evaluations (offsets 1 m - 2 km, log-uniform; sensor and source depths
 uniform in the water), their ratio and the fast path's maximum relative
-error; then magnetic dipole evaluations per second.  Timings are the best of
-several repeats, in the same process.
+error; then magnetic dipole evaluations per second; then the measurement models
+of the shipped scenarios (readings and Jacobian), compiled against numpy.  Timings
+are the best of several repeats, in the same process.
 """
 
 from __future__ import annotations
@@ -70,6 +71,30 @@ def main(argv=None):
     m = rng.standard_normal((n, 3)) * 1e7
     t = best_time(partial(dipole_field, s, q, m), 10)
     print(f"\nmagnetic dipole kernel: {n / t:.3g} evaluations/s ({1e9 * t / n:.1f} ns each, batch {n:.0e})")
+    measurement_models(min(n, 2400))
+
+
+def measurement_models(batch):
+    """Microseconds per state of the models' readings with their Jacobian (``FieldModel.h_and_H``, the compiled
+    kernel of :mod:`shipsense.trackers.measurement`) against the numpy kernels it replaces (``_h_and_H_numpy``),
+    for the shipped scenarios' models; one thread."""
+    import os
+
+    from shipsense.trackers.models import model_from_scenario
+
+    print(f"\nmeasurement models, h and its Jacobian, batch {batch}, one thread: microseconds per state")
+    print(f"{'model':<8}{'compiled':>10}{'numpy':>10}{'speed-up':>10}")
+    rng = np.random.default_rng(2)
+    truth = np.column_stack([rng.uniform(-150, 150, (batch, 2)), rng.uniform(-8, 8, (batch, 2)),
+                             rng.uniform(-12, -2, batch), rng.uniform(-1e6, 1e6, (batch, 3)),
+                             rng.uniform(50, 900, batch)])
+    os.environ["SHIPSENSE_THREADS"] = "1"     # read at every split: this process's later work runs in one thread
+    for name in ("S0", "S2", "S1-P1", "demo"):
+        model = model_from_scenario(name)
+        x = model.to_internal(model.state_from_truth(truth))
+        model.h_and_H(x)                       # compile or load
+        cells = [1e6 * best_time(partial(f, x), 10) / batch for f in (model.h_and_H, model._h_and_H_numpy)]
+        print(f"{name:<8}{cells[0]:>10.2f}{cells[1]:>10.2f}{cells[1] / cells[0]:>9.1f}x")
 
 
 if __name__ == "__main__":

@@ -368,17 +368,23 @@ class FastHED:
         rx, ry, zs, zt, px, py = (np.ascontiguousarray(v).ravel() for v in _split(sensors, sources, moments))
         shape = np.broadcast_shapes(*(np.shape(v)[:-1] for v in (sensors, sources, moments)))
 
+        params = self.point_parameters()
+
         def points(lo, hi):    # the kernel releases the GIL: a large batch runs in chunks on the CPUs
-            return hed_points(rx[lo:hi], ry[lo:hi], zs[lo:hi], zt[lo:hi], px[lo:hi], py[lo:hi], self._table,
-                              self._nx, self._nw, self._a, self._x0, self._hx, self._w0, self._hw, self.rho_max,
-                              self.medium.water_depth, self.medium.eta, 1.0 / (4.0 * np.pi * self.medium.sigma_water),
-                              derivatives)
+            return hed_points(rx[lo:hi], ry[lo:hi], zs[lo:hi], zt[lo:hi], px[lo:hi], py[lo:hi], *params, derivatives)
 
         parts = in_chunks(points, rx.size)
         E, dE, G = parts[0] if len(parts) == 1 else (np.concatenate(a) for a in zip(*parts))
         if not derivatives:
             return E.reshape(shape + (3,))
         return E.reshape(shape + (3,)), dE.reshape(shape + (3, 3)), G.reshape(shape + (3, 2))
+
+    def point_parameters(self, unit=1.0):
+        """The compiled point functions' description of this medium's field (the arguments after the point of
+        :func:`~shipsense.physics.hed_kernel.hed_field_point`): ``(table, nx, nw, a, x0, hx, w0, hw, rho_max, D,
+        eta, c)``, with ``c = 1 / (4 pi sigma1 unit)`` (fields in units of ``unit`` V/m)."""
+        return (self._table, self._nx, self._nw, self._a, self._x0, self._hx, self._w0, self._hw, self.rho_max,
+                self.medium.water_depth, self.medium.eta, 1.0 / (4.0 * np.pi * self.medium.sigma_water * unit))
 
     def __call__(self, sensors, sources, moments):
         """Electric field (V/m), shape (..., 3); same contract as :func:`hed_field`."""

@@ -237,12 +237,10 @@ class FieldModel:
         d = self._d
         cols = np.array([-1 if d["mom"] is None else d["mom"], -1 if d["z"] is None else d["z"], 1, 1], np.int64)
         hed, table = np.zeros(9), np.zeros((1, 3))
-        if "electrode" in a.types:
-            k = fast_hed(a.medium)
-            cols[2:] = k._nx, k._nw
-            hed = np.array([k._a, k._x0, k._hx, k._w0, k._hw, k.rho_max, a.medium.water_depth, a.medium.eta,
-                            1.0 / (4.0 * np.pi * a.medium.sigma_water * CHANNEL_UNIT["electrode"])])
-            table = k._table
+        if "electrode" in a.types:     # the medium's table, grid (ints) and constants (floats), in nV/m
+            table, nx, nw, *consts = fast_hed(a.medium).point_parameters(CHANNEL_UNIT["electrode"])
+            cols[2:] = nx, nw
+            hed = np.array(consts, dtype=float)
         return (FIELD, np.array(a.positions, dtype=float), np.array(a.orientations, dtype=float),
                 code, earth, offs, np.zeros((1, 1)), self.moment_unit / CHANNEL_UNIT["magnetometer"],
                 float(self.source_z), np.array(a.axial, dtype=np.int64), cols, hed, table)

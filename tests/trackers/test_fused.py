@@ -191,9 +191,9 @@ def test_compiled_steps_equal_the_numpy_steps_with_electrodes(name, scenario):
     """S1-P1: three envelope electrodes (the HED field's envelope, a state with z and p); demo: magnetometers and
     electrodes in one model.  Step by step: the compiled predict and update of every prior of a numpy run (all
     steps of two passages as one batch) against that run's numpy steps, over the approach (30 steps).  Later
-    the posterior collapses (S1: position variance / 3,000 in one step, cond S 1e5): the numpy and compiled
-    updates then both differ from the exact one (40 digits, mpmath) by ~1e-6 in correlation units, rounding of
-    P - K S K^T that no order of the algebra avoids, and a whole run amplifies it at up to 1.5x a step."""
+    the posterior collapses (S1: position variance / 3,000 in one step): the numpy and compiled updates then
+    both differed from the exact one (checked once, writing this test, with a 40-digit mpmath update) by ~1e-6
+    in correlation units, rounding of P - K S K^T that no order of the algebra avoids."""
     sc = load_scenario(scenario)
     model = model_from_scenario(sc)
     assert "z" in model.labels and kernel_of(model) is not None
@@ -222,8 +222,8 @@ def test_compiled_steps_equal_the_numpy_steps_with_electrodes(name, scenario):
     unit = get_filter(name, **options)
     post, inn = unit.update(stack, y.reshape(-1, model.m), model)
     ref = [np.stack(a) for a in zip(*posts)]
-    # demo's prior is far wider in the moment than its 0.2 nT noise (cond S ~1e9): the numpy update's means
-    # differ from the exact ones (mpmath, 40 digits) by up to 5e-11 relative, the compiled one's by up to 3e-10
+    # demo's prior is far wider in the moment than its 0.2 nT noise: the update is ill-conditioned (checked once,
+    # writing this test, against a 40-digit mpmath update: numpy's means up to 5e-11 off, the compiled 3e-10)
     tol, nats = (1e-10, 1e-8) if scenario == "S1-P1" else (5e-9, 1e-7)
     assert_same((post.mean, post.cov, inn.loglik, inn.nis, inn.S), ref[:5], tol, nats)
     # symmetrised: the numpy update's small-batch (LU) path leaves P+ asymmetric by up to 2e-7 in correlation
