@@ -1,0 +1,121 @@
+"""Where the time and memory go: the probes behind the README's "what stands in the way" figures.
+
+Run:  PYTHONPATH=. python benchmarks/where_time_goes.py stages S0|S1          # each stage's peak memory
+      PYTHONPATH=. python benchmarks/where_time_goes.py passage [--steps 1500]  # cProfile of Passage-v0 steps
+      PYTHONPATH=. python benchmarks/where_time_goes.py wide                    # one wide-study task of each kind
+
+``stages`` resets the process's peak resident memory (Linux ``/proc/self/clear_refs``) at the start of each
+stage of the study and prints the stage's starting, peak and final resident memory (MB).  ``passage`` and
+``wide`` print the functions of most own time (``cProfile``, one thread: ``SHIPSENSE_THREADS=1``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import cProfile
+import os
+import pstats
+import re
+import sys
+import tempfile
+import time
+
+
+def _status(key):
+    with open("/proc/self/status") as f:
+        return int(re.search(key + r":\s+(\d+)", f.read()).group(1)) / 1024
+
+
+def stages(study):
+    """Run ``reproduce <study>`` in this process and print each stage's memory."""
+    import importlib
+
+    from shipsense.reproduce import common
+
+    step, done = common.Stages.step, common.Stages.done
+
+    def step_(self, name):
+        with open("/proc/self/clear_refs", "w") as f:
+            f.write("5")                                    # reset VmHWM to the current resident size
+        self._probe = (name, _status("VmRSS"))
+        return step(self, name)
+
+    def done_(self):
+        name, start = self._probe
+        print(f"{name:<22}{start:>10.0f}{_status('VmHWM'):>10.0f}{_status('VmRSS'):>10.0f}", flush=True)
+        return done(self)
+
+    common.Stages.step, common.Stages.done = step_, done_
+    print(f"{'stage':<22}{'start MB':>10}{'peak MB':>10}{'end MB':>10}")
+    with tempfile.TemporaryDirectory() as out:
+        importlib.import_module(f"shipsense.reproduce.{study.lower()}").run(out=out, progress=False)
+
+
+def _profile(fn, rows):
+    pr = cProfile.Profile()
+    t0 = time.perf_counter()
+    pr.runcall(fn)
+    print(f"{time.perf_counter() - t0:.1f} s under the profiler")
+    pstats.Stats(pr).sort_stats("tottime").print_stats(rows)
+
+
+def passage(steps, rows):
+    import warnings
+
+    import gymnasium as gym
+    import numpy as np
+
+    import shipsense.envs  # noqa: F401  (registers the environments)
+
+    warnings.filterwarnings("ignore", category=DeprecationWarning)
+    env = gym.make("shipsense/Passage-v0")
+    env.reset(seed=0)
+    action = np.ones(3, dtype=np.int8)
+
+    def run(n):
+        for _ in range(n):
+            _, _, term, trunc, _ = env.step(action)
+            if term or trunc:
+                env.reset()
+
+    run(200)                                                # compile or load, first episodes
+    _profile(lambda: run(steps), rows)
+    print(f"({steps} steps of Passage-v0, all sensors read)")
+
+
+def wide(rows):
+    from shipsense.reproduce import wide as study
+
+    kinds = {}
+    for task in study.tasks(500, 0):
+        kinds.setdefault((task.family, task.part), task)
+    for task in kinds.values():                             # compile or load
+        study.run_task(task)
+    _profile(lambda: [study.run_task(t) for t in kinds.values()], rows)
+    print(f"({len(kinds)} tasks: {', '.join(t.name for t in kinds.values())})")
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = ap.add_subparsers(dest="what", required=True)
+    s = sub.add_parser("stages")
+    s.add_argument("study", choices=("S0", "S1"))
+    p = sub.add_parser("passage")
+    p.add_argument("--steps", type=int, default=1500)
+    sub.add_parser("wide")
+    ap.add_argument("--rows", type=int, default=20, help="profile rows to print")
+    args = ap.parse_args(argv)
+    if args.what == "stages":
+        if not sys.platform.startswith("linux"):
+            ap.error("stages reads /proc: Linux only")
+        stages(args.study)
+        return
+    os.environ["SHIPSENSE_THREADS"] = "1"
+    if args.what == "passage":
+        passage(args.steps, args.rows)
+    else:
+        wide(args.rows)
+
+
+if __name__ == "__main__":
+    main()
