@@ -3,7 +3,7 @@
 The fields are linear in the moment (and in ``p``), so for every candidate
 trajectory of a grid (start range and bearing from the array centroid,
 course, speed) the best moment is a closed-form least-squares solve
-(:func:`linear_basis`); the best distinct grid minima are refined by batched
+(:func:`linear_basis`, :func:`grid_search`); the best distinct grid minima are refined by batched
 Levenberg-Marquardt fits (:func:`~shipsense.trackers.batchfit.fit_passages`)
 over a window that starts at the detection (:func:`detection_start`), and
 checked by a chi-square goodness-of-fit test (:func:`chi2_limit`).
@@ -81,10 +81,9 @@ def candidate_grid(model, ranges, bearings_deg, courses_deg, speeds, source_z=No
     return theta
 
 
-_BASIS_CACHE: dict = {}
-
-
-_BASIS_CACHE_SIZE = 4
+_TERMS_CACHE: dict = {}
+_TERMS_CACHE_SIZE = 4
+_GRAMS_KEPT = 8
 
 
 def linear_basis(model, theta, steps, stride=1):
@@ -92,36 +91,80 @@ def linear_basis(model, theta, steps, stride=1):
 
     The measurements are linear in the moment (and ``p``) for vector, tmi,
     envelope and electrode magnitude (``p >= 0``) channels: ``h = offset + basis @ params``; bearing
-    channels are in the offset.  The last few grids' results are kept, each
-    for the longest window asked so far (a shorter window is its first
-    ``W`` steps: the same numbers, copied contiguous); a longer one extends
-    it to at least twice its length, so a tracker whose windows vary from
-    passage to passage computes the basis a few times, not once per window.
-    Treat the results as read-only.
+    channels are in the offset (and only there: a field channel's offset is zero, a bearing's basis zero).
+    :func:`grid_search` keeps these, whitened and window-major, in :func:`grid_terms`.
+    """
+    return _linear_basis(model, np.ascontiguousarray(theta, dtype=float), steps, stride)
+
+
+def grid_terms(model, theta, steps, stride=1):
+    """The grid search's terms of candidates ``theta`` over a window of ``steps`` samples taken every
+    ``stride``: whitened field-channel basis ``G`` (W', mF, C*P), bearing offsets ``off`` (W', mB, C) and the
+    Gram matrices ``A`` (C, P, P) of ``G`` over the window's W' samples (every sample present).
+
+    ``G`` and ``off`` are window-major, so a shorter window is a prefix (a view, no copy): the last few grids'
+    terms are kept for the longest window asked so far, and a longer one extends them to at least twice
+    its length -- a tracker whose windows vary from passage to passage computes them a few times, not once
+    per window.  Treat the results as read-only.
     """
     theta = np.ascontiguousarray(theta, dtype=float)
     key = (id(model), theta.shape, hash(theta.tobytes()), stride)
-    hit = _BASIS_CACHE.get(key)
+    hit = _TERMS_CACHE.get(key)
     if hit is not None and hit["model"] is not model:
         hit = None
     if hit is None or hit["steps"] < steps:
         longest = steps if hit is None else max(steps, 2 * hit["steps"])
-        offset, basis = _linear_basis(model, theta, longest, stride)
-        hit = {"model": model, "steps": longest, "full": (offset, basis), "views": {}}
-        _BASIS_CACHE.pop(key, None)
-        if len(_BASIS_CACHE) >= _BASIS_CACHE_SIZE:
-            _BASIS_CACHE.pop(next(iter(_BASIS_CACHE)))
-        _BASIS_CACHE[key] = hit
+        G, off = _window_major(model, *linear_basis(model, theta, longest, stride))
+        hit = {"model": model, "steps": longest, "G": G, "off": off, "P": len(_parameter_slots(model)),
+               "grams": {}}
+        _TERMS_CACHE.pop(key, None)
+        if len(_TERMS_CACHE) >= _TERMS_CACHE_SIZE:
+            _TERMS_CACHE.pop(next(iter(_TERMS_CACHE)))
+        _TERMS_CACHE[key] = hit
     W = len(range(0, steps, stride))
-    out = hit["views"].get(W)
-    if out is None:
-        out = tuple(np.ascontiguousarray(a[:, :W]) for a in hit["full"])
-        for a in out:
-            a.flags.writeable = False
-        if len(hit["views"]) >= 2:          # the last two windows' copies
-            hit["views"].pop(next(iter(hit["views"])))
-        hit["views"][W] = out
-    return out
+    G, off = hit["G"][:W], hit["off"][:W]
+    A = hit["grams"].get(W)
+    if A is None:
+        A = _gram(G.reshape(G.shape[0] * G.shape[1], G.shape[2]), theta.shape[0], hit["P"])
+        A.flags.writeable = False
+        if len(hit["grams"]) >= _GRAMS_KEPT:
+            hit["grams"].pop(next(iter(hit["grams"])))
+        hit["grams"][W] = A
+    return G, off, A
+
+
+def _window_major(model, offset, basis):
+    """Whitened field-channel basis (W, mF, C*P) and bearing offsets (W, mB, C), read-only, from
+    :func:`linear_basis`'s (C, W, m, P) and (C, W, m)."""
+    field, bearing = ~model.axial, model.axial
+    if np.any(offset[..., field]) or np.any(basis[..., bearing, :]):
+        raise ValueError("grid terms need offsets on bearing channels only and a basis on field channels only")
+    C, W, _, P = basis.shape
+    std = np.sqrt(model.R)
+    G = np.ascontiguousarray((basis[:, :, field] / std[field, None]).transpose(1, 2, 0, 3))
+    G = G.reshape(W, int(field.sum()), C * P)
+    off = np.ascontiguousarray(offset[:, :, bearing].transpose(1, 2, 0))
+    for a in (G, off):
+        a.flags.writeable = False
+    return G, off
+
+
+@njit(cache=True, nogil=True)
+def _gram(G, C, P):
+    """``A[c] = sum_k G[k, c P:(c + 1) P]^T G[k, c P:(c + 1) P]`` (C, P, P) of a whitened basis (K, C*P)."""
+    A = np.zeros((C, P, P))
+    for k in range(G.shape[0]):
+        for c in range(C):
+            base = c * P
+            for p in range(P):
+                g = G[k, base + p]
+                for q in range(p + 1):
+                    A[c, p, q] += g * G[k, base + q]
+    for c in range(C):
+        for p in range(P):
+            for q in range(p):
+                A[c, q, p] = A[c, p, q]
+    return A
 
 
 def _linear_basis(model, theta, steps, stride):
@@ -199,99 +242,128 @@ def fit_end(model, measurements, k0, window, through_peak=None):
     return np.where(past.any(axis=1), np.argmax(past, axis=1), end)
 
 
-def _grid_fit_masked(model, yw_all, offset, basis, std, clamp):
-    """Moment-eliminated chi-square (R, C) and moments (R, C, P) of every candidate, general case.
+def grid_fit(model, yw, G, off, A, clamp):
+    """Moment-eliminated chi-square (R, C) and moments (R, C, P) of every candidate of :func:`grid_terms`
+    ``(G, off, A)`` for windows ``yw`` (R, W', m) (internal units, NaN = missing).
 
-    Handles bearing channels (non-zero offsets) and missing samples (each passage its own masked design): for
-    every passage and candidate, the least-squares parameters of the whitened basis ``G = basis / std``
-    against the whitened residuals of the samples present (:func:`_grid_fit_kernel`, compiled; the
-    candidates in chunks on the CPUs; it keeps nothing per candidate).
+    Per passage and candidate: the least-squares parameters of the whitened field-channel basis against
+    the whitened field samples present (a ``1e-9`` ridge; the last parameter clamped at 0 if ``clamp``),
+    and the chi-square of the fit plus the whitened bearing residuals (wrapped modulo pi against the
+    candidate's bearings).  The field channels' ``G^T d`` of every candidate is one matrix product over the
+    passages (``d`` zero where missing); the normal matrix is the window's Gram matrix ``A`` less the outer
+    products of the missing samples (or built from the present ones when fewer; compiled,
+    :func:`_grid_solve_kernel`, the candidates in chunks on the CPUs); the chi-square is
+    ``|d|^2 - 2 par.b + par^T A par``.  Passages in chunks bound the (passages, C*P) temporaries.
     """
     from shipsense.parallel import in_chunks
 
-    R = yw_all.shape[0]
-    C, P = basis.shape[0], basis.shape[-1]
-    chi2 = np.empty((R, C))
-    params = np.empty((R, C, P))
-    yw = np.ascontiguousarray(yw_all, dtype=float)
-    args = (yw, np.ascontiguousarray(offset, dtype=float), np.ascontiguousarray(basis, dtype=float),
-            np.ascontiguousarray(std, dtype=float), np.ascontiguousarray(model.axial, dtype=np.bool_), bool(clamp),
-            chi2, params)
-    in_chunks(lambda lo, hi: _grid_fit_kernel(*args, lo, hi), C, split_min=64)
+    R, Wn, _ = yw.shape
+    C, P = A.shape[0], A.shape[-1]
+    field, bearing = ~model.axial, model.axial
+    std = np.sqrt(model.R)
+    yf = yw[:, :, field] / std[field]
+    present = np.isfinite(yf).reshape(R, -1)
+    d = np.where(present, yf.reshape(R, -1), 0.0)
+    dd = np.einsum("rk,rk->r", d, d)
+    yb = np.ascontiguousarray(yw[:, :, bearing], dtype=float)
+    std_b = np.ascontiguousarray(std[bearing])
+    G2 = G.reshape(G.shape[0] * G.shape[1], C * P)
+    chi2, params = np.empty((R, C)), np.empty((R, C, P))
+    rows = max(1, FIT_CHUNK_BYTES // (8 * C * max(P, 1)))
+    for lo in range(0, R, rows):
+        hi = min(R, lo + rows)
+        b = d[lo:hi] @ G2                                                               # (rows, C*P)
+        args = (b, G2, A, present[lo:hi], dd[lo:hi], yb[lo:hi], off, std_b, bool(clamp), chi2[lo:hi],
+                params[lo:hi])
+        in_chunks(lambda c_lo, c_hi, args=args: _grid_solve_kernel(*args, c_lo, c_hi), C, split_min=256)
     return chi2, params
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
-def _grid_fit_kernel(yw, offset, basis, std, axial, clamp, chi2, params, c_lo, c_hi):
-    """:func:`_grid_fit_masked` for candidates ``c_lo:c_hi``: per passage ``r`` and candidate ``c``, with the
-    whitened residuals ``d = (y - offset) / std`` of the samples present (bearings wrapped modulo pi) and the
-    whitened basis ``G = basis / std``, solve ``(G^T G + 1e-9 I) par = G^T d`` (Gaussian elimination with
-    partial pivoting, as LAPACK's ``gesv``), clamp the last parameter at 0 if asked, and sum the squared fit
-    residuals."""
-    R, W, m = yw.shape
-    P = basis.shape[3]
+def _grid_solve_kernel(b, G, A_all, present, dd, yb, off, std_b, clamp, chi2, params, c_lo, c_hi):
+    """:func:`grid_fit` for candidates ``c_lo:c_hi``: per passage, the normal matrix of each candidate
+    (``A_all`` less the missing samples' outer products, or the present samples' when fewer), solved by
+    Gaussian elimination with partial pivoting (as LAPACK's ``gesv``) with a ``1e-9`` ridge, the clamp, and
+    the chi-square from the normal equations plus the bearings' wrapped residuals."""
+    R, K = present.shape
+    P = A_all.shape[1]
+    W, nb = yb.shape[1], yb.shape[2]
     A = np.empty((P, P))
-    b = np.empty(P)
-    d = np.empty((W, m))
-    G = np.empty((W, m, P))     # the candidate's whitened basis
+    M = np.empty((P, P))
+    x = np.empty(P)
+    idx = np.empty(K, dtype=np.int64)
+    bear = np.empty(c_hi - c_lo)
     for r in range(R):
+        missing = 0
+        for k in range(K):
+            if not present[r, k]:
+                missing += 1
+        from_present = 2 * missing > K          # fewer present than missing: sum the present samples
+        count = 0
+        for k in range(K):
+            if present[r, k] == from_present:
+                idx[count] = k
+                count += 1
+        sign = 1.0 if from_present else -1.0
+        for c in range(c_lo, c_hi):             # the bearings' whitened wrapped residuals
+            bear[c - c_lo] = 0.0
+        for w in range(W):
+            for j in range(nb):
+                y = yb[r, w, j]
+                if not math.isfinite(y):
+                    continue
+                for c in range(c_lo, c_hi):
+                    e = y - off[w, j, c]
+                    e = (e - math.pi * math.floor((e + 0.5 * math.pi) / math.pi)) / std_b[j]
+                    bear[c - c_lo] += e * e
         for c in range(c_lo, c_hi):
+            base = c * P
             for p in range(P):
-                b[p] = 0.0
                 for q in range(P):
-                    A[p, q] = 0.0
-            for w in range(W):
-                for j in range(m):
-                    y = yw[r, w, j]
-                    if not math.isfinite(y):
-                        d[w, j] = 0.0
-                        continue
-                    e = y - offset[c, w, j]
-                    if axial[j]:
-                        e = e - math.pi * math.floor((e + 0.5 * math.pi) / math.pi)
-                    e = e / std[j]
-                    d[w, j] = e
-                    for p in range(P):
-                        G[w, j, p] = basis[c, w, j, p] / std[j]
-                    for p in range(P):
-                        g = G[w, j, p]
-                        b[p] += g * e
-                        for q in range(p + 1):
-                            A[p, q] += g * G[w, j, q]
+                    A[p, q] = 0.0 if from_present else A_all[c, p, q]
+            for i in range(count):
+                k = idx[i]
+                for p in range(P):
+                    g = sign * G[k, base + p]
+                    for q in range(p + 1):
+                        A[p, q] += g * G[k, base + q]
             for p in range(P):
-                A[p, p] += 1e-9
                 for q in range(p):
                     A[q, p] = A[p, q]
-            for k in range(P):              # Gaussian elimination with partial pivoting
+            for p in range(P):
+                x[p] = b[r, base + p]
+                for q in range(P):
+                    M[p, q] = A[p, q]
+                M[p, p] += 1e-9
+            for k in range(P):                  # Gaussian elimination with partial pivoting
                 piv = k
                 for i in range(k + 1, P):
-                    if abs(A[i, k]) > abs(A[piv, k]):
+                    if abs(M[i, k]) > abs(M[piv, k]):
                         piv = i
                 if piv != k:
                     for q in range(P):
-                        A[k, q], A[piv, q] = A[piv, q], A[k, q]
-                    b[k], b[piv] = b[piv], b[k]
+                        M[k, q], M[piv, q] = M[piv, q], M[k, q]
+                    x[k], x[piv] = x[piv], x[k]
                 for i in range(k + 1, P):
-                    f = A[i, k] / A[k, k]
+                    f = M[i, k] / M[k, k]
                     for q in range(k, P):
-                        A[i, q] -= f * A[k, q]
-                    b[i] -= f * b[k]
+                        M[i, q] -= f * M[k, q]
+                    x[i] -= f * x[k]
             for k in range(P - 1, -1, -1):
-                t = b[k]
+                t = x[k]
                 for q in range(k + 1, P):
-                    t -= A[k, q] * params[r, c, q]
-                params[r, c, k] = t / A[k, k]
-            if clamp and params[r, c, P - 1] < 0.0:
-                params[r, c, P - 1] = 0.0
-            s = 0.0
-            for w in range(W):
-                for j in range(m):
-                    if math.isfinite(yw[r, w, j]):
-                        f = d[w, j]
-                        for p in range(P):
-                            f -= G[w, j, p] * params[r, c, p]
-                        s += f * f
-            chi2[r, c] = s
+                    t -= M[k, q] * x[q]
+                x[k] = t / M[k, k]
+            if clamp and P > 0 and x[P - 1] < 0.0:
+                x[P - 1] = 0.0
+            s = dd[r]
+            for p in range(P):
+                s -= 2.0 * x[p] * b[r, base + p]
+                for q in range(P):
+                    s += x[p] * A[p, q] * x[q]
+            chi2[r, c] = max(s, 0.0) + bear[c - c_lo]
+            for p in range(P):
+                params[r, c, p] = x[p]
 
 
 def depth_prior(model, z_std, source_z=None):
@@ -430,34 +502,10 @@ def grid_search(model, yw, grid, window, stride):
     """Moment-eliminated chi-square (R, C) and best parameters (R, C, P) of every grid candidate.
 
     ``yw`` (R, W', m) are the window's samples at steps ``0, stride, ...`` (internal units, NaN = missing);
-    the grid's candidate trajectories are evaluated on the same steps (:func:`linear_basis`).
+    the grid's candidate trajectories are evaluated on the same steps (:func:`grid_terms`, :func:`grid_fit`).
     """
-    R, Wn, m = yw.shape
-    std = np.sqrt(model.R)
-    offset, basis = linear_basis(model, grid, window, stride)                             # (C, W', m[, P])
-    clamp = "p" in model.labels                                   # the envelope needs p >= 0
-    if np.any(offset) or not np.isfinite(yw).all():
-        return _grid_fit_masked(model, yw, offset, basis, std, clamp)
-    G = basis / std[:, None]                                                              # (C, W', m, P)
-    C, P = G.shape[0], G.shape[-1]
-    # no offset (no bearing channels) and nothing missing: the whitened data d are the same for every
-    # candidate, so b = G^T d is one matmul and chi2 = |d|^2 - 2 par.b + par^T A par (no fit formed)
-    Gf = G.reshape(C, Wn * m, P)                                                          # (C, W'm, P)
-    A_all = np.swapaxes(Gf, -1, -2) @ Gf + 1e-9 * np.eye(P)                               # shared by passages
-    A_inv = np.linalg.inv(A_all)
-    d = (yw / std).reshape(R, Wn * m)
-    chi2, params = np.empty((R, C)), np.empty((R, C, P))
-    rows = max(1, FIT_CHUNK_BYTES // (8 * C * P))        # passages at a time: bounds the (C, P, rows) temporaries
-    for lo in range(0, R, rows):
-        dc = d[lo:lo + rows]
-        b = np.matmul(np.swapaxes(Gf, -1, -2), dc.T)                                      # (C, P, rows)
-        par = A_inv @ b
-        if clamp:
-            par[:, -1] = np.maximum(par[:, -1], 0.0)
-        chi2[lo:lo + rows] = (np.sum(dc * dc, axis=-1)[None] - 2.0 * np.sum(par * b, axis=1)
-                              + np.sum(par * (A_all @ par), axis=1)).T                    # (rows, C)
-        params[lo:lo + rows] = np.moveaxis(par, -1, 0)                                    # (rows, C, P)
-    return chi2, params
+    G, off, A = grid_terms(model, grid, window, stride)
+    return grid_fit(model, yw, G, off, A, "p" in model.labels)     # (the envelope needs p >= 0)
 
 
 def refine_minima(model, yfit, grid, chi2_grid, params, *, stages, keep, distinct_m, prior, gof, explore_samples,

@@ -292,24 +292,34 @@ def test_distinct_rows_is_the_greedy_selection_of_every_row():
     assert np.all(found.sum(axis=1) == np.array([len(set(i)) for i in idx.tolist()]))
 
 
-def test_the_compiled_masked_grid_fit_equals_a_least_squares_solve_per_candidate():
-    """Bearings (wrapped residuals against non-zero offsets), missing samples and the clamp, candidate by
-    candidate against numpy's solve of the masked normal equations."""
-    from shipsense.trackers.initialiser import _grid_fit_masked
+def test_the_grid_fit_equals_a_least_squares_solve_per_candidate(monkeypatch):
+    """Bearings (wrapped residuals against non-zero offsets), missing samples (a few: the window's normal
+    matrix less theirs; most: the present ones'; none) and the clamp, candidate by candidate against numpy's
+    solve of the masked normal equations; passages in chunks and candidates on one thread give the same (to
+    the rounding of the matrix product over fewer passages)."""
+    from shipsense.trackers import initialiser
+    from shipsense.trackers.initialiser import _gram, _window_major, grid_fit
     from shipsense.trackers.models import model_from_scenario
 
     model = model_from_scenario("S2")
     ax = model.axial
     rng = np.random.default_rng(2)
-    R, C, W, P = 2, 150, 12, 3           # 150 candidates: chunks in threads
+    R, C, W, P = 4, 600, 12, 3           # 600 candidates: chunks in threads
     yw = rng.normal(size=(R, W, model.m))
     yw[..., ax] = rng.uniform(-1.5, 1.5, (R, W, ax.sum()))
-    yw[rng.random(yw.shape) < 0.2] = np.nan
+    yw[0][rng.random(yw[0].shape) < 0.2] = np.nan                       # a few missing
+    yw[1][rng.random(yw[1].shape) < 0.8] = np.nan                       # most missing
+    yw[3, :, :3] = np.nan                                               # a sensor not read
     offset = rng.uniform(-1.5, 1.5, (C, W, model.m)) * ax
     basis = rng.normal(size=(C, W, model.m, P)) * ~ax[:, None]
     std = np.sqrt(model.R)
     G = basis / std[:, None]
-    chi2, params = _grid_fit_masked(model, yw, offset, basis, std, True)
+    Gw, off = _window_major(model, offset, basis)
+    A = _gram(Gw.reshape(W * (~ax).sum(), C * P), C, P)
+    chi2, params = grid_fit(model, yw, Gw, off, A, True)
+    monkeypatch.setattr(initialiser, "FIT_CHUNK_BYTES", 8 * C * P)     # one passage at a time
+    monkeypatch.setenv("SHIPSENSE_THREADS", "1")
+    np.testing.assert_allclose(grid_fit(model, yw, Gw, off, A, True)[0], chi2, rtol=1e-12)   # (BLAS rounding)
     for r in range(R):
         present = np.isfinite(yw[r])
         for c in range(0, C, 7):
@@ -318,8 +328,10 @@ def test_the_compiled_masked_grid_fit_equals_a_least_squares_solve_per_candidate
             g = (G[c] * present[..., None]).reshape(-1, P)
             par = np.linalg.solve(g.T @ g + 1e-9 * np.eye(P), g.T @ d)
             par[-1] = max(par[-1], 0.0)
-            np.testing.assert_allclose(params[r, c], par, rtol=1e-10, atol=1e-12)
-            np.testing.assert_allclose(chi2[r, c], np.sum((d - g @ par) ** 2), rtol=1e-10)
+            np.testing.assert_allclose(params[r, c], par, rtol=1e-9, atol=1e-12)
+            np.testing.assert_allclose(chi2[r, c], np.sum((d - g @ par) ** 2), rtol=1e-9)
+    with pytest.raises(ValueError, match="bearing channels only"):
+        _window_major(model, offset + 1.0, basis)
 
 
 def test_fits_and_grid_in_chunks_of_passages_equal_one_batch(monkeypatch):
@@ -346,18 +358,20 @@ def test_fits_and_grid_in_chunks_of_passages_equal_one_batch(monkeypatch):
     np.testing.assert_allclose(both.loglik, whole.loglik, rtol=1e-9, atol=1e-6)
 
 
-def test_the_basis_cache_serves_shorter_windows_from_a_longer_one_exactly():
-    """linear_basis keeps each grid's longest window and serves shorter ones as its first steps: the same numbers
-    as computing them (bit for bit), contiguous and read-only; a longer window extends the cache."""
+def test_the_grid_terms_serve_shorter_windows_from_a_longer_one_exactly():
+    """grid_terms keeps each grid's terms for the longest window and serves shorter ones as prefixes: the same
+    numbers as computing them (bit for bit), read-only; a longer window extends the cache."""
     from shipsense.trackers import initialiser
-    from shipsense.trackers.initialiser import _linear_basis
+    from shipsense.trackers.initialiser import _gram, _window_major, grid_terms
 
     model = model_from_scenario("S2")          # magnetometers and a bearing: offset and basis both nonzero
     grid = candidate_grid(model, [50.0, 150.0], np.arange(0.0, 360.0, 90.0), np.arange(0.0, 360.0, 120.0), [4.0])
-    initialiser._BASIS_CACHE.clear()
+    initialiser._TERMS_CACHE.clear()
     for steps, stride in ((12, 1), (5, 1), (30, 1), (7, 1), (30, 4), (9, 4)):
-        got = linear_basis(model, grid, steps, stride)
-        for a, b in zip(got, _linear_basis(model, grid, steps, stride)):
-            np.testing.assert_array_equal(a, b)
-            assert a.flags.c_contiguous and not a.flags.writeable
-    assert {v["steps"] for v in initialiser._BASIS_CACHE.values()} == {30}    # 12 -> 30 (stride 1); 30 (stride 4)
+        G, off, A = grid_terms(model, grid, steps, stride)
+        G0, off0 = _window_major(model, *linear_basis(model, grid, steps, stride))
+        np.testing.assert_array_equal(G, G0)
+        np.testing.assert_array_equal(off, off0)
+        np.testing.assert_array_equal(A, _gram(G0.reshape(-1, G0.shape[-1]), len(grid), 3))
+        assert not (G.flags.writeable or off.flags.writeable or A.flags.writeable)
+    assert {v["steps"] for v in initialiser._TERMS_CACHE.values()} == {30}    # 12 -> 30 (stride 1); 30 (stride 4)
