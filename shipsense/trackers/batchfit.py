@@ -12,6 +12,8 @@ from functools import lru_cache
 
 import numpy as np
 
+from shipsense.trackers.measurement import FIELD, kernel_of
+
 
 def powers(A, K):
     """A^k for k = 0..K-1, shape (K, n, n)."""
@@ -172,10 +174,23 @@ def fit_passages(model, y, theta_init, steps, stride=1, iterations=40, return_in
     theta = np.array(theta_init, dtype=float)
     if lo is not None:
         theta = np.clip(theta, lo, hi)
-    problem = _Passages(model, y, Ak, prior, None if noise is None else noise.gamma, len(theta))
-    theta, cost, r, X, Hs = _levenberg_marquardt(problem, theta, iterations, tol, lo, hi)
-    if not return_information:
-        return theta, cost
+    gamma = None if noise is None else noise.gamma
+    problem = _Passages(model, y, Ak, prior, gamma, len(theta))
+    spec = kernel_of(model) if theta.dtype.kind == "f" else None
+    if spec is not None and spec[0] == FIELD:   # the compiled loop, one fit at a time (lm_kernel.py)
+        from shipsense.trackers.lm_kernel import lm_fits
+
+        mu, root = (np.zeros((1, problem.n)), np.empty(0)) if prior is None else (
+            np.atleast_2d(np.asarray(prior[0], dtype=float)), problem.root)
+        theta, cost = lm_fits(spec, theta, Ak, np.asarray(y, dtype=float), problem.w, mu, root,
+                              np.inf if gamma is None else gamma, None if lo is None else (lo, hi), iterations, tol)
+        if not return_information:
+            return theta, cost
+        r, X, Hs = problem.residual(theta, np.arange(len(theta)))
+    else:
+        theta, cost, r, X, Hs = _levenberg_marquardt(problem, theta, iterations, tol, lo, hi)
+        if not return_information:
+            return theta, cost
     Jac = problem.jacobian(X, np.arange(len(theta)), r, Hs, weighted=False)   # the sandwich's bread, unweighted
     JtJ = np.swapaxes(Jac, -1, -2) @ Jac
     if noise is not None:

@@ -1,0 +1,186 @@
+"""The compiled Levenberg-Marquardt loop of :func:`~shipsense.trackers.batchfit.fit_passages`, one fit at a time.
+
+:func:`~shipsense.trackers.batchfit.fit_passages` runs its fits here when the model has a compiled
+measurement kernel (:func:`~shipsense.trackers.measurement.kernel_of`): every fit is independent, so each
+runs its damped Gauss-Newton iterations to the end inside one compiled loop -- the batched numpy loop
+(:func:`~shipsense.trackers.batchfit._levenberg_marquardt`, the reference, and the path of models without a
+kernel) spends most of its time in Python around small batches.  The iteration is the numpy loop's, step for
+step: the normal equations ``J^T W J`` and gradient ``J^T W r`` (``W`` the Huber weights ``min(1, gamma /
+|r|)``, 1 without Huber) accumulated sample by sample from the measurement kernel's readings and Jacobian
+(no Jacobian is stored), the damping ``lam diag(J^T W J + 1e-12)`` solved by Gaussian elimination with
+partial pivoting, the projection on the state bounds, the same acceptance, damping schedule and stall rule.
+The two agree to rounding (tests/trackers/test_lm_kernel.py).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from shipsense.parallel import in_chunks
+from shipsense.trackers.measurement import _h_jac, _loop_jit, _wrap
+
+
+def lm_fits(spec, theta, Ak, y, w, mu, root, gamma, bounds, iterations, tol):
+    """Fit every row of ``theta`` (B, n) (modified in place; returned with the costs (B,)).
+
+    ``Ak`` (B or 1, K, n, n) transitions to the fitted samples, ``y`` (B or 1, K, m) internal units (NaN =
+    missing), ``w`` (m,) whitening, ``mu`` (B or 1, n) and ``root`` (n,) the prior's mean and square-root
+    information (``root`` empty: no prior), ``gamma`` the Huber threshold (``inf``: least squares),
+    ``bounds`` ``(lo, hi)`` (n,) or None.
+    """
+    B, n = theta.shape
+    present = np.isfinite(y)
+    y0 = np.where(present, y, 0.0)
+    lo, hi = (np.empty(0), np.empty(0)) if bounds is None else (np.asarray(b, dtype=float) for b in bounds)
+    cost = np.empty(B)
+    args = (spec, theta, np.ascontiguousarray(Ak, dtype=float), y0, present, np.ascontiguousarray(w, dtype=float),
+            np.ascontiguousarray(mu, dtype=float), np.ascontiguousarray(root, dtype=float), float(gamma), lo, hi,
+            int(iterations), float(tol), cost)
+    in_chunks(lambda b_lo, b_hi: _lm_kernel(*args, b_lo, b_hi), B, split_min=16)
+    return theta, cost
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def _lm_kernel(spec, theta, Ak, y, present, w, mu, root, gamma, lo, hi, iterations, tol, cost, b_lo, b_hi):
+    """:func:`lm_fits` of rows ``b_lo:b_hi`` (allocates the scratch; the loop is :func:`_lm_loop`)."""
+    n, m = theta.shape[1], y.shape[2]
+    _lm_loop(spec, theta, Ak, y, present, w, mu, root, gamma, lo, hi, iterations, tol, cost, b_lo, b_hi,
+             np.empty((6, n)), np.empty((4, n, n)), np.empty(m), np.empty((m, n)), np.empty(3), np.empty(3),
+             np.empty(3), np.empty((3, 3)), np.empty((3, 3)))
+    return True
+
+
+@_loop_jit
+def _lm_loop(spec, theta, Ak, y, present, w, mu, root, gamma, lo, hi, iterations, tol, cost, b_lo, b_hi,
+             vec, mat, yhat, H, r3, m3, Bf, dBq, dBm):
+    n = theta.shape[1]
+    th, tt, g, gt, x, row = vec[0], vec[1], vec[2], vec[3], vec[4], vec[5]
+    N, Nt, M = mat[0], mat[1], mat[2]
+    for b in range(b_lo, b_hi):
+        for a in range(n):
+            th[a] = theta[b, a]
+        c = _normal(spec, th, b, Ak, y, present, w, mu, root, gamma, N, g, x, row, yhat, H, r3, m3, Bf, dBq, dBm)
+        lam = 1e-2
+        stall = 0
+        for _ in range(iterations):
+            if stall >= 3:
+                break
+            for p in range(n):                       # (J^T W J + lam diag(D + 1e-12)) step = -g
+                for q in range(n):
+                    M[p, q] = N[p, q]
+                M[p, p] += lam * (N[p, p] + 1e-12)
+                tt[p] = -g[p]
+            _solve(M, tt, n)
+            for a in range(n):
+                tt[a] += th[a]
+                if lo.size > 0:
+                    tt[a] = min(max(tt[a], lo[a]), hi[a])
+            ct = _normal(spec, tt, b, Ak, y, present, w, mu, root, gamma, Nt, gt, x, row, yhat, H, r3, m3, Bf,
+                         dBq, dBm)
+            better = math.isfinite(ct) and ct < c
+            gain = (c - ct) / max(c, 1e-300) if better else 0.0
+            if better:
+                c = ct
+                for p in range(n):
+                    th[p] = tt[p]
+                    g[p] = gt[p]
+                    for q in range(n):
+                        N[p, q] = Nt[p, q]
+            lam = min(max(lam / 3.0 if better else lam * 5.0, 1e-9), 1e9)
+            stalled = gain < tol if better else lam >= 1e6
+            stall = stall + 1 if stalled else 0
+        for a in range(n):
+            theta[b, a] = th[a]
+        cost[b] = c
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _normal(spec, th, b, Ak, y, present, w, mu, root, gamma, N, g, x, row, yhat, H, r3, m3, Bf, dBq, dBm):
+    """Cost (chi-square, or Huber's) of fit ``b`` at state ``th`` and its normal matrix ``N = J^T W J`` and
+    gradient ``g = J^T W r`` (``W`` the Huber weights)."""
+    n = th.shape[0]
+    K, m = y.shape[1], y.shape[2]
+    ia = b if Ak.shape[0] > 1 else 0
+    iy = b if y.shape[0] > 1 else 0
+    axial = spec[9]
+    for p in range(n):
+        g[p] = 0.0
+        for q in range(n):
+            N[p, q] = 0.0
+    c = 0.0
+    for k in range(K):
+        for i in range(n):                           # the state at sample k
+            acc = 0.0
+            for j in range(n):
+                acc += Ak[ia, k, i, j] * th[j]
+            x[i] = acc
+        _h_jac(x, spec, yhat, H, r3, m3, Bf, dBq, dBm)
+        for i in range(m):
+            if not present[iy, k, i]:
+                continue
+            e = yhat[i] - y[iy, k, i]
+            if axial[i]:
+                e = _wrap(e)
+            e *= w[i]
+            for a in range(n):                       # the Jacobian's row: w_i H_i A_k
+                acc = 0.0
+                for j in range(n):
+                    acc += H[i, j] * Ak[ia, k, j, a]
+                row[a] = w[i] * acc
+            c += _accumulate(e, gamma, row, N, g, n)
+    if root.size > 0:                                # the prior's rows root_a (th_a - mu_a)
+        im = b if mu.shape[0] > 1 else 0
+        for a in range(n):
+            if root[a] == 0.0:
+                continue
+            for j in range(n):
+                row[j] = 0.0
+            row[a] = root[a]
+            c += _accumulate(root[a] * (th[a] - mu[im, a]), gamma, row, N, g, n)
+    for p in range(n):
+        for q in range(p):
+            N[q, p] = N[p, q]
+    return c
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _accumulate(e, gamma, row, N, g, n):
+    """Add residual ``e`` with Jacobian row ``row`` to ``N`` (lower triangle) and ``g``; its cost."""
+    a = abs(e)
+    if a <= gamma:
+        wt, cost = 1.0, e * e
+    else:
+        wt, cost = gamma / max(a, 1e-300), 2.0 * gamma * a - gamma * gamma
+    for p in range(n):
+        rp = wt * row[p]
+        g[p] += rp * e
+        for q in range(p + 1):
+            N[p, q] += rp * row[q]
+    return cost
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _solve(M, x, n):
+    """``x <- M^-1 x`` by Gaussian elimination with partial pivoting (``M`` overwritten), as LAPACK's ``gesv``."""
+    for k in range(n):
+        piv = k
+        for i in range(k + 1, n):
+            if abs(M[i, k]) > abs(M[piv, k]):
+                piv = i
+        if piv != k:
+            for q in range(n):
+                M[k, q], M[piv, q] = M[piv, q], M[k, q]
+            x[k], x[piv] = x[piv], x[k]
+        for i in range(k + 1, n):
+            f = M[i, k] / M[k, k]
+            for q in range(k, n):
+                M[i, q] -= f * M[k, q]
+            x[i] -= f * x[k]
+    for k in range(n - 1, -1, -1):
+        t = x[k]
+        for q in range(k + 1, n):
+            t -= M[k, q] * x[q]
+        x[k] = t / M[k, k]
