@@ -151,7 +151,11 @@ def fit_passages(model, y, theta_init, steps, stride=1, iterations=40, return_in
     at the solution: the inverse of the batch-fit covariance).  Stops after
     ``iterations``; a fit stops earlier once it stalled three times in a row
     (an accepted step gaining less than the relative ``tol``, or a rejected
-    step at a damping of 1e6 or more).
+    step at a damping of 1e6 or more).  A model with a compiled measurement
+    kernel (every field model but the series HED path) runs each fit's
+    iterations in one compiled loop (:mod:`~shipsense.trackers.lm_kernel`),
+    the others the batched numpy loop (:func:`_levenberg_marquardt`): the same
+    iteration, equal to rounding (tested).
     """
     B = len(theta_init)
     rows = max(1, FIT_CHUNK_BYTES // (8 * model.n * model.m * max(1, np.shape(y)[-2])))
