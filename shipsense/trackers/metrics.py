@@ -13,9 +13,18 @@ CONVERGENCE_THRESHOLD_M = 10.0
 
 
 def position_error(means, truth):
-    """Horizontal position error (..., steps) of estimates and truth (x, y first)."""
-    d = np.asarray(means)[..., :2] - np.asarray(truth)[..., :2]
-    return np.sqrt(np.sum(d * d, axis=-1))
+    """Horizontal position error (..., steps) of estimates and truth (x, y first).
+
+    Formed in place (``sqrt(dx^2 + dy^2)``, the same numbers as summing ``d * d`` over x and y): a study's
+    bank of hypotheses over runs and steps needs two arrays of its size, not five."""
+    means, truth = np.asarray(means), np.asarray(truth)
+    err = np.subtract(means[..., 0], truth[..., 0], dtype=float)
+    np.square(err, out=err)
+    dy = np.subtract(means[..., 1], truth[..., 1], dtype=float)
+    np.square(dy, out=dy)
+    err += dy
+    del dy
+    return np.sqrt(err, out=err)
 
 
 def rmse_k(means, truth, run_axis=0):

@@ -56,3 +56,14 @@ def test_nees_of_consistent_gaussian_errors_averages_the_dimension():
 def test_selection_accuracy():
     tr = np.array([[5.0, 1.0], [2.0, 9.0], [3.0, 4.0]])
     assert selection_accuracy([1, 0, 1], tr) == pytest.approx(2 / 3)
+
+
+def test_position_error_is_the_norm_of_the_horizontal_difference_under_broadcasting():
+    """The in-place form gives the textbook ``sqrt(sum(d * d))`` bit for bit, for a bank of hypotheses against
+    one truth per run (broadcast), and for integer inputs."""
+    rng = np.random.default_rng(0)
+    means, truth = rng.normal(size=(5, 4, 30, 7)) * 100, rng.normal(size=(5, 1, 30, 7)) * 100
+    d = means[..., :2] - truth[..., :2]
+    np.testing.assert_array_equal(position_error(means, truth), np.sqrt(np.sum(d * d, axis=-1)))
+    assert position_error(means, truth).shape == (5, 4, 30)
+    np.testing.assert_array_equal(position_error(np.array([[3, 0]]), np.array([[0, 4]])), [5.0])
