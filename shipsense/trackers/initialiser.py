@@ -3,7 +3,7 @@
 The fields are linear in the moment (and in ``p``), so for every candidate
 trajectory of a grid (start range and bearing from the array centroid,
 course, speed) the best moment is a closed-form least-squares solve
-(:func:`linear_basis`, :func:`grid_search`); the best distinct grid minima are refined by batched
+(:func:`linear_basis`, :func:`grid_minima`); the best distinct grid minima are refined by batched
 Levenberg-Marquardt fits (:func:`~shipsense.trackers.batchfit.fit_passages`)
 over a window that starts at the detection (:func:`detection_start`), and
 checked by a chi-square goodness-of-fit test (:func:`chi2_limit`).
@@ -92,7 +92,7 @@ def linear_basis(model, theta, steps, stride=1):
     The measurements are linear in the moment (and ``p``) for vector, tmi,
     envelope and electrode magnitude (``p >= 0``) channels: ``h = offset + basis @ params``; bearing
     channels are in the offset (and only there: a field channel's offset is zero, a bearing's basis zero).
-    :func:`grid_search` keeps these, whitened and window-major, in :func:`grid_terms`.
+    The grid search keeps these, whitened and window-major, in :func:`grid_terms`.
     """
     return _linear_basis(model, np.ascontiguousarray(theta, dtype=float), steps, stride)
 
@@ -498,35 +498,41 @@ class WindowFits:
         return distinct_loglik(self.chi2, self.found)
 
 
-def grid_search(model, yw, grid, window, stride):
-    """Moment-eliminated chi-square (R, C) and best parameters (R, C, P) of every grid candidate.
+def grid_minima(model, yw, grid, window, stride, count, distinct_m, mid):
+    """The ``count`` best distinct grid candidates of each passage (R, count, n), best first, with their
+    least-squares moments (:func:`grid_fit`): a candidate more than ``distinct_m`` from every better pick at
+    the window's middle (``mid`` (2, n): the state's position there), the best repeated when fewer are
+    distinct (:func:`_distinct`).
 
     ``yw`` (R, W', m) are the window's samples at steps ``0, stride, ...`` (internal units, NaN = missing);
-    the grid's candidate trajectories are evaluated on the same steps (:func:`grid_terms`, :func:`grid_fit`).
+    the grid's candidate trajectories are evaluated on the same steps (:func:`grid_terms`).  The grid's
+    chi-square and moments (C and C x P per passage) exist for a chunk of passages at a time.
     """
-    G, off, A = grid_terms(model, grid, window, stride)
-    return grid_fit(model, yw, G, off, A, "p" in model.labels)     # (the envelope needs p >= 0)
-
-
-def refine_minima(model, yfit, grid, chi2_grid, params, *, stages, keep, distinct_m, prior, gof, explore_samples,
-                  taus=None, huber=None):
-    """The ``keep`` best distinct Levenberg-Marquardt fits of each passage's window ``yfit`` (R, W, m),
-    started from its best distinct grid minima, refined in ``stages`` (a passage whose best fit so far fails
-    the chi-square test gets the next stage's minima); :class:`WindowFits`."""
-    R, W, _ = yfit.shape
     slots = _parameter_slots(model)
-    mid = powers(model.A, W)[W // 2][:2]
+    G, off, A = grid_terms(model, grid, window, stride)
+    clamp = "p" in model.labels                                   # the envelope needs p >= 0
+    R, C, P = yw.shape[0], len(grid), A.shape[-1]
     mid_grid = grid @ mid.T                                                              # (C, 2)
+    starts = np.zeros((R, count, model.n))
+    rows = max(1, FIT_CHUNK_BYTES // (8 * C * (P + 1)))
+    for lo in range(0, R, rows):
+        chi2, params = grid_fit(model, yw[lo:lo + rows], G, off, A, clamp)
+        for i in range(chi2.shape[0]):
+            chosen = _distinct(chi2[i], mid_grid, count, distinct_m)
+            starts[lo + i] = grid[chosen]
+            starts[lo + i][:, slots] = params[i, chosen]
+    return starts
+
+
+def refine_minima(model, yfit, starts, *, stages, keep, distinct_m, prior, gof, explore_samples, taus=None,
+                  huber=None):
+    """The ``keep`` best distinct Levenberg-Marquardt fits of each passage's window ``yfit`` (R, W, m),
+    started from its best distinct grid minima ``starts`` (R, stages[-1], n) (:func:`grid_minima`), refined
+    in ``stages`` (a passage whose best fit so far fails the chi-square test gets the next stage's minima);
+    :class:`WindowFits`."""
+    R, W, _ = yfit.shape
+    mid = powers(model.A, W)[W // 2][:2]
     M = stages[-1]
-
-    def grid_starts(rows, count):   # the ``count`` best distinct grid minima of passages ``rows``, their moments
-        out = np.zeros((len(rows), count, model.n))
-        for i, r in enumerate(rows):
-            chosen = _distinct(chi2_grid[r], mid_grid, count, distinct_m)
-            out[i] = grid[chosen]
-            out[i][:, slots] = params[r, chosen]
-        return out
-
     if explore_samples is not None and explore_samples < 2:
         raise ValueError(f"explore_samples must be at least 2, got {explore_samples!r}")
     explore = 1 if explore_samples is None else max(1, W // int(explore_samples))
@@ -538,9 +544,9 @@ def refine_minima(model, yfit, grid, chi2_grid, params, *, stages, keep, distinc
     info = np.zeros((R, M, model.n, model.n))
     todo, lo = np.arange(R), 0
     for hi in stages:
-        starts = grid_starts(todo, hi)[:, lo:]
-        t, c, j = fit_passages(model, np.repeat(ysub[todo], hi - lo, axis=0), starts.reshape(-1, model.n), W,
-                               stride=explore, return_information=True, prior=prior, huber=huber,
+        first = starts[todo, lo:hi].reshape(-1, model.n)
+        t, c, j = fit_passages(model, np.repeat(ysub[todo], hi - lo, axis=0), first, W, stride=explore,
+                               return_information=True, prior=prior, huber=huber,
                                taus=None if tsub is None else np.repeat(tsub[todo], hi - lo, axis=0))
         theta[todo, lo:hi] = t.reshape(todo.size, hi - lo, -1)
         chi2[todo, lo:hi] = np.where(np.isfinite(c), c, np.inf).reshape(todo.size, hi - lo)
@@ -574,8 +580,10 @@ def window_fits(model, yfit, *, ranges, speeds, taus=None, bearing_step_deg=15.0
     stride = max(1, W // grid_samples)
     grid = candidate_grid(model, ranges, np.arange(0.0, 360.0, bearing_step_deg),
                           np.arange(0.0, 360.0, course_step_deg), speeds, source_z)
-    chi2, params = grid_search(model, yfit[:, ::stride], grid, W, stride)
-    return refine_minima(model, yfit, grid, chi2, params, stages=_refine_stages(refine, keep), keep=keep,
+    stages = _refine_stages(refine, keep)
+    starts = grid_minima(model, yfit[:, ::stride], grid, W, stride, stages[-1], distinct_m,
+                         powers(model.A, W)[W // 2][:2])
+    return refine_minima(model, yfit, starts, stages=stages, keep=keep,
                          distinct_m=distinct_m, prior=depth_prior(model, z_std, source_z), gof=gof,
                          explore_samples=explore_samples, taus=taus, huber=huber)
 

@@ -337,8 +337,9 @@ def test_the_grid_fit_equals_a_least_squares_solve_per_candidate(monkeypatch):
 def test_fits_and_grid_in_chunks_of_passages_equal_one_batch(monkeypatch):
     """The initialiser bounds its memory by fitting (and grid-searching) passages in chunks.  Every fit is
     independent, so chunked fits give the one batch's results bit for bit; the grid's matrix products over
-    fewer passages round differently (another BLAS path): the fits then stop within their tolerance of each
-    other, 1e-8 (S1-P2: a depth prior, ``p >= 0``)."""
+    fewer passages round differently (another BLAS path): the fits then start a rounding apart and stop
+    within their tolerance of each other (a relative gain of 1e-9 in the cost: measured 1.5e-8 relative on
+    the seeds; 1e-6 allowed) (S1-P2: a depth prior, ``p >= 0``)."""
     import shipsense.trackers.batchfit as batchfit
     import shipsense.trackers.initialiser as initialiser
     from shipsense.reproduce.common import prior_grid
@@ -354,7 +355,7 @@ def test_fits_and_grid_in_chunks_of_passages_equal_one_batch(monkeypatch):
     for field in ("seeds", "P0", "loglik", "start"):
         np.testing.assert_array_equal(getattr(fits, field), getattr(whole, field))
     np.testing.assert_array_equal(both.start, whole.start)
-    np.testing.assert_allclose(both.seeds, whole.seeds, rtol=1e-8, atol=1e-8)
+    np.testing.assert_allclose(both.seeds, whole.seeds, rtol=1e-6, atol=1e-8)
     np.testing.assert_allclose(both.loglik, whole.loglik, rtol=1e-9, atol=1e-6)
 
 
