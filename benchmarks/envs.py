@@ -13,7 +13,8 @@ Passage-v0's actions are all-ones (read every sensor) so that every step runs th
 update; Passage-v1's read the first ``k``-sensor subset (its full budget).  Autoresets are included (for
 Passage-v1 with its run-in: the observer reads every sensor until its first track, about 0.5 s per
 passage of the initialiser's grid search).  Every rate is over three timed runs together, each from its
-own seed.  PPO frames per second are reported by ``shipsense train`` (see EXPERIMENTS.md).
+own seed; a Passage vector env's runs are whole episode cycles (:func:`whole_episodes`).  PPO frames per
+second are reported by ``shipsense train`` (see EXPERIMENTS.md).
 """
 
 from __future__ import annotations
@@ -115,13 +116,24 @@ def passage_rates(steps, n, kwargs=None, v1_id="shipsense/Passage-v1"):
     env = gym.make("shipsense/Passage-v0", **kwargs)
     single = single_rate(env, steps, np.ones(3, dtype=np.int8))
     venv = gym.make_vec("shipsense/Passage-v0", num_envs=n, vectorization_mode="vector_entry_point", **kwargs)
-    vec = vector_rate(venv, max(steps // 10, 20), np.ones((n, 3), dtype=np.int8))
+    vec = vector_rate(venv, whole_episodes(venv, steps // 10), np.ones((n, 3), dtype=np.int8))
     env1 = gym.make(v1_id)
     full = int(env1.unwrapped.core.full[0])
     single1 = single_rate(env1, steps, full)
     venv1 = gym.make_vec(v1_id, num_envs=n, vectorization_mode="vector_entry_point")
-    vec1 = vector_rate(venv1, max(steps // 10, 20), np.full(n, full))
+    vec1 = vector_rate(venv1, whole_episodes(venv1, steps // 10), np.full(n, full))
     return single, vec, single1, vec1
+
+
+def whole_episodes(venv, steps):
+    """At least ``steps`` vector steps, rounded up to whole episode cycles (K - 1 steps and the autoreset step).
+
+    A passage lasts K samples, so the vector env's sub-environments, reset together, stay in step: each
+    cycle starts every tracker (its window fits) at about the same sample.  A timed run from a reset that
+    ends mid-cycle weighs those starts by where it ends (40 steps of S2's 80 counted them twice); whole
+    cycles give the rate a training run sees."""
+    K = int(venv.unwrapped.core.K)
+    return K * max(1, -(-int(steps) // K))
 
 
 def design_rates(steps, num_envs):
