@@ -158,8 +158,10 @@ def fit_passages(model, y, theta_init, steps, stride=1, iterations=40, return_in
     iteration, equal to rounding (tested).
     """
     B = len(theta_init)
+    spec = kernel_of(model)
+    compiled = spec is not None and spec[0] == FIELD
     rows = max(1, FIT_CHUNK_BYTES // (8 * model.n * model.m * max(1, np.shape(y)[-2])))
-    if B > rows:       # every fit is independent: chunks of rows bound the Jacobians' memory (same results)
+    if B > rows and not compiled:   # every fit is independent: chunks of rows bound the Jacobians' memory
         parts = []
         for lo in range(0, B, rows):
             part = slice(lo, lo + rows)
@@ -174,32 +176,69 @@ def fit_passages(model, y, theta_init, steps, stride=1, iterations=40, return_in
         Ak = powers(model.A, steps)[::stride][None]                     # (1, K', n, n)
     else:
         Ak = transitions(model, taus)                                    # (B or 1, K', n, n)
-    lo, hi = getattr(model, "state_bounds", None) or (None, None)
+    y = np.asarray(y, dtype=float)
     theta = np.array(theta_init, dtype=float)
+    _check_shapes(model, y, theta, Ak, prior, steps, stride, taus)
+    lo, hi = getattr(model, "state_bounds", None) or (None, None)
     if lo is not None:
         theta = np.clip(theta, lo, hi)
     gamma = None if noise is None else noise.gamma
-    problem = _Passages(model, y, Ak, prior, gamma, len(theta))
-    spec = kernel_of(model) if theta.dtype.kind == "f" else None
-    if spec is not None and spec[0] == FIELD:   # the compiled loop, one fit at a time (lm_kernel.py)
+    if compiled:   # the compiled loop, one fit at a time (lm_kernel.py), on every fit at once
         from shipsense.trackers.lm_kernel import lm_fits
 
-        mu, root = (np.zeros((1, problem.n)), np.empty(0)) if prior is None else (
-            np.atleast_2d(np.asarray(prior[0], dtype=float)), problem.root)
-        theta, cost = lm_fits(spec, theta, Ak, np.asarray(y, dtype=float), problem.w, mu, root,
+        mu, root = (np.zeros((1, model.n)), np.empty(0)) if prior is None else (
+            np.atleast_2d(np.asarray(prior[0], dtype=float)), np.sqrt(np.asarray(prior[1], dtype=float)))
+        theta, cost = lm_fits(spec, theta, Ak, y, 1.0 / np.sqrt(model.R), mu, root,
                               np.inf if gamma is None else gamma, None if lo is None else (lo, hi), iterations, tol)
         if not return_information:
             return theta, cost
-        r, X, Hs = problem.residual(theta, np.arange(len(theta)))
-    else:
-        theta, cost, r, X, Hs = _levenberg_marquardt(problem, theta, iterations, tol, lo, hi)
-        if not return_information:
-            return theta, cost
+        info = []
+        for start in range(0, B, rows):   # the information's Jacobians in chunks of rows
+            part = slice(start, start + rows)
+            chunk_prior = None if prior is None else (_fit_rows(prior[0], part, 2), prior[1])
+            problem = _Passages(model, _fit_rows(y, part), _fit_rows(Ak, part), chunk_prior, gamma,
+                                len(theta[part]))
+            info.append(_information(problem, theta[part], noise, prior is not None))
+        return theta, cost, np.concatenate(info)
+    problem = _Passages(model, y, Ak, prior, gamma, len(theta))
+    theta, cost, r, X, Hs = _levenberg_marquardt(problem, theta, iterations, tol, lo, hi)
+    if not return_information:
+        return theta, cost
+    return theta, cost, _information(problem, theta, noise, prior is not None, (r, X, Hs))
+
+
+def _check_shapes(model, y, theta, Ak, prior, steps, stride, taus):
+    """A clear error for arguments of :func:`fit_passages` whose shapes do not match (the compiled loop would
+    read past them)."""
+    B, n = np.shape(theta) if np.ndim(theta) == 2 else (None, None)
+    if n != model.n:
+        raise ValueError(f"theta_init must be (fits, {model.n}), got {np.shape(theta)}")
+    if y.ndim != 3 or y.shape[2] != model.m or y.shape[0] not in (1, B):
+        raise ValueError(f"y must be (1 or {B} fits, samples, {model.m}), got {y.shape}")
+    if Ak.shape[0] not in (1, B):
+        raise ValueError(f"taus must be (1 or {B} fits, samples), got {np.shape(taus)}")
+    if y.shape[1] != Ak.shape[1]:
+        given = f"taus give {Ak.shape[1]}" if taus is not None else (
+            f"steps={steps} with stride={stride} give {Ak.shape[1]}")
+        raise ValueError(f"y has {y.shape[1]} samples per fit but {given}")
+    if prior is not None:
+        mean = np.asarray(prior[0])
+        if mean.shape[-1] != model.n or (mean.ndim == 2 and mean.shape[0] not in (1, B)) or mean.ndim > 2 or (
+                np.shape(prior[1]) != (model.n,)):
+            raise ValueError(f"prior must be (mean ({model.n},) or (1 or {B}, {model.n}), information "
+                             f"({model.n},)), got {mean.shape} and {np.shape(prior[1])}")
+
+
+def _information(problem, theta, noise, has_prior, at=None):
+    """The Gauss-Newton information (len(theta), n, n) of the fits ``theta`` of ``problem`` (the Jacobian
+    unweighted; a Huber fit's corrected for leverage); ``at`` the residuals, propagated states and Jacobians at
+    ``theta`` when already formed."""
+    r, X, Hs = problem.residual(theta, np.arange(len(theta))) if at is None else at
     Jac = problem.jacobian(X, np.arange(len(theta)), r, Hs, weighted=False)   # the sandwich's bread, unweighted
     JtJ = np.swapaxes(Jac, -1, -2) @ Jac
     if noise is not None:
-        JtJ = leverage_information(Jac, JtJ, noise, Jac.shape[1] - (problem.n if prior is not None else 0))
-    return theta, cost, JtJ
+        JtJ = leverage_information(Jac, JtJ, noise, Jac.shape[1] - (problem.n if has_prior else 0))
+    return JtJ
 
 
 def _fit_rows(a, part, ndim=1):

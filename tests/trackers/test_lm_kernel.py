@@ -62,10 +62,44 @@ def test_the_compiled_fits_with_times_strides_and_few_iterations(monkeypatch):
 
 
 def test_a_fit_that_cannot_move_stays_where_it_started(monkeypatch):
-    """Non-finite data everywhere: no step is ever accepted, in both loops; the cost is the prior's."""
+    """Non-finite data everywhere: no step is ever accepted, in both loops (the cost is zero)."""
     model, y, _, theta0 = _problem("S2", 2, 1, 10)
     y[:] = np.nan
     (th, c), (th0, c0) = _both(monkeypatch, model, y, theta0.copy(), 10)
     np.testing.assert_array_equal(th, theta0)
     np.testing.assert_array_equal(th0, theta0)
     np.testing.assert_array_equal(c, c0)
+
+
+def test_shared_data_per_fit_priors_and_chunks(monkeypatch):
+    """One window shared by every fit (a leading axis of 1), a prior mean per fit, and fits in chunks of the
+    information's Jacobians (the compiled loop runs every fit at once, the numpy loop chunk by chunk)."""
+    model, y, _, theta0 = _problem("S1-P2", 6, 9, 30)
+    mean, weight = depth_prior(model, 1.0)
+    means = np.repeat(mean[None], 6, axis=0)
+    means[:, model.labels.index("z")] *= np.linspace(0.9, 1.1, 6)
+    monkeypatch.setattr(batchfit, "FIT_CHUNK_BYTES", 8 * model.n * model.m * 30 * 4)   # 4 fits per chunk
+    (th, c, info), (th0, c0, info0) = _both(monkeypatch, model, y[:1], theta0, 30, return_information=True,
+                                            prior=(means, weight))
+    np.testing.assert_allclose(c, c0, rtol=1e-8)
+    np.testing.assert_allclose(th, th0, rtol=1e-6, atol=1e-8 * np.abs(th0).max())
+    np.testing.assert_allclose(info, info0, rtol=1e-5, atol=1e-8 * np.abs(info0).max())
+
+
+@pytest.mark.parametrize("change, message", [
+    (dict(steps=10), "samples per fit but steps=10"),
+    (dict(y_rows=2), "y must be"),
+    (dict(prior_rows=3), "prior must be"),
+    (dict(taus_rows=3), "taus must be"),
+])
+def test_mismatched_shapes_are_refused_before_the_compiled_loop(change, message):
+    model, y, _, theta0 = _problem("S2", 4, 2, 24)
+    kw = {}
+    if "y_rows" in change:
+        y = y[:change["y_rows"]]
+    if "prior_rows" in change:
+        kw["prior"] = (np.zeros((change["prior_rows"], model.n)), np.ones(model.n))
+    if "taus_rows" in change:
+        kw["taus"] = np.tile(np.arange(24) * model.period, (change["taus_rows"], 1))
+    with pytest.raises(ValueError, match=message):
+        fit_passages(model, y, theta0, change.get("steps", 24), **kw)
