@@ -109,9 +109,11 @@ def grid_terms(model, theta, steps, stride=1):
     """
     theta = np.ascontiguousarray(theta, dtype=float)
     key = (id(model), theta.shape, hash(theta.tobytes()), stride)
-    hit = _TERMS_CACHE.get(key)
+    hit = _TERMS_CACHE.pop(key, None)
     if hit is not None and hit["model"] is not model:
         hit = None
+    if hit is not None:
+        _TERMS_CACHE[key] = hit                      # the most recently used last
     if hit is None or hit["steps"] < steps:
         longest = steps if hit is None else max(steps, 2 * hit["steps"])
         G, off = _window_major(model, *linear_basis(model, theta, longest, stride))
@@ -123,8 +125,10 @@ def grid_terms(model, theta, steps, stride=1):
         _TERMS_CACHE[key] = hit
     W = len(range(0, steps, stride))
     G, off = hit["G"][:W], hit["off"][:W]
-    A = hit["grams"].get(W)
-    if A is None:
+    A = hit["grams"].pop(W, None)
+    if A is not None:
+        hit["grams"][W] = A                          # the most recently used last
+    else:
         A = _gram(G.reshape(G.shape[0] * G.shape[1], G.shape[2]), theta.shape[0], hit["P"])
         A.flags.writeable = False
         if len(hit["grams"]) >= _GRAMS_KEPT:
@@ -249,16 +253,19 @@ def grid_fit(model, yw, G, off, A, clamp):
     Per passage and candidate: the least-squares parameters of the whitened field-channel basis against
     the whitened field samples present (a ``1e-9`` ridge; the last parameter clamped at 0 if ``clamp``),
     and the chi-square of the fit plus the whitened bearing residuals (wrapped modulo pi against the
-    candidate's bearings).  The field channels' ``G^T d`` of every candidate is one matrix product over the
-    passages (``d`` zero where missing); the normal matrix is the window's Gram matrix ``A`` less the outer
-    products of the missing samples (or built from the present ones when fewer; compiled,
-    :func:`_grid_solve_kernel`, the candidates in chunks on the CPUs); the chi-square is
-    ``|d|^2 - 2 par.b + par^T A par``.  Passages in chunks bound the (passages, C*P) temporaries.
+    candidate's bearings).  The field channels' ``G^T d`` of every candidate is one matrix-vector product
+    per passage (``d`` zero where missing; a passage's numbers do not depend on its batch); the normal
+    matrix is the window's Gram matrix ``A`` less the outer products of the missing samples (or built from
+    the present ones when fewer; compiled, :func:`_grid_solve_kernel`, the candidates in chunks on the
+    CPUs); the chi-square is ``|d|^2 - 2 par.b + par^T A par``.  Passages in chunks bound the
+    (passages, C*P) temporaries.
     """
     from shipsense.parallel import in_chunks
 
     R, Wn, _ = yw.shape
     C, P = A.shape[0], A.shape[-1]
+    if not (Wn == G.shape[0] == off.shape[0]):
+        raise ValueError(f"the windows have {Wn} samples but the grid terms {G.shape[0]}")
     field, bearing = ~model.axial, model.axial
     std = np.sqrt(model.R)
     yf = yw[:, :, field] / std[field]
@@ -270,9 +277,12 @@ def grid_fit(model, yw, G, off, A, clamp):
     G2 = G.reshape(G.shape[0] * G.shape[1], C * P)
     chi2, params = np.empty((R, C)), np.empty((R, C, P))
     rows = max(1, FIT_CHUNK_BYTES // (8 * C * max(P, 1)))
+    buf = np.empty((min(R, rows), C * P))
     for lo in range(0, R, rows):
         hi = min(R, lo + rows)
-        b = d[lo:hi] @ G2                                                               # (rows, C*P)
+        b = buf[:hi - lo]
+        for r in range(lo, hi):   # passage by passage: its numbers do not depend on the others in the batch
+            np.dot(d[r], G2, out=b[r - lo])                                             # (C*P,)
         args = (b, G2, A, present[lo:hi], dd[lo:hi], yb[lo:hi], off, std_b, bool(clamp), chi2[lo:hi],
                 params[lo:hi])
         in_chunks(lambda c_lo, c_hi, args=args: _grid_solve_kernel(*args, c_lo, c_hi), C, split_min=256)
@@ -420,16 +430,36 @@ def _distinct(chi2, positions, M, distinct_m):
     """Indices of the ``M`` lowest ``chi2`` whose ``positions`` (N, 2) are more than ``distinct_m`` apart.
 
     Greedy over the finite ``chi2`` (each pick the best candidate not within ``distinct_m`` of an earlier
-    pick); when fewer than ``M`` are distinct the best one fills the rest.
+    pick); when fewer than ``M`` are distinct the best one fills the rest.  The candidates are walked in
+    ascending ``chi2`` (a stable sort: ties in index order, as ``argmin``), each kept unless within
+    ``distinct_m`` of a pick (:func:`_distinct_walk`, compiled).
     """
-    alive = np.isfinite(chi2)          # not fitted (staged refinement) or failed: never picked
-    chosen = []
-    while len(chosen) < M and alive.any():
-        c = int(np.argmin(np.where(alive, chi2, np.inf)))
-        chosen.append(c)
-        d = positions - positions[c]
-        alive &= np.einsum("ij,ij->i", d, d) > distinct_m * distinct_m
+    chi2 = np.asarray(chi2, dtype=float)
+    order = np.argsort(np.where(np.isfinite(chi2), chi2, np.inf), kind="stable")
+    order = order[np.isfinite(chi2[order])]           # (not fitted, or failed: never picked)
+    picks = np.empty(M, dtype=np.int64)
+    count = _distinct_walk(order, np.ascontiguousarray(positions, dtype=float), M, float(distinct_m) ** 2, picks)
+    chosen = picks[:count].tolist()
     return chosen + [chosen[0]] * (M - len(chosen))
+
+
+@njit(cache=True, nogil=True)
+def _distinct_walk(order, positions, M, limit2, picks):
+    count = 0
+    for c in order:
+        if count == M:
+            break
+        keep = True
+        for i in range(count):
+            d0 = positions[c, 0] - positions[picks[i], 0]
+            d1 = positions[c, 1] - positions[picks[i], 1]
+            if not d0 * d0 + d1 * d1 > limit2:
+                keep = False
+                break
+        if keep:
+            picks[count] = c
+            count += 1
+    return count
 
 
 def distinct_rows(chi2, positions, M, distinct_m):
