@@ -18,13 +18,14 @@ def position_error(means, truth):
     Formed in place (``sqrt(dx^2 + dy^2)``, the same numbers as summing ``d * d`` over x and y): a study's
     bank of hypotheses over runs and steps needs two arrays of its size, not five."""
     means, truth = np.asarray(means), np.asarray(truth)
-    err = np.subtract(means[..., 0], truth[..., 0], dtype=float)
+    dtype = np.result_type(means, truth, 1.0)                 # floating, as wide as the inputs
+    err = np.asarray(np.subtract(means[..., 0], truth[..., 0], dtype=dtype))
     np.square(err, out=err)
-    dy = np.subtract(means[..., 1], truth[..., 1], dtype=float)
+    dy = np.asarray(np.subtract(means[..., 1], truth[..., 1], dtype=dtype))
     np.square(dy, out=dy)
     err += dy
     del dy
-    return np.sqrt(err, out=err)
+    return np.sqrt(err, out=err)[()]          # (one state: a scalar)
 
 
 def rmse_k(means, truth, run_axis=0):

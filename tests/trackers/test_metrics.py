@@ -67,3 +67,5 @@ def test_position_error_is_the_norm_of_the_horizontal_difference_under_broadcast
     np.testing.assert_array_equal(position_error(means, truth), np.sqrt(np.sum(d * d, axis=-1)))
     assert position_error(means, truth).shape == (5, 4, 30)
     np.testing.assert_array_equal(position_error(np.array([[3, 0]]), np.array([[0, 4]])), [5.0])
+    assert position_error([3.0, 0.0], [0.0, 4.0]) == 5.0                    # one state
+    assert position_error(means.astype(np.float32), truth.astype(np.float32)).dtype == np.float32
