@@ -51,12 +51,16 @@ def stages(study):
         importlib.import_module(f"shipsense.reproduce.{study.lower()}").run(out=out, progress=False)
 
 
+SORT = "tottime"
+"""The profiles' order (``--sort``): own time, or ``cumulative`` (with callees)."""
+
+
 def _profile(fn, rows):
     pr = cProfile.Profile()
     t0 = time.perf_counter()
     pr.runcall(fn)
     print(f"{time.perf_counter() - t0:.1f} s under the profiler")
-    pstats.Stats(pr).sort_stats("tottime").print_stats(rows)
+    pstats.Stats(pr).sort_stats(SORT).print_stats(rows)
 
 
 def passage(steps, rows):
@@ -104,7 +108,11 @@ def main(argv=None):
     p.add_argument("--steps", type=int, default=1500)
     sub.add_parser("wide")
     ap.add_argument("--rows", type=int, default=20, help="profile rows to print")
+    ap.add_argument("--sort", choices=("tottime", "cumulative"), default="tottime",
+                    help="profile order: own time (default) or with callees")
     args = ap.parse_args(argv)
+    global SORT
+    SORT = args.sort
     if args.what == "stages":
         if not sys.platform.startswith("linux"):
             ap.error("stages reads /proc: Linux only")
