@@ -6,7 +6,8 @@ Run:  PYTHONPATH=. python benchmarks/where_time_goes.py stages S0|S1          # 
 
 ``stages`` resets the process's peak resident memory (Linux ``/proc/self/clear_refs``) at the start of each
 stage of the study and prints the stage's starting, peak and final resident memory (MB).  ``passage`` and
-``wide`` print the functions of most own time (``cProfile``, one thread: ``SHIPSENSE_THREADS=1``).
+``wide`` print the functions of most own time (``cProfile``, one thread: ``SHIPSENSE_THREADS=1``), or with
+``--sort cumulative`` (before the command) of most time with their callees.
 """
 
 from __future__ import annotations
