@@ -12,6 +12,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from shipsense import numba_cache
+
 
 @numba.njit(cache=True, inline="always")
 def _exact(rho, dz, coef):
@@ -202,3 +204,6 @@ def _lagrange4_derivative(t):
     """Their derivatives in t."""
     return (-(3 * t * t - 6 * t + 2) / 6.0, (3 * t * t - 4 * t - 1) / 2.0,
             -(3 * t * t - 2 * t - 2) / 2.0, (3 * t * t - 1) / 6.0)
+
+
+numba_cache.key_on_sources(globals())   # the caches follow the files these kernels are compiled from

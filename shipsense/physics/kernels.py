@@ -13,6 +13,7 @@ import math
 
 from numba import njit
 
+from shipsense import numba_cache
 from shipsense.physics.magnetic import MU0_OVER_4PI
 
 
@@ -59,3 +60,6 @@ def dipole_point_jacobian(r, m, B, dB_dq, dB_dm):
             dB_dm[j, i] = vm
             dB_dq[i, j] = -vr
             dB_dq[j, i] = -vr
+
+
+numba_cache.key_on_sources(globals())   # the caches follow the files these kernels are compiled from

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from shipsense import numba_cache
 from shipsense.trackers.batchfit import FIT_CHUNK_BYTES, fit_passages, powers
 
 
@@ -744,3 +745,6 @@ def unalign(values, start, K, fill=np.nan):
     rows = np.broadcast_to(np.arange(R)[:, None], src.shape)
     out[rows[inside], src[inside]] = values[inside]
     return out
+
+
+numba_cache.key_on_sources(globals())   # the caches follow the files these kernels are compiled from

@@ -19,6 +19,7 @@ import math
 import numpy as np
 from numba import njit
 
+from shipsense import numba_cache
 from shipsense.parallel import in_chunks
 from shipsense.trackers.measurement import _h_jac, _loop_jit, _wrap
 
@@ -194,3 +195,6 @@ def _solve(M, x, n):
         for q in range(k + 1, n):
             t -= M[k, q] * x[q]
         x[k] = t / M[k, k]
+
+
+numba_cache.key_on_sources(globals())   # the caches follow the files these kernels are compiled from

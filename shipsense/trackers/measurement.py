@@ -18,6 +18,7 @@ import weakref
 import numpy as np
 from numba import njit
 
+from shipsense import numba_cache
 from shipsense.parallel import in_chunks
 from shipsense.physics.hed_kernel import hed_field_point, hed_point
 from shipsense.physics.kernels import dipole_point, dipole_point_jacobian
@@ -248,3 +249,6 @@ def readings(model, x):
     :meth:`~shipsense.trackers.models.FieldModel.h`; None if the model has no compiled kernel or ``x`` is
     complex (complex-step derivatives run the numpy kernels)."""
     return _evaluate(model, x, False)
+
+
+numba_cache.key_on_sources(globals())   # the caches follow the files these kernels are compiled from

@@ -41,6 +41,7 @@ from functools import lru_cache
 import numpy as np
 from numba import njit
 
+from shipsense import numba_cache
 from shipsense.parallel import in_chunks
 from shipsense.trackers.filters._core import (
     LOG_2PI,
@@ -805,3 +806,6 @@ def _merwe(weights, n, alpha, beta, kappa):
     """The unscented weights as writable arrays (a read-only array is another compiled signature)."""
     spread, Wm, Wc = weights(n, alpha, beta, kappa)
     return spread, Wm.copy(), Wc.copy()
+
+
+numba_cache.key_on_sources(globals())   # the caches follow the files these kernels are compiled from

@@ -1,0 +1,70 @@
+"""Key numba's on-disk cache of the compiled kernels on everything they are compiled from.
+
+numba caches a compiled function (``cache=True``) under a stamp of the file that defines it (a hash of its
+contents), not of the files whose functions it inlines or whose constants it freezes (numba issue #8396):
+after an edit of only ``shipsense/trackers/measurement.py``, or an upgrade that changed it, the filter steps
+in ``fused.py`` that inline its measurement function would load stale machine code.  Each module with
+compiled kernels ends with :func:`key_on_sources`, which replaces its kernels' stamp by a hash of the module
+and of every package file it takes code or constants from (:data:`DEPENDS`, transitively), so that a change
+in any of them rebuilds it.  The stamp is a private attribute of numba's cache
+(``Dispatcher._cache._cache_file._source_stamp``, numba 0.5x-0.6x); a numba without it keeps its own
+behaviour.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+DEPENDS = {
+    "physics/kernels.py": ("physics/magnetic.py",),
+    "physics/hed_kernel.py": (),
+    "trackers/measurement.py": ("parallel.py", "physics/hed_kernel.py", "physics/kernels.py"),
+    "trackers/filters/fused.py": ("parallel.py", "trackers/filters/_core.py", "trackers/filters/cdkf.py",
+                                  "trackers/filters/huber_ukf.py", "trackers/filters/ukf.py",
+                                  "trackers/measurement.py"),
+    "trackers/lm_kernel.py": ("parallel.py", "trackers/measurement.py"),
+    "trackers/initialiser.py": ("trackers/batchfit.py",),
+}
+"""Each file with compiled kernels (relative to the package) and the package modules it imports at module
+level (tests/test_numba_cache.py checks this against the sources)."""
+
+PACKAGE = Path(__file__).parent
+
+
+def sources(name, depends=DEPENDS):
+    """``name`` and every file its compiled code may take from: its imports, and theirs if they are kernel
+    files too (sorted)."""
+    seen, todo = set(), [name]
+    while todo:
+        f = todo.pop()
+        if f not in seen:
+            seen.add(f)
+            todo.extend(depends.get(f, ()))
+    return sorted(seen)
+
+
+def sources_digest(name, root=PACKAGE, depends=DEPENDS):
+    """SHA-256 of the names and contents of :func:`sources` of ``name``."""
+    h = hashlib.sha256()
+    for f in sources(name, depends):
+        h.update(f.encode() + b"\0" + (Path(root) / f).read_bytes() + b"\0")
+    return h.digest()
+
+
+def key_on_sources(namespace, root=PACKAGE, depends=DEPENDS):
+    """Stamp the cached kernels defined in a module (its ``globals()``) with :func:`sources_digest`; returns
+    how many.  Call it at the end of the module, after its kernels are defined (numba reads the stamp when
+    it first loads or saves a kernel, at its first call)."""
+    name = Path(namespace["__file__"]).resolve().relative_to(Path(root).resolve()).as_posix()
+    digest = sources_digest(name, root, depends)
+    count = 0
+    for obj in list(namespace.values()):
+        cache_file = getattr(getattr(obj, "_cache", None), "_cache_file", None)
+        func = getattr(obj, "py_func", None)
+        if cache_file is None or func is None or func.__module__ != namespace["__name__"]:
+            continue
+        if hasattr(cache_file, "_source_stamp"):
+            cache_file._source_stamp = digest
+            count += 1
+    return count

@@ -1,0 +1,87 @@
+"""numba's cache of the compiled kernels follows every file they are compiled from (numba keys it on the
+defining file alone)."""
+
+import ast
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import shipsense
+from shipsense import numba_cache
+
+PACKAGE = Path(shipsense.__file__).parent
+
+
+def _module_file(module):
+    path = PACKAGE.parent / (module.replace(".", "/") + ".py")
+    return path.relative_to(PACKAGE).as_posix() if path.exists() else None
+
+
+def test_the_dependency_table_lists_every_kernel_file_and_its_imports():
+    """Every package file that compiles with numba is in DEPENDS, with exactly the package modules it imports at
+    module level (a new kernel file, or a new import in one, must be added), and keys its caches."""
+    kernels = {p.relative_to(PACKAGE).as_posix() for p in PACKAGE.rglob("*.py")
+               if "njit(" in p.read_text() or "@_loop_jit" in p.read_text()}
+    assert kernels == set(numba_cache.DEPENDS)
+    for name in kernels:
+        text = (PACKAGE / name).read_text()
+        tree = ast.parse(text)
+        imported = {_module_file(node.module) for node in tree.body
+                    if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("shipsense.")}
+        assert imported - {None} == set(numba_cache.DEPENDS[name]), name
+        assert text.rstrip().splitlines()[-1].startswith("numba_cache.key_on_sources(globals())"), name
+
+
+def test_the_package_kernels_are_keyed_on_their_sources():
+    from shipsense.trackers import measurement
+    from shipsense.trackers.filters import fused
+
+    digest = numba_cache.sources_digest("trackers/filters/fused.py")
+    assert fused._update_kernel._cache._cache_file._source_stamp == digest
+    assert measurement._batch_kernel._cache._cache_file._source_stamp != digest      # its own sources
+
+
+USER = """
+import sys
+from numba import njit
+from shipsense import numba_cache
+from dep import g
+
+
+@njit(cache=True)
+def f():
+    return g()
+
+
+if sys.argv[1] == "keyed":
+    numba_cache.key_on_sources(globals(), root=sys.argv[2], depends={"user.py": ("dep.py",)})
+print(f())
+"""
+
+
+def test_an_edit_of_an_inlined_file_rebuilds_the_kernel(tmp_path):
+    """A kernel inlining another file's function, cached, then that file edited: numba alone loads the stale
+    kernel (the control); keyed on its sources, the kernel is rebuilt."""
+    (tmp_path / "user.py").write_text(USER)
+
+    def run(mode):
+        out = subprocess.run([sys.executable, "user.py", mode, str(tmp_path)], cwd=tmp_path, capture_output=True,
+                             text=True, check=True)
+        return out.stdout.strip()
+
+    for mode in ("plain", "keyed"):
+        for p in tmp_path.glob("__pycache__/*"):
+            p.unlink()
+        dep = textwrap.dedent("""
+            from numba import njit
+
+
+            @njit(inline="always")
+            def g():
+                return {}
+            """)
+        (tmp_path / "dep.py").write_text(dep.format(1.0))
+        assert run(mode) == "1.0"
+        (tmp_path / "dep.py").write_text(dep.format(2.0))
+        assert run(mode) == ("1.0" if mode == "plain" else "2.0")
