@@ -23,8 +23,9 @@ DEPENDS = {
     "trackers/filters/fused.py": ("parallel.py", "trackers/filters/_core.py", "trackers/filters/cdkf.py",
                                   "trackers/filters/huber_ukf.py", "trackers/filters/ukf.py",
                                   "trackers/measurement.py"),
-    "trackers/lm_kernel.py": ("parallel.py", "trackers/measurement.py"),
-    "trackers/initialiser.py": ("trackers/batchfit.py",),
+    "trackers/lm_kernel.py": ("parallel.py", "trackers/compiled_linalg.py", "trackers/measurement.py"),
+    "trackers/initialiser.py": ("trackers/batchfit.py", "trackers/compiled_linalg.py"),
+    "trackers/compiled_linalg.py": (),
 }
 """Each file with compiled kernels (relative to the package) and the package modules it imports at module
 level (tests/test_numba_cache.py checks this against the sources)."""

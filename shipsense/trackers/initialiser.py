@@ -21,6 +21,7 @@ from numba import njit
 
 from shipsense import numba_cache
 from shipsense.trackers.batchfit import FIT_CHUNK_BYTES, fit_passages, powers
+from shipsense.trackers.compiled_linalg import solve_in_place
 
 
 @dataclass(frozen=True)
@@ -294,7 +295,8 @@ def grid_fit(model, yw, G, off, A, clamp):
 def _grid_solve_kernel(b, G, A_all, present, dd, yb, off, std_b, clamp, chi2, params, c_lo, c_hi):
     """:func:`grid_fit` for candidates ``c_lo:c_hi``: per passage, the normal matrix of each candidate
     (``A_all`` less the missing samples' outer products, or the present samples' when fewer), solved by
-    Gaussian elimination with partial pivoting (as LAPACK's ``gesv``) with a ``1e-9`` ridge, the clamp, and
+    Gaussian elimination with partial pivoting (:func:`~shipsense.trackers.compiled_linalg.solve_in_place`)
+    with a ``1e-9`` ridge, the clamp, and
     the chi-square from the normal equations plus the bearings' wrapped residuals."""
     R, K = present.shape
     P = A_all.shape[1]
@@ -346,25 +348,7 @@ def _grid_solve_kernel(b, G, A_all, present, dd, yb, off, std_b, clamp, chi2, pa
                 for q in range(P):
                     M[p, q] = A[p, q]
                 M[p, p] += 1e-9
-            for k in range(P):                  # Gaussian elimination with partial pivoting
-                piv = k
-                for i in range(k + 1, P):
-                    if abs(M[i, k]) > abs(M[piv, k]):
-                        piv = i
-                if piv != k:
-                    for q in range(P):
-                        M[k, q], M[piv, q] = M[piv, q], M[k, q]
-                    x[k], x[piv] = x[piv], x[k]
-                for i in range(k + 1, P):
-                    f = M[i, k] / M[k, k]
-                    for q in range(k, P):
-                        M[i, q] -= f * M[k, q]
-                    x[i] -= f * x[k]
-            for k in range(P - 1, -1, -1):
-                t = x[k]
-                for q in range(k + 1, P):
-                    t -= M[k, q] * x[q]
-                x[k] = t / M[k, k]
+            solve_in_place(M, x, P)
             if clamp and P > 0 and x[P - 1] < 0.0:
                 x[P - 1] = 0.0
             s = dd[r]

@@ -21,6 +21,7 @@ from numba import njit
 
 from shipsense import numba_cache
 from shipsense.parallel import in_chunks
+from shipsense.trackers.compiled_linalg import solve_in_place
 from shipsense.trackers.measurement import _h_jac, _loop_jit, _wrap
 
 
@@ -76,7 +77,7 @@ def _lm_loop(spec, theta, Ak, y, present, w, mu, root, gamma, lo, hi, iterations
                         M[p, q] = N[p, q]
                     M[p, p] += lam * (N[p, p] + 1e-12)
                     tt[p] = -g[p]
-                _solve(M, tt, n)
+                solve_in_place(M, tt, n)
                 for a in range(n):
                     tt[a] += th[a]
                     if lo.size > 0:
@@ -171,30 +172,6 @@ def _accumulate(e, gamma, row, N, g, n):
         for q in range(p + 1):
             N[p, q] += rp * row[q]
     return cost
-
-
-@njit(cache=True, error_model="numpy", inline="always")
-def _solve(M, x, n):
-    """``x <- M^-1 x`` by Gaussian elimination with partial pivoting (``M`` overwritten), as LAPACK's ``gesv``."""
-    for k in range(n):
-        piv = k
-        for i in range(k + 1, n):
-            if abs(M[i, k]) > abs(M[piv, k]):
-                piv = i
-        if piv != k:
-            for q in range(n):
-                M[k, q], M[piv, q] = M[piv, q], M[k, q]
-            x[k], x[piv] = x[piv], x[k]
-        for i in range(k + 1, n):
-            f = M[i, k] / M[k, k]
-            for q in range(k, n):
-                M[i, q] -= f * M[k, q]
-            x[i] -= f * x[k]
-    for k in range(n - 1, -1, -1):
-        t = x[k]
-        for q in range(k + 1, n):
-            t -= M[k, q] * x[q]
-        x[k] = t / M[k, k]
 
 
 numba_cache.key_on_sources(globals())   # the caches follow the files these kernels are compiled from

@@ -1,0 +1,36 @@
+"""Small dense linear algebra for the compiled loops (numba, inlined): what LAPACK does for one small system,
+without a call out of the loop."""
+
+from __future__ import annotations
+
+from numba import njit
+
+from shipsense import numba_cache
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def solve_in_place(M, x, n):
+    """``x <- M^-1 x`` for the leading ``n x n`` block by Gaussian elimination with partial pivoting (``M``
+    overwritten), as LAPACK's ``gesv``."""
+    for k in range(n):
+        piv = k
+        for i in range(k + 1, n):
+            if abs(M[i, k]) > abs(M[piv, k]):
+                piv = i
+        if piv != k:
+            for q in range(n):
+                M[k, q], M[piv, q] = M[piv, q], M[k, q]
+            x[k], x[piv] = x[piv], x[k]
+        for i in range(k + 1, n):
+            f = M[i, k] / M[k, k]
+            for q in range(k, n):
+                M[i, q] -= f * M[k, q]
+            x[i] -= f * x[k]
+    for k in range(n - 1, -1, -1):
+        t = x[k]
+        for q in range(k + 1, n):
+            t -= M[k, q] * x[q]
+        x[k] = t / M[k, k]
+
+
+numba_cache.key_on_sources(globals())   # the caches follow the files these kernels are compiled from
