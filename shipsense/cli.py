@@ -172,11 +172,14 @@ def cmd_demo(args) -> int:
     from shipsense.config import load_scenario
     from shipsense.plotting import plot_simulation, plot_track
     from shipsense.simulator import simulate
-    from shipsense.tracking import describe, track_to_files
+    from shipsense.tracking import describe, first_use_notice, track_to_files
 
     out = Path(args.out)
     _writable("--out", out, directory=True)
     sc = load_scenario("demo")
+    notice = first_use_notice()
+    if notice:
+        print(f"demo: {notice}", file=sys.stderr)
     bar = _progress(3, "demo: simulate")
     with staged_directory(out) as stage:   # all of the demo's files, or none
         sim = simulate(sc, runs=1)
@@ -211,7 +214,7 @@ def cmd_track(args) -> int:
     from shipsense.recording import RecordingError, read_recording
     from shipsense.simulator import simulate
     from shipsense.trackers.filters import FILTER_NAMES
-    from shipsense.tracking import describe, track_to_files
+    from shipsense.tracking import describe, first_use_notice, track_to_files
 
     sc = load_scenario(args.scenario)
     if args.filter is not None and args.filter not in FILTER_NAMES:
@@ -233,6 +236,9 @@ def cmd_track(args) -> int:
         times, y, truth = sim.times, sim.measurements[0], sim.truth[0]
         used_seed = sc.seed if args.seed is None else args.seed
         source = f"simulated {'random' if args.random else 'nominal'} passage of {sc.name} (seed {used_seed})"
+    notice = first_use_notice()
+    if notice:
+        print(f"track: {notice}", file=sys.stderr)
     with staged_directory(out) as stage:   # the tables and the plot, or nothing
         try:
             summary = track_to_files(sc, times, y, stage, truth=truth, method=args.method, unit=args.filter,

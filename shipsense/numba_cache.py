@@ -69,3 +69,15 @@ def key_on_sources(namespace, root=PACKAGE, depends=DEPENDS):
             cache_file._source_stamp = digest
             count += 1
     return count
+
+
+def cached(*dispatchers):
+    """Whether each of ``dispatchers`` has compiled code on disk for its current sources (its first call then
+    loads it instead of compiling); False when numba's cache cannot tell."""
+    for d in dispatchers:
+        try:
+            if not d._cache._cache_file._load_index():
+                return False
+        except Exception:   # noqa: BLE001 - a numba without these internals, an unreadable cache: unknown
+            return False
+    return True

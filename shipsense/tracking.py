@@ -30,6 +30,22 @@ PLOT_POINTS = 2000
 """Samples kept for the picture of a long passage (evenly spaced, the last included)."""
 
 
+FIRST_USE = ("compiling the numerical kernels on their first use on this machine (about a minute on two "
+             "cores; cached for later runs)")
+
+
+def first_use_notice():
+    """:data:`FIRST_USE` if the tracker's compiled kernels (filter steps, measurement kernel, least-squares
+    loop) are not yet compiled on disk for the current sources, else None."""
+    from shipsense import numba_cache
+    from shipsense.trackers import lm_kernel, measurement
+    from shipsense.trackers.filters import fused
+
+    ready = numba_cache.cached(fused._update_kernel, fused._predict_kernel, measurement._batch_kernel,
+                               lm_kernel._lm_kernel)
+    return None if ready else FIRST_USE
+
+
 @dataclass
 class TrackSummary:
     """What a tracked passage came to: the tracker, the last sample, errors (with a truth), gaps, and the

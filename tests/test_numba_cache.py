@@ -2,6 +2,7 @@
 defining file alone)."""
 
 import ast
+import os
 import subprocess
 import sys
 import textwrap
@@ -85,3 +86,19 @@ def test_an_edit_of_an_inlined_file_rebuilds_the_kernel(tmp_path):
         assert run(mode) == "1.0"
         (tmp_path / "dep.py").write_text(dep.format(2.0))
         assert run(mode) == ("1.0" if mode == "plain" else "2.0")
+
+
+def test_the_first_use_notice_says_whether_the_tracker_will_compile(tmp_path):
+    """``shipsense demo`` and ``track`` say when the tracker's kernels are about to compile: with an empty
+    cache the notice is given; once a passage has been tracked (compiled or loaded), not."""
+    from shipsense import simulate
+    from shipsense.trackers import Tracker
+    from shipsense.tracking import first_use_notice
+
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path))
+    out = subprocess.run([sys.executable, "-c", "from shipsense.tracking import first_use_notice; "
+                          "print(first_use_notice())"], env=env, capture_output=True, text=True, check=True)
+    assert "compiling the numerical kernels" in out.stdout
+    sim = simulate("S2", runs=1, seed=3, random=True)
+    Tracker("S2").track(sim.times, sim.measurements)
+    assert first_use_notice() is None
