@@ -570,33 +570,47 @@ def _predict_kernel(X, P_in, A, Q, sqQ, square_root, mean_out, P_out, L_out, ok_
     Asc = np.empty((n, n + kq))
     vsc = np.empty(n + kq)
     nzs = np.empty(n + kq, np.int64)
-    _predict_loop(X, P_in, A, Q, sqQ, square_root, mean_out, P_out, L_out, ok_out, AP, M, Asc, vsc, nzs)
+    # each row's nonzero columns of a shared transition (per-element transitions: found element by element)
+    nz_count = np.zeros(n, np.int64)
+    nz_cols = np.zeros((n, n), np.int64)
+    _predict_loop(X, P_in, A, Q, sqQ, square_root, mean_out, P_out, L_out, ok_out, AP, M, Asc, vsc, nzs, nz_count,
+                  nz_cols)
     return ok_out.all()
 
 
 @_loop_jit
-def _predict_loop(X, P_in, A, Q, sqQ, square_root, mean_out, P_out, L_out, ok_out, AP, M, Asc, vsc, nzs):
-    """:func:`_predict_kernel`'s loop over the batch, on its scratch."""
+def _predict_loop(X, P_in, A, Q, sqQ, square_root, mean_out, P_out, L_out, ok_out, AP, M, Asc, vsc, nzs, nz_count,
+                  nz_cols):
+    """:func:`_predict_kernel`'s loop over the batch, on its scratch.  ``A P A^T`` visits only ``A``'s nonzero
+    entries (a transition matrix is sparse: n + 2 of n^2 for constant velocity), listed once per transition,
+    in the order of a dense sum, so the sums are the same."""
     nb, n = X.shape
     kq = sqQ.shape[2]
     for b in range(nb):
         ia = b if A.shape[0] > 1 else 0
         iq = b if Q.shape[0] > 1 else 0
         Ab = A[ia]
-        for i in range(n):
+        if b == 0 or A.shape[0] > 1:
+            for i in range(n):
+                nz_count[i] = 0
+                for c in range(n):
+                    if Ab[i, c] != 0.0:
+                        nz_cols[i, nz_count[i]] = c
+                        nz_count[i] += 1
+        for i in range(n):      # (dense: a non-finite mean stays non-finite, as numpy's A @ x)
             t = 0.0
             for j in range(n):
                 t += Ab[i, j] * X[b, j]
             mean_out[b, i] = t
         Pb = P_in[b]
-        for i in range(n):      # A P, skipping A's zeros (a transition matrix is sparse; the sums are the same)
+        for i in range(n):      # A P
             for j in range(n):
                 AP[i, j] = 0.0
-            for c in range(n):
+            for u in range(nz_count[i]):
+                c = nz_cols[i, u]
                 a = Ab[i, c]
-                if a != 0.0:
-                    for j in range(n):
-                        AP[i, j] += a * Pb[c, j]
+                for j in range(n):
+                    AP[i, j] += a * Pb[c, j]
         if square_root:
             for i in range(n):
                 for j in range(n):
@@ -609,10 +623,9 @@ def _predict_loop(X, P_in, A, Q, sqQ, square_root, mean_out, P_out, L_out, ok_ou
             for i in range(n):
                 for j in range(i + 1):
                     t = 0.0
-                    for c in range(n):
-                        a = Ab[j, c]
-                        if a != 0.0:
-                            t += AP[i, c] * a
+                    for u in range(nz_count[j]):
+                        c = nz_cols[j, u]
+                        t += AP[i, c] * Ab[j, c]
                     Pout[i, j] = t + Q[iq, i, j]
                     Pout[j, i] = t + Q[iq, j, i]
             ok_out[b] = _chol(Pout, L_out[b])
