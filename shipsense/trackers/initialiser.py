@@ -255,8 +255,8 @@ def grid_fit(model, yw, G, off, A, clamp):
     Per passage and candidate: the least-squares parameters of the whitened field-channel basis against
     the whitened field samples present (a ``1e-9`` ridge; the last parameter clamped at 0 if ``clamp``),
     and the chi-square of the fit plus the whitened bearing residuals (wrapped modulo pi against the
-    candidate's bearings).  The field channels' ``G^T d`` of every candidate is one matrix-vector product
-    per passage (``d`` zero where missing; a passage's numbers do not depend on its batch); the normal
+    candidate's bearings).  The field channels' ``G^T d`` of every candidate is a stack of one-row matrix
+    products, one per passage (``d`` zero where missing; a passage's numbers do not depend on its batch); the normal
     matrix is the window's Gram matrix ``A`` less the outer products of the missing samples (or built from
     the present ones when fewer; compiled, :func:`_grid_solve_kernel`, the candidates in chunks on the
     CPUs); the chi-square is ``|d|^2 - 2 par.b + par^T A par``.  Passages in chunks bound the
@@ -283,8 +283,8 @@ def grid_fit(model, yw, G, off, A, clamp):
     for lo in range(0, R, rows):
         hi = min(R, lo + rows)
         b = buf[:hi - lo]
-        for r in range(lo, hi):   # passage by passage: its numbers do not depend on the others in the batch
-            np.dot(d[r], G2, out=b[r - lo])                                             # (C*P,)
+        # a stack of one-row products, one per passage: its numbers do not depend on the others in the batch
+        np.matmul(d[lo:hi, None, :], G2, out=b[:, None, :])                               # (rows, 1, C*P)
         args = (b, G2, A, present[lo:hi], dd[lo:hi], yb[lo:hi], off, std_b, bool(clamp), chi2[lo:hi],
                 params[lo:hi])
         in_chunks(lambda c_lo, c_hi, args=args: _grid_solve_kernel(*args, c_lo, c_hi), C, split_min=256)
@@ -411,59 +411,49 @@ def chi2_limit(model, yfit, prior, gof, huber=None):
     return stats.chi2.isf(gof, dof) if huber is None else huber.limit(dof, gof)
 
 
-def _distinct(chi2, positions, M, distinct_m):
-    """Indices of the ``M`` lowest ``chi2`` whose ``positions`` (N, 2) are more than ``distinct_m`` apart.
+def distinct_rows(chi2, positions, M, distinct_m):
+    """Indices (R, M) of each row's ``M`` lowest finite ``chi2`` (R, C) whose ``positions`` ((R or 1), C, 2)
+    are more than ``distinct_m`` apart, and whether each is a pick (R, M) (False: fewer were distinct, the
+    index repeats the row's best; a row with no finite ``chi2`` has none, index 0).
 
-    Greedy over the finite ``chi2`` (each pick the best candidate not within ``distinct_m`` of an earlier
-    pick); when fewer than ``M`` are distinct the best one fills the rest.  The candidates are walked in
-    ascending ``chi2`` (a stable sort: ties in index order, as ``argmin``), each kept unless within
-    ``distinct_m`` of a pick (:func:`_distinct_walk`, compiled).
+    Greedy: each pick the best candidate not within ``distinct_m`` of an earlier pick.  Each row's candidates
+    are walked in ascending ``chi2`` (a stable sort: ties in index order), each kept unless within
+    ``distinct_m`` of a pick (:func:`_distinct_walk`, every row in one compiled call).
     """
-    chi2 = np.asarray(chi2, dtype=float)
-    order = np.argsort(np.where(np.isfinite(chi2), chi2, np.inf), kind="stable")
-    order = order[np.isfinite(chi2[order])]           # (not fitted, or failed: never picked)
-    picks = np.empty(M, dtype=np.int64)
-    count = _distinct_walk(order, np.ascontiguousarray(positions, dtype=float), M, float(distinct_m) ** 2, picks)
-    chosen = picks[:count].tolist()
-    return chosen + [chosen[0]] * (M - len(chosen))
+    chi2 = np.where(np.isfinite(chi2), chi2, np.inf)          # (not fitted, or failed: never picked)
+    order = np.argsort(chi2, axis=1, kind="stable")
+    finite = np.isfinite(chi2).sum(axis=1)
+    idx = np.zeros((chi2.shape[0], M), dtype=np.int64)
+    count = _distinct_walk(order, finite, np.ascontiguousarray(positions, dtype=float), float(distinct_m) ** 2,
+                           idx)
+    found = np.arange(M)[None, :] < count[:, None]
+    return np.where(found, idx, idx[:, :1]), found
 
 
 @njit(cache=True, nogil=True)
-def _distinct_walk(order, positions, M, limit2, picks):
-    count = 0
-    for c in order:
-        if count == M:
-            break
-        keep = True
-        for i in range(count):
-            d0 = positions[c, 0] - positions[picks[i], 0]
-            d1 = positions[c, 1] - positions[picks[i], 1]
-            if not d0 * d0 + d1 * d1 > limit2:
-                keep = False
+def _distinct_walk(order, finite, positions, limit2, picks):
+    """The picks (R, M) of every row of :func:`distinct_rows` into ``picks``; returns their counts (R,)."""
+    R, M = picks.shape
+    count = np.zeros(R, dtype=np.int64)
+    for r in range(R):
+        pos = positions[r if positions.shape[0] > 1 else 0]
+        n = 0
+        for t in range(finite[r]):
+            if n == M:
                 break
-        if keep:
-            picks[count] = c
-            count += 1
+            c = order[r, t]
+            keep = True
+            for i in range(n):
+                d0 = pos[c, 0] - pos[picks[r, i], 0]
+                d1 = pos[c, 1] - pos[picks[r, i], 1]
+                if not d0 * d0 + d1 * d1 > limit2:
+                    keep = False
+                    break
+            if keep:
+                picks[r, n] = c
+                n += 1
+        count[r] = n
     return count
-
-
-def distinct_rows(chi2, positions, M, distinct_m):
-    """:func:`_distinct` for every row at once: indices (R, M) of each row's ``M`` lowest finite ``chi2``
-    (R, C) whose ``positions`` (R, C, 2) are more than ``distinct_m`` apart, and whether each is a pick
-    (R, M) (False: fewer were distinct, the index repeats the row's best)."""
-    chi2 = np.where(np.isfinite(chi2), chi2, np.inf)
-    R = chi2.shape[0]
-    rows = np.arange(R)
-    alive = np.isfinite(chi2)
-    idx = np.zeros((R, M), dtype=int)
-    found = np.zeros((R, M), dtype=bool)
-    for j in range(M):   # M greedy picks, each over all rows
-        c = np.argmin(np.where(alive, chi2, np.inf), axis=1)
-        found[:, j] = alive[rows, c]
-        idx[:, j] = np.where(found[:, j], c, idx[:, 0])
-        d = positions - positions[rows, c][:, None]
-        alive &= ~found[:, j:j + 1] | (np.einsum("rci,rci->rc", d, d) > distinct_m * distinct_m)
-    return idx, found
 
 
 def distinct_loglik(chi2, found):
@@ -517,7 +507,7 @@ def grid_minima(model, yw, grid, window, stride, count, distinct_m, mid):
     """The ``count`` best distinct grid candidates of each passage (R, count, n), best first, with their
     least-squares moments (:func:`grid_fit`): a candidate more than ``distinct_m`` from every better pick at
     the window's middle (``mid`` (2, n): the state's position there), the best repeated when fewer are
-    distinct (:func:`_distinct`).
+    distinct (:func:`distinct_rows`).
 
     ``yw`` (R, W', m) are the window's samples at steps ``0, stride, ...`` (internal units, NaN = missing);
     the grid's candidate trajectories are evaluated on the same steps (:func:`grid_terms`).  The grid's
@@ -527,15 +517,15 @@ def grid_minima(model, yw, grid, window, stride, count, distinct_m, mid):
     G, off, A = grid_terms(model, grid, window, stride)
     clamp = "p" in model.labels                                   # the envelope needs p >= 0
     R, C, P = yw.shape[0], len(grid), A.shape[-1]
-    mid_grid = grid @ mid.T                                                              # (C, 2)
+    mid_grid = (grid @ mid.T)[None]                                                      # (1, C, 2)
     starts = np.zeros((R, count, model.n))
     rows = max(1, FIT_CHUNK_BYTES // (8 * C * (P + 1)))
     for lo in range(0, R, rows):
         chi2, params = grid_fit(model, yw[lo:lo + rows], G, off, A, clamp)
-        for i in range(chi2.shape[0]):
-            chosen = _distinct(chi2[i], mid_grid, count, distinct_m)
-            starts[lo + i] = grid[chosen]
-            starts[lo + i][:, slots] = params[i, chosen]
+        chosen, _ = distinct_rows(chi2, mid_grid, count, distinct_m)                   # (rows, count)
+        part = starts[lo:lo + rows]
+        part[:] = grid[chosen]
+        part[..., slots] = np.take_along_axis(params, chosen[..., None], axis=1)
     return starts
 
 

@@ -274,8 +274,21 @@ def test_exploring_on_a_subset_of_the_window_finds_a_global_minimum_the_stages_m
         global_init(model, y, explore_samples=1, **kw)
 
 
+def _greedy(chi2, positions, M, distinct_m):
+    """The greedy selection written plainly: each pick the best finite candidate not within ``distinct_m`` of
+    an earlier pick; the best fills the rest."""
+    alive = np.isfinite(chi2)
+    chosen = []
+    while len(chosen) < M and alive.any():
+        c = int(np.argmin(np.where(alive, chi2, np.inf)))
+        chosen.append(c)
+        d = positions - positions[c]
+        alive &= np.einsum("ij,ij->i", d, d) > distinct_m * distinct_m
+    return chosen + [chosen[0]] * (M - len(chosen))
+
+
 def test_distinct_rows_is_the_greedy_selection_of_every_row():
-    from shipsense.trackers.initialiser import _distinct, distinct_rows
+    from shipsense.trackers.initialiser import distinct_rows
 
     rng = np.random.default_rng(3)
     R, C, M = 30, 12, 4
@@ -287,9 +300,15 @@ def test_distinct_rows_is_the_greedy_selection_of_every_row():
     idx, found = distinct_rows(chi2, pos, M, 15.0)
     for r in range(R):
         if np.isfinite(chi2[r]).any():
-            assert idx[r].tolist() == _distinct(chi2[r], pos[r], M, 15.0)
+            assert idx[r].tolist() == _greedy(chi2[r], pos[r], M, 15.0)
     assert idx[0].tolist() == [5] * M and found[0].tolist() == [True, False, False, False]
     assert np.all(found.sum(axis=1) == np.array([len(set(i)) for i in idx.tolist()]))
+    # ties (whole-number chi-squares), NaN, and one set of positions shared by every row (the grid's)
+    chi2 = rng.integers(0, 6, (200, 80)).astype(float)
+    chi2[rng.uniform(size=chi2.shape) < 0.1] = np.nan
+    shared = rng.uniform(0, 60, (1, 80, 2))
+    idx, _ = distinct_rows(chi2, shared, 9, 15.0)
+    assert all(idx[r].tolist() == _greedy(chi2[r], shared[0], 9, 15.0) for r in range(200))
 
 
 def test_the_grid_fit_equals_a_least_squares_solve_per_candidate(monkeypatch):
