@@ -13,6 +13,10 @@ import numpy as np
 from shipsense.plotting import plt
 from shipsense.trackers.metrics import convergence_rate, mrmse, trmse
 
+LEAN = ("positions", "loglik", "selected")
+"""What the studies' banks keep (``run_bank(store=)``): positions, likelihoods and the selected track -- what
+:func:`bank_summary` reads (a full record of S0's dense bank at 200 runs is ~245 MB)."""
+
 
 class Output:
     """An experiment's output folder: ``summary.json``, CSV tables and PNG figures."""

@@ -8,7 +8,7 @@ import numpy as np
 
 from shipsense.config import load_scenario
 from shipsense.plotting import draw_array, plt
-from shipsense.reproduce.common import Output, Stages, bank_summary, bar_charts, global_init_summary, rmse_plot
+from shipsense.reproduce.common import LEAN, Output, Stages, bank_summary, bar_charts, global_init_summary, rmse_plot
 from shipsense.simulator import simulate
 from shipsense.trackers.bank import run_bank
 from shipsense.trackers.driver import run_filter
@@ -21,9 +21,6 @@ OFFSETS = (10.0, 30.0, 50.0, 100.0, 200.0)
 UNITS = ("ekf", "ukf", "ckf", "cdkf", "srcdkf")
 BASIN_RATE = 0.9
 DENSE_BEARINGS = tuple(float(b) for b in np.arange(0.0, 360.0, 30.0))
-LEAN = ("positions", "loglik", "selected")
-"""What the banks keep: the study reads positions, likelihoods and the selected track (a full record of the dense
-bank at 200 runs is ~245 MB)."""
 
 
 def run(runs=200, out="results/S0", seed=0, progress=True):

@@ -8,7 +8,7 @@ from shipsense.config import load_scenario
 from shipsense.physics.array import SensorArray
 from shipsense.physics.motion import cv_positions
 from shipsense.plotting import draw_array, plt
-from shipsense.reproduce.common import Output, Stages, bank_summary, bar_charts, global_init_summary, rmse_plot
+from shipsense.reproduce.common import LEAN, Output, Stages, bank_summary, bar_charts, global_init_summary, rmse_plot
 from shipsense.simulator import simulate
 from shipsense.trackers.bank import run_bank
 from shipsense.trackers.filters import get_filter
@@ -97,7 +97,7 @@ def bank_for(sc, runs, seed, unit, o=None, tag=None, chain=None):
     model = model_from_scenario(sc)
     truth = model.state_from_truth(sim.truth)
     seeds, P0 = seed_hypotheses(model, sim.measurements[:, 0], sc.tracker.bank)
-    b = run_bank(unit, model, sim.measurements, seeds, P0, store=("positions", "loglik", "selected"))
+    b = run_bank(unit, model, sim.measurements, seeds, P0, store=LEAN)
     summ, _ = bank_summary(b, truth, centre=model.array.positions[:, :2].mean(axis=0))
     amb = b.ambiguities(nats=sc.tracker.bank.ambiguity_nats, distance=sc.tracker.bank.ambiguity_distance)
     counts = {}

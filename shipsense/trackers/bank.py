@@ -122,7 +122,7 @@ class BankRun:
     def fused_pos_cov(self) -> np.ndarray:
         """Fused position covariance ``sum_j mu_j (P_j + d_j d_j^T)`` (R, K, 2, 2)."""
         w = self.weights[..., None, None]
-        d = np.nan_to_num(self.means[..., :2]) - self.fused_means[:, None, :, :2]
+        d = np.nan_to_num(self.positions) - self.fused_means[:, None, :, :2]
         spread = d[..., :, None] * d[..., None, :]
         return np.sum(w * (np.nan_to_num(self._kept("pos_cov")) + spread), axis=1)
 
@@ -402,10 +402,10 @@ def run_bank(unit, model, measurements, seeds, P0, *, prune_nats=None, progress=
                 record[at] = value.reshape(rows + value.shape[1:])
         active[at] = True
         if selected is not None:       # the maximum-likelihood hypothesis now, among the active ones
-            best = state.selected()
-            where = np.full(R * H, -1)
-            where[state.idx] = np.arange(len(state.idx))
-            selected[:, k] = mean[where[np.arange(R) * H + best]]
+            row = np.arange(R) * H + state.selected()                 # its flat element
+            if len(state.idx) != R * H:                               # pruned: its row among the active ones
+                row = np.searchsorted(state.idx, row)
+            selected[:, k] = mean[row]
         if prune_nats is not None:
             state.prune(prune_nats)
     init = np.zeros((R, H)) if initial_loglik is None else np.asarray(initial_loglik, float)
