@@ -45,7 +45,9 @@ class BankRun:
     positions : (R, H, K, 2)       posterior positions (the first two columns of ``means``)
 
     A record :func:`run_bank` was not asked to keep (``store``) is None; ``positions`` and
-    ``selected_means`` are then kept as the bank ran (``"positions"``, ``"selected"``).
+    ``selected_means`` are then kept as the bank ran (``"positions"``, ``"selected"``); with ``"selected"``
+    kept, ``selected`` is the selection made as the bank ran (the same maximum of the cumulative
+    log-likelihood, summed step by step), so ``selected_means`` and ``selected_pos_cov`` are one choice.
     """
 
     seeds: np.ndarray
@@ -60,6 +62,7 @@ class BankRun:
     initial_loglik: np.ndarray = 0.0
     kept_positions: np.ndarray | None = None
     kept_selected: np.ndarray | None = None
+    kept_selected_index: np.ndarray | None = None
 
     def _kept(self, name):
         """The record ``name``, or a clear error when :func:`run_bank` was not asked to keep it."""
@@ -91,6 +94,8 @@ class BankRun:
     @property
     def selected(self) -> np.ndarray:
         """Index of the maximum-likelihood hypothesis at every step (R, K)."""
+        if self.kept_selected_index is not None:
+            return self.kept_selected_index
         return np.argmax(self.cum_loglik, axis=1)
 
     @property
@@ -137,7 +142,7 @@ class BankRun:
     def diverged(self, window: int = 10, confidence: float = 0.999) -> np.ndarray:
         """Divergence flag (R, H, K): lost covariance, or mean NIS over the last ``window`` steps
         above its ``confidence`` chi-square bound."""
-        from scipy import stats  # here: scipy.stats is ~70 MB and 0.3 s to import, and only this needs it
+        from scipy import special  # 2 gammaincinv(k / 2, p) = scipy.stats.chi2.ppf(p, k), without scipy.stats
 
         nis = np.where(self.active, self._kept("nis"), 0.0)
         m = np.where(self.active, self._kept("m"), 0)
@@ -146,7 +151,7 @@ class BankRun:
         lag = lambda a: np.concatenate([np.zeros_like(a[..., :window]), a[..., :-window]], axis=-1)  # noqa: E731
         win_n = cs_n - lag(cs_n)
         win_m = cs_m - lag(cs_m)
-        bound = stats.chi2.ppf(confidence, np.maximum(win_m, 1))
+        bound = 2.0 * special.gammaincinv(np.maximum(win_m, 1) / 2.0, confidence)
         return (~self._kept("ok")) | ((win_n > bound) & (win_m > 0))
 
     def ambiguities(self, step: int = -1, nats: float = 3.0, distance: float = 20.0):
@@ -382,6 +387,7 @@ def run_bank(unit, model, measurements, seeds, P0, *, prune_nats=None, progress=
     used = kept("m", (R, H, K), np.zeros, dtype=int)
     ok = kept("ok", (R, H, K), np.zeros, dtype=bool)
     selected = kept("selected", (R, K, n), np.empty)
+    chosen = None if selected is None else np.empty((R, K), dtype=np.intp)
     active = np.zeros((R, H, K), dtype=bool)
     steps = range(K)
     if progress:
@@ -402,7 +408,8 @@ def run_bank(unit, model, measurements, seeds, P0, *, prune_nats=None, progress=
                 record[at] = value.reshape(rows + value.shape[1:])
         active[at] = True
         if selected is not None:       # the maximum-likelihood hypothesis now, among the active ones
-            row = np.arange(R) * H + state.selected()                 # its flat element
+            chosen[:, k] = state.selected()
+            row = np.arange(R) * H + chosen[:, k]                     # its flat element
             if len(state.idx) != R * H:                               # pruned: its row among the active ones
                 row = np.searchsorted(state.idx, row)
             selected[:, k] = mean[row]
@@ -410,7 +417,7 @@ def run_bank(unit, model, measurements, seeds, P0, *, prune_nats=None, progress=
             state.prune(prune_nats)
     init = np.zeros((R, H)) if initial_loglik is None else np.asarray(initial_loglik, float)
     return BankRun(seeds, means, pos_cov, loglik, nis, used, ok, active, tuple(model.labels), init, positions,
-                   selected)
+                   selected, chosen)
 
 
 def default_bank():

@@ -11,7 +11,7 @@ from shipsense.trackers.initialiser import GlobalInit, unalign
 from shipsense.trackers.restarts import peak_refit_sample, refit_at
 
 
-def track_with_global_init(unit, model, measurements, gi: GlobalInit):
+def track_with_global_init(unit, model, measurements, gi: GlobalInit, store=None):
     """Run the bank from the global initialiser's hypotheses; returns ``(estimates (R, K, n) SI, BankRun)``.
 
     Every passage's bank starts at its own ``gi.start``: the measurements are
@@ -21,7 +21,8 @@ def track_with_global_init(unit, model, measurements, gi: GlobalInit):
     ``BankRun`` is on that aligned axis (step j of passage r is its sample
     ``gi.start[r] + j``).  Before the bank starts, the estimate is the best
     batch fit's trajectory (constant velocity, propagated backwards before
-    the detection).
+    the detection).  ``store``: the bank's records to keep (:func:`~shipsense.trackers.bank.run_bank`; its
+    default when None), with the selected track always kept.
     """
     from shipsense.trackers.bank import run_bank
 
@@ -35,7 +36,8 @@ def track_with_global_init(unit, model, measurements, gi: GlobalInit):
     src = start[:, None] + j                                                  # (R, J): sample of step j
     inside = src < K
     aligned = np.where(inside[..., None], y[np.arange(R)[:, None], np.minimum(src, K - 1)], np.nan)
-    bank = run_bank(unit, model, aligned, gi.seeds, gi.P0, initial_loglik=gi.loglik)
+    kw = {} if store is None else {"store": tuple(dict.fromkeys((*store, "selected")))}
+    bank = run_bank(unit, model, aligned, gi.seeds, gi.P0, initial_loglik=gi.loglik, **kw)
     est = unalign(bank.selected_means, start, K)
     best = np.argmax(gi.loglik, axis=1)
     theta0 = gi.window[np.arange(R), best, 0] / model.x_scale                 # internal, at k0

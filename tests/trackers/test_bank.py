@@ -77,6 +77,10 @@ def test_a_lean_record_keeps_positions_likelihoods_and_the_selected_track_of_the
     np.testing.assert_array_equal(lean.selected_means, full.selected_means)
     only = run_bank("ukf", model, y, seeds, P0, prune_nats=prune_nats, store="selected")
     np.testing.assert_array_equal(only.selected_means, full.selected_means)
+    np.testing.assert_array_equal(only.selected, full.selected)          # the selection made as the bank ran
+    cov = run_bank("ukf", model, y, seeds, P0, prune_nats=prune_nats, store=("pos_cov", "selected"))
+    np.testing.assert_array_equal(cov.selected_pos_cov, full.selected_pos_cov)    # one choice for mean and cov
+    np.testing.assert_array_equal(cov.selected_means, full.selected_means)
     with pytest.raises(ValueError, match="store: unknown 'mean'; choose from means, pos_cov"):
         run_bank("ukf", model, y, seeds, P0, store=("mean",))
     with pytest.raises(ValueError, match="did not keep 'loglik': run_bank"):
