@@ -118,7 +118,7 @@ def grid_terms(model, theta, steps, stride=1):
         _TERMS_CACHE[key] = hit                      # the most recently used last
     if hit is None or hit["steps"] < steps:
         longest = steps if hit is None else max(steps, 2 * hit["steps"])
-        G, off = _window_major(model, *linear_basis(model, theta, longest, stride))
+        G, off = _grid_arrays(model, theta, longest, stride)
         hit = {"model": model, "steps": longest, "G": G, "off": off, "P": len(_parameter_slots(model)),
                "grams": {}}
         _TERMS_CACHE.pop(key, None)
@@ -137,6 +137,25 @@ def grid_terms(model, theta, steps, stride=1):
             hit["grams"].pop(next(iter(hit["grams"])))
         hit["grams"][W] = A
     return G, off, A
+
+
+_BASIS_CHUNK = 512
+"""Candidates per :func:`linear_basis` call while :func:`_grid_arrays` fills a grid's terms: the basis and
+its whitened, transposed copies are then a chunk's, not the grid's."""
+
+
+def _grid_arrays(model, theta, steps, stride):
+    """:func:`_window_major` of candidates ``theta`` (C, n), filled :data:`_BASIS_CHUNK` candidates at a time."""
+    C, P, W = len(theta), len(_parameter_slots(model)), len(range(0, steps, stride))
+    G = np.empty((W, int((~model.axial).sum()), C * P))
+    off = np.empty((W, int(model.axial.sum()), C))
+    for c0 in range(0, C, _BASIS_CHUNK):
+        c1 = min(c0 + _BASIS_CHUNK, C)
+        G[:, :, c0 * P:c1 * P], off[:, :, c0:c1] = _window_major(model, *linear_basis(model, theta[c0:c1], steps,
+                                                                                      stride))
+    for a in (G, off):
+        a.flags.writeable = False
+    return G, off
 
 
 def _window_major(model, offset, basis):

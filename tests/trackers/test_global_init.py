@@ -376,14 +376,17 @@ def test_fits_and_grid_in_chunks_of_passages_equal_one_batch(monkeypatch):
         np.testing.assert_array_equal(getattr(both, field), getattr(whole, field))
 
 
-def test_the_grid_terms_serve_shorter_windows_from_a_longer_one_exactly():
+@pytest.mark.parametrize("chunk", [512, 5])
+def test_the_grid_terms_serve_shorter_windows_from_a_longer_one_exactly(monkeypatch, chunk):
     """grid_terms keeps each grid's terms for the longest window and serves shorter ones as prefixes: the same
-    numbers as computing them (bit for bit), read-only; a longer window extends the cache."""
+    numbers as computing them (bit for bit, also filled a few candidates at a time), read-only; a longer window
+    extends the cache."""
     from shipsense.trackers import initialiser
     from shipsense.trackers.initialiser import _gram, _window_major, grid_terms
 
     model = model_from_scenario("S2")          # magnetometers and a bearing: offset and basis both nonzero
     grid = candidate_grid(model, [50.0, 150.0], np.arange(0.0, 360.0, 90.0), np.arange(0.0, 360.0, 120.0), [4.0])
+    monkeypatch.setattr(initialiser, "_BASIS_CHUNK", chunk)                  # 24 candidates: one chunk, or five
     initialiser._TERMS_CACHE.clear()
     for steps, stride in ((12, 1), (5, 1), (30, 1), (7, 1), (30, 4), (9, 4)):
         G, off, A = grid_terms(model, grid, steps, stride)
