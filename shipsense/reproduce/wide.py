@@ -298,7 +298,7 @@ def consistency(runs=100, seed=0, tracker="restarts", sigma_a=TRACKER_SIGMA_A):
 
 def consistency_of(name, runs=100, seed=0, tracker="restarts", sigma_a=TRACKER_SIGMA_A):
     """:func:`consistency` on one of its scenarios (a task of :func:`run`)."""
-    from scipy import stats
+    from scipy import special
 
     from shipsense.config import ProcessNoiseConfig
     from shipsense.reproduce.common import track_restarting
@@ -326,7 +326,8 @@ def consistency_of(name, runs=100, seed=0, tracker="restarts", sigma_a=TRACKER_S
         noise = f"dwna {pn.sigma_a[0]:g} m/s^2"
     m = _metrics(est, pos_cov, truth, None, 0.0, np.full(runs, K - 1), status)
     n_conv = int(round(m["convergence_rate"] * runs))
-    band = [float(stats.chi2.ppf(q, 2 * max(n_conv, 1)) / max(n_conv, 1)) for q in (0.025, 0.975)]
+    # the chi-square(2 n) quantiles over n: scipy.stats.chi2.ppf(q, 2 n) = 2 gammaincinv(n, q)
+    band = [float(2.0 * special.gammaincinv(max(n_conv, 1), q) / max(n_conv, 1)) for q in (0.025, 0.975)]
     ne = m["nees_mean"]
     return {"filter": "ukf", "tracker": tracker, "process_noise": noise, "runs": runs,
             "convergence_rate": m["convergence_rate"], "nees_mean": ne,

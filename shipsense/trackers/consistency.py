@@ -104,8 +104,6 @@ def threshold(dof, level):
 def _quantiles(level, top):
     """``chi2.isf(level, k)`` for k = 0..top (inf at 0), rounded up to a power of two of entries: the tracker
     asks every sample for a handful of small degrees of freedom (scipy's call costs ~0.1 ms)."""
-    from scipy import stats
-
     size = 1 << int(top).bit_length()
     k = np.arange(size)
-    return np.where(k > 0, stats.chi2.isf(level, np.maximum(k, 1)), np.inf)
+    return np.where(k > 0, special.chdtri(np.maximum(k, 1), level), np.inf)     # scipy.stats.chi2.isf

@@ -106,3 +106,34 @@ def assert_positive_definite(c):
     assert np.all(d > 0)
     assert np.all(np.linalg.eigvalsh(c / d[..., :, None] / d[..., None, :]) > 0)
     assert np.all(np.linalg.eigvalsh(c[..., :2, :2]) > 0)
+
+
+def test_quantiles_from_scipy_special_equal_scipy_stats_and_the_tracker_leaves_scipy_stats_unloaded():
+    """The tests' chi-square and normal quantiles come from scipy.special (scipy.stats costs 40 MB and 0.3 s to
+    import): equal to scipy.stats' (the same special functions underneath); a tracked passage, its window fits'
+    goodness-of-fit limits and the bank's divergence flags load no scipy.stats."""
+    import subprocess
+    import sys
+
+    from shipsense.trackers.batchfit import _normal_pdf
+    from shipsense.trackers.consistency import _quantiles
+    from shipsense.trackers.initialiser import chi2_limit
+    from shipsense.trackers.models import model_from_scenario
+
+    np.testing.assert_array_equal(_quantiles(0.01, 9)[1:], stats.chi2.isf(0.01, np.arange(1, 16)))
+    model = model_from_scenario("S2")
+    yfit = np.ones((3, 7, model.m))
+    yfit[1, :2] = np.nan
+    dof = np.isfinite(yfit).reshape(3, -1).sum(axis=1) - model.n        # no prior: data less the state
+    np.testing.assert_array_equal(chi2_limit(model, yfit, None, 0.01), stats.chi2.isf(0.01, dof))
+    h = Huber(eps=0.1)
+    mu, var = h.moments
+    assert h.limit(30, 0.01) == pytest.approx(30 * mu + stats.norm.isf(0.01) * np.sqrt(30 * var), rel=1e-15)
+    e = np.linspace(-40.0, 40.0, 81)
+    np.testing.assert_allclose(_normal_pdf(e, 10.0), stats.norm(scale=10.0).pdf(e), rtol=1e-15)
+    code = ("import sys; from shipsense import load_scenario, simulate; from shipsense.trackers import Tracker; "
+            "from shipsense.trackers.bank import run_bank; sc = load_scenario('S2'); s = simulate(sc, runs=1, seed=1); "
+            "t = Tracker(sc, passages=1); t.track(sc.times, s.measurements); "
+            "b = run_bank('ukf', t.model, s.measurements, s.truth[:, :1, :7], 100.0 * np.eye(7), "
+            "store=('nis', 'm', 'ok')); b.diverged(); assert 'scipy.stats' not in sys.modules, 'scipy.stats loaded'")
+    subprocess.run([sys.executable, "-c", "import numpy as np; " + code], check=True)
