@@ -6,6 +6,7 @@ import csv
 import json
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -93,21 +94,107 @@ class Stages:
         return time.perf_counter() - self.t0
 
 
+RUN_CHUNK = 50
+"""Runs per batch in the studies' banks and initialiser runs (:func:`bank_tally`, :func:`global_init_summary`):
+the records and their summaries' temporaries scale with it (S0's dense bank: 57 MB at 200 runs).  Passages are
+independent, so the figures do not depend on it; batches of 50 runs (600-1,800 filters) keep the steps' speed."""
+
+
+def run_chunks(runs, chunk=RUN_CHUNK):
+    """Slices of ``runs`` runs, ``chunk`` at a time."""
+    return [slice(s, min(s + chunk, runs)) for s in range(0, runs, chunk)]
+
+
+@dataclass(frozen=True)
+class BankTally:
+    """What the studies read of a bank over runs (:func:`bank_summary`), in O(R H + R K + H K) memory
+    instead of the bank's records' O(R H K): gathered run chunk by run chunk (:func:`bank_tally`).
+
+    Attributes: ``seeds`` (R, H, n); ``trmse`` (R, H) each hypothesis's TRMSE in each run;
+    ``final_loglik`` (R, H) cumulative log-likelihoods at the last step (-inf once pruned);
+    ``selected_means`` (R, K, n) the maximum-likelihood track; ``sq_err`` (H, K, 2) sums over runs of each
+    hypothesis's squared x and y errors (:meth:`mrmse`); ``runs`` R.
+    """
+
+    seeds: np.ndarray
+    trmse: np.ndarray
+    final_loglik: np.ndarray
+    selected_means: np.ndarray
+    sq_err: np.ndarray
+
+    @classmethod
+    def of(cls, bank, truth):
+        """The tally of a :class:`~shipsense.trackers.bank.BankRun` (positions, likelihoods and the selected
+        track kept: :data:`LEAN`) against ``truth`` (R, K, n).  The same numbers as
+        :func:`~shipsense.trackers.metrics.trmse` and ``bank.cum_loglik[:, :, -1]``, formed in place: two
+        arrays of the record's (R, H, K) size at a time."""
+        pos, truth = bank.positions, np.asarray(truth)
+        sq = np.subtract(pos[..., 0], truth[:, None, :, 0])                        # (R, H, K): dx, then dx^2
+        np.square(sq, out=sq)
+        dy2 = np.subtract(pos[..., 1], truth[:, None, :, 1])
+        np.square(dy2, out=dy2)
+        sq_err = np.stack([sq.sum(axis=0), dy2.sum(axis=0)], axis=-1)              # (H, K, 2)
+        sq += dy2
+        del dy2
+        tr = np.sqrt(sq, out=sq).mean(axis=-1)                                     # position_error's numbers
+        ll = np.where(bank.active, bank.loglik, 0.0)                               # BankRun.cum_loglik's sums
+        final = np.cumsum(ll, axis=-1, out=ll)[..., -1] + np.asarray(bank.initial_loglik)
+        final = np.where(bank.active[..., -1], final, -np.inf)
+        return cls(np.asarray(bank.seeds), tr, final, bank.selected_means, sq_err)
+
+    @classmethod
+    def concat(cls, parts):
+        """One tally of consecutive run chunks' tallies."""
+        parts = list(parts)
+        cat = {f: np.concatenate([getattr(p, f) for p in parts]) for f in
+               ("seeds", "trmse", "final_loglik", "selected_means")}
+        return cls(**cat, sq_err=np.sum([p.sq_err for p in parts], axis=0))
+
+    @property
+    def runs(self):
+        return len(self.trmse)
+
+    @property
+    def selected_last(self):
+        """The hypothesis selected at the last step (R,)."""
+        return np.argmax(self.final_loglik, axis=1)
+
+    def mrmse(self, h):
+        """:func:`~shipsense.trackers.metrics.mrmse` of hypothesis ``h``'s track over the runs."""
+        ms = self.sq_err[h] / self.runs                                             # (K, 2) mean square errors
+        rx, ry = np.sqrt(ms).mean(axis=0)
+        return {"x": float(rx), "y": float(ry), "r": float(np.sqrt(ms.sum(axis=1)).mean())}
+
+
+def bank_tally(unit, model, y, seeds, P0, truth, chunk=RUN_CHUNK):
+    """:func:`~shipsense.trackers.bank.run_bank` on passages ``y`` (R, K, m) from ``seeds`` (R, H, n), run
+    chunk of runs by chunk (:data:`RUN_CHUNK`), tallied against ``truth`` (:class:`BankTally`)."""
+    from shipsense.trackers.bank import run_bank
+
+    P0 = np.asarray(P0)
+    parts = []
+    for sl in run_chunks(len(y), chunk):
+        b = run_bank(unit, model, y[sl], seeds[sl], P0 if P0.ndim == 2 else P0[sl], store=LEAN)
+        parts.append(BankTally.of(b, truth[sl]))
+        del b
+    return BankTally.concat(parts)
+
+
 def bank_summary(bank, truth, centre=(0.0, 0.0)):
     """Per-hypothesis table and selection figures of a bank over runs (truth (R, K, n)).
 
-    Seed ranges and bearings are taken from ``centre`` (the array centroid)."""
-    tr = trmse(bank.positions, truth[:, None])                   # (R, H)
-    final_ll = bank.cum_loglik[:, :, -1]
-    seeds = bank.seeds
+    ``bank``: a :class:`~shipsense.trackers.bank.BankRun` or its :class:`BankTally`.  Seed ranges and
+    bearings are taken from ``centre`` (the array centroid).  Returns the figures and the TRMSE (R, H)."""
+    t = bank if isinstance(bank, BankTally) else BankTally.of(bank, truth)
+    tr, final_ll, seeds = t.trmse, t.final_loglik, t.seeds
     rel = seeds[..., :2] - np.asarray(centre)
     hyps = [{"range_m": float(np.mean(np.linalg.norm(rel[:, h], axis=-1))),
              "bearing_rad": float(np.arctan2(rel[0, h, 1], rel[0, h, 0]) % (2 * np.pi)),
              "trmse_m": float(np.nanmean(tr[:, h])),
              "mean_loglik": float(np.nanmean(np.where(np.isfinite(final_ll[:, h]), final_ll[:, h], np.nan)))}
             for h in range(seeds.shape[1])]
-    sel = bank.selected[:, -1]
-    sel_means = bank.selected_means
+    sel = t.selected_last
+    sel_means = t.selected_means
     return {
         "hypotheses": hyps,
         "selected_index": int(np.bincount(sel, minlength=seeds.shape[1]).argmax()),
@@ -173,7 +260,7 @@ def track_global(unit, model, y, sc, *, refit_peak=None, return_init=False, **op
     t1 = time.perf_counter()
     gi = global_init(model, y, **prior_grid(sc), **options)
     t_init = time.perf_counter() - t1
-    est, bank = track_with_global_init(unit, model, y, gi)
+    est, bank = track_with_global_init(unit, model, y, gi, store=("pos_cov",))   # what is read here
     cov = unalign(bank.selected_pos_cov, gi.start, y.shape[1])
     if refit_peak is not None:
         est, cov = refit_stage(unit, model, y, gi, est, cov, refit_peak, options.get("z_std"))
@@ -214,7 +301,8 @@ def global_init_summary(unit, model, y, truth, sc, snr_start=5.0):
     """The global initialiser on a scenario's runs, then ``unit`` as a bank of its minima (no refits)."""
     from shipsense.trackers.metrics import position_error
 
-    est, _, _ = track_global(unit, model, y, sc, snr_start=snr_start)
+    est = np.concatenate([track_global(unit, model, y[sl], sc, snr_start=snr_start)[0]   # passages independent
+                          for sl in run_chunks(len(y))])
     return {"convergence_rate": convergence_rate(est, truth), "selected_mrmse_m": mrmse(est, truth),
             "final_error_median_m": float(np.median(position_error(est, truth)[:, -1])),
             "filter": unit.name, "snr_start": snr_start}

@@ -8,7 +8,15 @@ import numpy as np
 
 from shipsense.config import load_scenario
 from shipsense.plotting import draw_array, plt
-from shipsense.reproduce.common import LEAN, Output, Stages, bank_summary, bar_charts, global_init_summary, rmse_plot
+from shipsense.reproduce.common import (
+    Output,
+    Stages,
+    bank_summary,
+    bank_tally,
+    bar_charts,
+    global_init_summary,
+    rmse_plot,
+)
 from shipsense.simulator import simulate
 from shipsense.trackers.bank import run_bank
 from shipsense.trackers.driver import run_filter
@@ -37,7 +45,7 @@ def run(runs=200, out="results/S0", seed=0, progress=True):
     times = sc.times
     st.done()
 
-    # 1. convergence basin: one SRCDKF per run and offset, all in one batch
+    # 1. convergence basin: one SRCDKF per run from each offset, the runs of an offset in one batch
     st.step("basin")
     rng = np.random.default_rng(seed + 1)
     ang = rng.uniform(0, 2 * np.pi, (len(OFFSETS), runs))
@@ -46,14 +54,15 @@ def run(runs=200, out="results/S0", seed=0, progress=True):
     x0[..., 0] += dr * np.cos(ang)
     x0[..., 1] += dr * np.sin(ang)
     x0[..., 4:] = 0.0
-    basin = run_filter(sc.tracker.filter, model, sim.measurements[None], x0, P0, store=("means",))
     rows, curves, rates = [], {}, []
     for i, d in enumerate(OFFSETS):
-        rate = convergence_rate(basin.means[i], truth)
-        final = position_error(basin.means[i], truth)[:, -1]
+        basin = run_filter(sc.tracker.filter, model, sim.measurements, x0[i], P0, store=("means",)).means
+        rate = convergence_rate(basin, truth)
+        final = position_error(basin, truth)[:, -1]
         rows.append([d, rate, float(np.median(final)), float(np.sqrt(np.mean(final**2)))])
-        curves[f"dr = {d:g} m"] = rmse_k(basin.means[i], truth)
+        curves[f"dr = {d:g} m"] = rmse_k(basin, truth)
         rates.append(rate)
+        del basin
     ok = [d for d, r in zip(OFFSETS, rates) if r >= BASIN_RATE]
     basin_radius = max(ok) if ok else 0.0
     o.csv("basin.csv", ["offset_m", "convergence_rate", "median_final_error_m", "final_rmse_m"], rows)
@@ -89,9 +98,8 @@ def run(runs=200, out="results/S0", seed=0, progress=True):
     for conv in (bank.bearing_convention, *({"north", "east"} - {bank.bearing_convention})):
         cbank = bank.model_copy(update={"bearing_convention": conv})
         cseeds, _ = seed_hypotheses(model, sim.measurements[:, 0], cbank)
-        cb = run_bank(sc.tracker.filter, model, sim.measurements, cseeds, P0, store=LEAN)
+        cb = bank_tally(sc.tracker.filter, model, sim.measurements, cseeds, P0, truth)
         readings[conv] = (cb.selected_means, *bank_summary(cb, truth), _reading(conv, cb, cseeds, truth, basin_radius))
-        del cb
     selected, summ, tr, main = readings[bank.bearing_convention]
     bar_charts(o, "selection_bars.png", f"S0 exp. 3: {seeds.shape[1]} hypotheses, {runs} runs, bearings from "
                f"{bank.bearing_convention}", summ["hypotheses"], labels=[str(h + 1) for h in range(seeds.shape[1])])
@@ -124,7 +132,7 @@ def run(runs=200, out="results/S0", seed=0, progress=True):
     st.step("dense bank")
     dense_bank = bank.model_copy(update={"bearings_deg": list(DENSE_BEARINGS)})
     dseeds, dP0 = seed_hypotheses(model, sim.measurements[:, 0], dense_bank)   # the literal bank's Q: only l changes
-    bd = run_bank(sc.tracker.filter, model, sim.measurements, dseeds, dP0, store=LEAN)
+    bd = bank_tally(sc.tracker.filter, model, sim.measurements, dseeds, dP0, truth)
     dsumm, _ = bank_summary(bd, truth)
     dense = {"hypotheses": int(dseeds.shape[1]), "bearings_deg": list(DENSE_BEARINGS),
              "process_noise": "the scenario's (Q = 0.1 I, SI)", "bearing_convention": bank.bearing_convention,
@@ -157,10 +165,10 @@ def run(runs=200, out="results/S0", seed=0, progress=True):
 
 def _reading(convention, bank, seeds, truth, basin_radius):
     """The study's Table 3 figures of one reading of the bank's bearings (hypotheses numbered from 1, level-major
-    as the study numbers them): nearest seed, the three hypotheses of highest mean final log-likelihood with their
-    MRMSE, and the selected track's MRMSE (reported with its convergence rate)."""
+    as the study numbers them) from the bank's tally: nearest seed, the three hypotheses of highest mean final
+    log-likelihood with their MRMSE, and the selected track's MRMSE (reported with its convergence rate)."""
     dist = np.linalg.norm(seeds[:, :, :2] - truth[:, None, 0, :2], axis=-1)
-    final = bank.cum_loglik[:, :, -1]
+    final = bank.final_loglik
     ll = np.nanmean(np.where(np.isfinite(final), final, np.nan), axis=0)
     top = np.argsort(-np.where(np.isfinite(ll), ll, -np.inf))[:3]
     return {"bearing_convention": convention,
@@ -168,7 +176,7 @@ def _reading(convention, bank, seeds, truth, basin_radius):
             "seed_nearest_hypothesis": int(np.bincount(dist.argmin(axis=1)).argmax()) + 1,
             "seed_inside_basin_rate": float(np.mean(dist.min(axis=1) <= basin_radius)),
             "loglik_top3": [int(h) + 1 for h in top],
-            "top3_mrmse_m": [{"hypothesis": int(h) + 1, **mrmse(bank.positions[:, h], truth),
+            "top3_mrmse_m": [{"hypothesis": int(h) + 1, **bank.mrmse(h),
                               "mean_loglik": float(ll[h])} for h in top],
             "selected_mrmse_m": mrmse(bank.selected_means, truth),
             "selected_convergence_rate": convergence_rate(bank.selected_means, truth)}

@@ -1,0 +1,46 @@
+"""The studies' bank tally: run chunk by run chunk, it keeps what the full record would give."""
+
+import numpy as np
+import pytest
+
+from shipsense.config import load_scenario
+from shipsense.reproduce.common import LEAN, bank_summary, bank_tally, run_chunks
+from shipsense.simulator import simulate
+from shipsense.trackers.bank import run_bank
+from shipsense.trackers.metrics import mrmse, trmse
+from shipsense.trackers.models import model_from_scenario
+from shipsense.trackers.seeding import seed_hypotheses
+
+
+@pytest.fixture(scope="module")
+def s0_runs():
+    sc = load_scenario("S0")
+    model = model_from_scenario(sc)
+    sim = simulate(sc, runs=5, seed=4)
+    seeds, P0 = seed_hypotheses(model, sim.measurements[:, 0], sc.tracker.bank)
+    return model, sim.measurements[:, :80], model.state_from_truth(sim.truth)[:, :80], seeds, P0
+
+
+def test_run_chunks_cover_the_runs_once():
+    assert run_chunks(5, 2) == [slice(0, 2), slice(2, 4), slice(4, 5)]
+    assert run_chunks(0, 3) == []
+
+
+def test_a_tally_in_chunks_equals_the_whole_banks_record(s0_runs):
+    model, y, truth, seeds, P0 = s0_runs
+    whole = run_bank("ukf", model, y, seeds, P0, store=LEAN)
+    tally = bank_tally("ukf", model, y, seeds, P0, truth, chunk=2)                # chunks of 2, 2 and 1 runs
+    assert tally.runs == 5
+    np.testing.assert_array_equal(tally.final_loglik, whole.cum_loglik[:, :, -1])
+    np.testing.assert_array_equal(tally.selected_means, whole.selected_means)
+    np.testing.assert_array_equal(tally.selected_last, whole.selected[:, -1])
+    np.testing.assert_array_equal(tally.trmse, trmse(whole.positions, truth[:, None]))
+    for h in range(seeds.shape[1]):                                             # MRMSE from the summed squares
+        want = mrmse(whole.positions[:, h], truth)
+        got = tally.mrmse(h)
+        assert got.keys() == want.keys()
+        np.testing.assert_allclose([got[k] for k in want], [want[k] for k in want], rtol=1e-12)
+    a, tr_a = bank_summary(whole, truth)
+    b, tr_b = bank_summary(tally, truth)
+    np.testing.assert_array_equal(tr_a, tr_b)
+    assert a == b
