@@ -4,6 +4,11 @@ native vector envs' partial reset."""
 from __future__ import annotations
 
 import numpy as np
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+SEED_HIGH = 2**31 - 1
+"""Episode seeds are drawn below this (the environments' generators hand one to the core per reset)."""
 
 
 class RebuiltOnUnpickle:
@@ -47,7 +52,7 @@ def reset_rows(options, num_envs):
     return np.flatnonzero(mask)
 
 
-def stream_generators(seed, num_envs, high=2**31 - 1):
+def stream_generators(seed, num_envs, high=SEED_HIGH):
     """One generator per sub-environment of a native vector env: ``seed`` an int (sub-environment ``i`` draws
     from ``seed + i``, as a single env reset with ``seed + i``), None (fresh entropy), or a list of
     ``num_envs`` seeds (None entries: fresh entropy; what SB3's ``VecEnv.seed`` hands over)."""
@@ -61,3 +66,56 @@ def stream_generators(seed, num_envs, high=2**31 - 1):
                              f"got {len(seeds)}")
         seeds = [np.random.SeedSequence().entropy % high if s is None else int(s) for s in seeds]
     return [np.random.Generator(np.random.PCG64(np.random.SeedSequence(s))) for s in seeds]
+
+
+class CoreVectorEnv(VectorEnv):
+    """A native vector env on one batched core: one generator per sub-environment (:func:`stream_generators`),
+    ``reset`` of all or of the masked sub-environments (:func:`reset_rows`), next-step autoreset
+    (:meth:`_autoreset`) and ``rgb_array`` rendering.
+
+    A subclass sets ``self.core`` (``reset_envs(envs, seeds, fresh=)``, ``render(e)``) and ``self.num_envs``,
+    calls :meth:`_batch` with its single spaces, and defines ``_observation()`` (every sub-environment's) and
+    ``step``.
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "autoreset_mode": AutoresetMode.NEXT_STEP}
+
+    def _batch(self, single_spaces, render_mode):
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
+        self.single_observation_space, self.single_action_space = single_spaces
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+        self.action_space = batch_space(self.single_action_space, self.num_envs)
+        self.render_mode = render_mode
+        self._rngs = None
+        self._prev_done = np.zeros(self.num_envs, dtype=bool)
+
+    def _reseed(self, seed):
+        self._rngs = stream_generators(seed, self.num_envs, SEED_HIGH)
+
+    def _episode_seeds(self, envs):
+        """Each of sub-environments ``envs``'s next episode seed, from its own generator."""
+        return [int(self._rngs[i].integers(SEED_HIGH)) for i in envs]
+
+    def reset(self, *, seed=None, options=None):
+        fresh = seed is not None or self._rngs is None
+        if fresh:
+            self._reseed(seed)
+        envs = reset_rows(options, self.num_envs)
+        self.core.reset_envs(envs, self._episode_seeds(envs), fresh=fresh)
+        self._prev_done[envs] = False
+        return self._observation(), {}
+
+    def _autoreset(self):
+        """Next-step autoreset: the sub-environments that ended in the last step reset now (and ignore this
+        step's action); returns their mask."""
+        done = self._prev_done
+        if done.any():
+            idx = np.flatnonzero(done)
+            self.core.reset_envs(idx, self._episode_seeds(idx))
+        return done
+
+    def render(self):
+        if self.render_mode == "rgb_array":
+            return tuple(self.core.render(e) for e in range(self.num_envs))
+        return None

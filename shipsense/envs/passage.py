@@ -76,16 +76,13 @@ from __future__ import annotations
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
-from gymnasium.vector import AutoresetMode, VectorEnv
-from gymnasium.vector.utils import batch_space
 
 from shipsense.config import load_scenario
 from shipsense.envs.arguments import number
-from shipsense.envs.core_env import RebuiltOnUnpickle, reset_rows, stream_generators
+from shipsense.envs.core_env import SEED_HIGH, CoreVectorEnv, RebuiltOnUnpickle
 from shipsense.simulator import simulate
 from shipsense.trackers import Tracker
 
-SEED_HIGH = 2**31 - 1
 PASSAGE_BLOCK = 16
 """Passages simulated per simulator call and environment (see :meth:`PassageCore.reset_envs`)."""
 
@@ -306,7 +303,7 @@ class PassageEnv(RebuiltOnUnpickle, gym.Env):
         return None
 
 
-class PassageVectorEnv(VectorEnv):
+class PassageVectorEnv(CoreVectorEnv):
     """Native vector version of ``shipsense/Passage-v0``: the same :class:`PassageCore` on a batch.
 
     Sub-environment ``i`` reset with ``seed`` behaves exactly like a single
@@ -317,38 +314,19 @@ class PassageVectorEnv(VectorEnv):
     25 % more steps per second at 64 environments; ``shipsense train`` does).
     """
 
-    metadata = {"render_modes": ["rgb_array"], "autoreset_mode": AutoresetMode.NEXT_STEP}
-
     def __init__(self, num_envs=1, scenario="S2", overrides=None, filter=None, max_reads=None, energy_cost=0.01,
                  error_scale=10.0, render_mode=None, observer="tracker"):
         self.num_envs = int(num_envs)
         self.core = PassageCore(self.num_envs, scenario, overrides, filter, max_reads, energy_cost, error_scale,
                                 observer)
-        self.single_observation_space, self.single_action_space = _spaces(self.core)
-        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
-        self.action_space = batch_space(self.single_action_space, self.num_envs)
-        self.render_mode = render_mode
-        self._rngs = None
-        self._prev_done = np.zeros(self.num_envs, dtype=bool)
+        self._batch(_spaces(self.core), render_mode)
 
-    def _reseed(self, seed):
-        self._rngs = stream_generators(seed, self.num_envs, SEED_HIGH)
-
-    def reset(self, *, seed=None, options=None):
-        fresh = seed is not None or self._rngs is None
-        if fresh:
-            self._reseed(seed)
-        envs = reset_rows(options, self.num_envs)
-        obs = self.core.reset_envs(envs, [int(self._rngs[i].integers(SEED_HIGH)) for i in envs], fresh=fresh)
-        self._prev_done[envs] = False
-        return (obs if envs.size == self.num_envs else self.core._observe()), {}
+    def _observation(self):
+        return self.core._observe()
 
     def step(self, actions):
         actions = np.asarray(actions).reshape(self.num_envs, -1)
-        done = self._prev_done
-        if done.any():  # next-step autoreset: these environments reset now and ignore their action
-            idx = np.flatnonzero(done)
-            self.core.reset_envs(idx, [int(self._rngs[i].integers(SEED_HIGH)) for i in idx])
+        done = self._autoreset()
         live = np.flatnonzero(~done)
         # environments that just reset do not step; the others advance together
         rewards, terminated, info = self.core.step(actions, envs=live if done.any() else None)
@@ -358,8 +336,3 @@ class PassageVectorEnv(VectorEnv):
         self._prev_done = terminated.copy()
         truncated = np.zeros(self.num_envs, dtype=bool)
         return obs, rewards.astype(np.float64), terminated, truncated, info
-
-    def render(self):
-        if self.render_mode == "rgb_array":
-            return tuple(self.core.render(e) for e in range(self.num_envs))
-        return None

@@ -135,17 +135,14 @@ from itertools import combinations
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
-from gymnasium.vector import AutoresetMode, VectorEnv
-from gymnasium.vector.utils import batch_space
 
 from shipsense.config import load_scenario
 from shipsense.envs.arguments import number
-from shipsense.envs.core_env import ClosesItsFigure, RebuiltOnUnpickle, reset_rows, stream_generators
+from shipsense.envs.core_env import SEED_HIGH, ClosesItsFigure, CoreVectorEnv, RebuiltOnUnpickle
 from shipsense.simulator import simulate
 from shipsense.trackers import Tracker
 from shipsense.trackers.tracker import INITIALISING, NO_DATA
 
-SEED_HIGH = 2**31 - 1
 PASSAGE_BLOCK = 16
 """Passages simulated per simulator call and environment (see :meth:`PassageV1Core.reset_envs`)."""
 CHI2_2_95 = 5.991464547107979
@@ -533,7 +530,7 @@ class PassageV1Env(RebuiltOnUnpickle, ClosesItsFigure, gym.Env):
         return None
 
 
-class PassageV1VectorEnv(VectorEnv):
+class PassageV1VectorEnv(CoreVectorEnv):
     """Native vector version of ``shipsense/Passage-v1``: one :class:`PassageV1Core` (one batched tracker) for
     all sub-environments.
 
@@ -548,45 +545,25 @@ class PassageV1VectorEnv(VectorEnv):
     (:class:`~shipsense.envs.sb3.VectorEnvAdapter`) calls it in the step an episode ends.
     """
 
-    metadata = {"render_modes": ["rgb_array"], "autoreset_mode": AutoresetMode.NEXT_STEP}
     BASELINES = BASELINES
     potential = staticmethod(observation_potential)
     """The shaping potential of training (:func:`observation_potential`)."""
 
     def __init__(self, num_envs=1, scenario="S2", overrides=None, k=1, energy_cost=0.01, error_scale=1.0,
                  render_mode=None):
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
         self.core = PassageV1Core(num_envs, scenario, overrides, k, energy_cost, error_scale)
         self.num_envs = self.core.E
         self.subsets = self.core.subsets
-        self.single_observation_space, self.single_action_space = _spaces(self.core)
-        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
-        self.action_space = batch_space(self.single_action_space, self.num_envs)
-        self.render_mode = render_mode
-        self._rngs = None
-        self._prev_done = np.zeros(self.num_envs, dtype=bool)
+        self._batch(_spaces(self.core), render_mode)
 
-    def _reseed(self, seed):
-        self._rngs = stream_generators(seed, self.num_envs, SEED_HIGH)
-
-    def reset(self, *, seed=None, options=None):
-        fresh = seed is not None or self._rngs is None
-        if fresh:
-            self._reseed(seed)
-        envs = reset_rows(options, self.num_envs)
-        self.core.reset_envs(envs, [int(self._rngs[i].integers(SEED_HIGH)) for i in envs], fresh=fresh)
-        self._prev_done[envs] = False
-        return self.core.observe(), {}
+    def _observation(self):
+        return self.core.observe()
 
     def step(self, actions):
         actions = np.asarray(actions).reshape(self.num_envs)
         if np.any((actions < 0) | (actions >= len(self.subsets))):
             raise ValueError(f"actions must be integers in [0, {len(self.subsets)})")
-        done = self._prev_done
-        if done.any():   # next-step autoreset: these environments reset now and ignore their action
-            idx = np.flatnonzero(done)
-            self.core.reset_envs(idx, [int(self._rngs[i].integers(SEED_HIGH)) for i in idx])
+        done = self._autoreset()
         live = ~done
         rewards, terminated, info = self.core.step(np.where(live, actions, 0),
                                                    envs=np.flatnonzero(live) if done.any() else None)
@@ -611,11 +588,6 @@ class PassageV1VectorEnv(VectorEnv):
         """The batched baseline policy ``name``: ``policy(obs) -> actions`` (num_envs,)."""
         _check_baseline(name)
         return _Policy(self.core, name, seed, single=False)
-
-    def render(self):
-        if self.render_mode == "rgb_array":
-            return tuple(self.core.render(e) for e in range(self.num_envs))
-        return None
 
 
 __all__ = ["BASELINES", "PassageV1Core", "PassageV1Env", "PassageV1VectorEnv", "information_gains",

@@ -221,3 +221,13 @@ def test_sb3_adapter_serves_the_native_vector_env_through_list_seeds_and_partial
                 o, _ = s.reset()
             np.testing.assert_allclose(obs[i], o, atol=1e-6)
     assert ended >= 2
+
+
+def test_both_passage_vector_envs_refuse_an_unknown_render_mode():
+    """One vector-env base (``core_env.CoreVectorEnv``) for Passage-v0 and -v1: the single envs' check of
+    ``render_mode`` holds for the vector ones too (v0's vector env accepted anything before)."""
+    from shipsense.envs.passage_v1 import PassageV1VectorEnv
+
+    for cls in (PassageVectorEnv, PassageV1VectorEnv):
+        with pytest.raises(ValueError, match="render_mode must be one of \\['rgb_array'\\], got 'human'"):
+            cls(2, render_mode="human")
