@@ -24,6 +24,8 @@ def s0_runs():
 def test_run_chunks_cover_the_runs_once():
     assert run_chunks(5, 2) == [slice(0, 2), slice(2, 4), slice(4, 5)]
     assert run_chunks(0, 3) == []
+    with pytest.raises(ValueError, match="chunk must be at least 1 run, got 0"):
+        run_chunks(5, 0)
 
 
 def test_a_tally_in_chunks_equals_the_whole_banks_record(s0_runs):
@@ -44,3 +46,17 @@ def test_a_tally_in_chunks_equals_the_whole_banks_record(s0_runs):
     b, tr_b = bank_summary(tally, truth)
     np.testing.assert_array_equal(tr_a, tr_b)
     assert a == b
+
+
+def test_a_tally_takes_every_initial_covariance_shape_the_bank_takes(s0_runs):
+    """``P0`` shared (n, n), per hypothesis (H, n, n) or per run and hypothesis (R, H, n, n): the same tally
+    (the bank broadcasts them alike); no runs is refused."""
+    model, y, truth, seeds, P0 = s0_runs
+    y, truth, seeds = y[:, :30], truth[:, :30], seeds[:, :4]
+    want = bank_tally("ukf", model, y, seeds, P0, truth, chunk=2)
+    for shape in ((4,), (5, 4)):
+        got = bank_tally("ukf", model, y, seeds, np.broadcast_to(P0, shape + P0.shape), truth, chunk=2)
+        np.testing.assert_array_equal(got.trmse, want.trmse)
+        np.testing.assert_array_equal(got.selected_means, want.selected_means)
+    with pytest.raises(ValueError, match="at least one run"):
+        bank_tally("ukf", model, y[:0], seeds[:0], P0, truth[:0])

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from shipsense.plotting import plt
-from shipsense.trackers.metrics import convergence_rate, mrmse, trmse
+from shipsense.trackers.metrics import convergence_rate, mrmse
 
 LEAN = ("positions", "loglik", "selected")
 """What the studies' banks keep (``run_bank(store=)``): positions, likelihoods and the selected track -- what
@@ -101,7 +101,9 @@ independent, so the figures do not depend on it; batches of 50 runs (600-1,800 f
 
 
 def run_chunks(runs, chunk=RUN_CHUNK):
-    """Slices of ``runs`` runs, ``chunk`` at a time."""
+    """Slices of ``runs`` runs, ``chunk`` (>= 1) at a time."""
+    if int(chunk) < 1:
+        raise ValueError(f"chunk must be at least 1 run, got {chunk}")
     return [slice(s, min(s + chunk, runs)) for s in range(0, runs, chunk)]
 
 
@@ -126,8 +128,8 @@ class BankTally:
     def of(cls, bank, truth):
         """The tally of a :class:`~shipsense.trackers.bank.BankRun` (positions, likelihoods and the selected
         track kept: :data:`LEAN`) against ``truth`` (R, K, n).  The same numbers as
-        :func:`~shipsense.trackers.metrics.trmse` and ``bank.cum_loglik[:, :, -1]``, formed in place: two
-        arrays of the record's (R, H, K) size at a time."""
+        :func:`~shipsense.trackers.metrics.trmse` (formed in place: two arrays of the record's (R, H, K) size
+        at a time) and ``bank.final_loglik``."""
         pos, truth = bank.positions, np.asarray(truth)
         sq = np.subtract(pos[..., 0], truth[:, None, :, 0])                        # (R, H, K): dx, then dx^2
         np.square(sq, out=sq)
@@ -137,10 +139,7 @@ class BankTally:
         sq += dy2
         del dy2
         tr = np.sqrt(sq, out=sq).mean(axis=-1)                                     # position_error's numbers
-        ll = np.where(bank.active, bank.loglik, 0.0)                               # BankRun.cum_loglik's sums
-        final = np.cumsum(ll, axis=-1, out=ll)[..., -1] + np.asarray(bank.initial_loglik)
-        final = np.where(bank.active[..., -1], final, -np.inf)
-        return cls(np.asarray(bank.seeds), tr, final, bank.selected_means, sq_err)
+        return cls(np.asarray(bank.seeds), tr, bank.final_loglik, bank.selected_means, sq_err)
 
     @classmethod
     def concat(cls, parts):
@@ -167,14 +166,17 @@ class BankTally:
 
 
 def bank_tally(unit, model, y, seeds, P0, truth, chunk=RUN_CHUNK):
-    """:func:`~shipsense.trackers.bank.run_bank` on passages ``y`` (R, K, m) from ``seeds`` (R, H, n), run
-    chunk of runs by chunk (:data:`RUN_CHUNK`), tallied against ``truth`` (:class:`BankTally`)."""
+    """:func:`~shipsense.trackers.bank.run_bank` on passages ``y`` (R >= 1, K, m) from ``seeds`` (R, H, n) and
+    ``P0`` (any shape ``run_bank`` takes), run chunk of runs by chunk (:data:`RUN_CHUNK`), without pruning or
+    prior likelihoods, tallied against ``truth`` (:class:`BankTally`)."""
     from shipsense.trackers.bank import run_bank
 
-    P0 = np.asarray(P0)
+    if len(y) == 0:
+        raise ValueError("bank_tally needs at least one run")
+    P0 = np.broadcast_to(np.asarray(P0, dtype=float), seeds.shape + seeds.shape[-1:])     # (R, H, n, n)
     parts = []
     for sl in run_chunks(len(y), chunk):
-        b = run_bank(unit, model, y[sl], seeds[sl], P0 if P0.ndim == 2 else P0[sl], store=LEAN)
+        b = run_bank(unit, model, y[sl], seeds[sl], P0[sl], store=LEAN)
         parts.append(BankTally.of(b, truth[sl]))
         del b
     return BankTally.concat(parts)

@@ -46,8 +46,8 @@ class BankRun:
 
     A record :func:`run_bank` was not asked to keep (``store``) is None; ``positions`` and
     ``selected_means`` are then kept as the bank ran (``"positions"``, ``"selected"``); with ``"selected"``
-    kept, ``selected`` is the selection made as the bank ran (the same maximum of the cumulative
-    log-likelihood, summed step by step), so ``selected_means`` and ``selected_pos_cov`` are one choice.
+    kept, ``selected`` is the selection made as the bank ran (the maximum of :attr:`cum_loglik`, which sums
+    in the bank's order), so ``selected_means`` and ``selected_pos_cov`` are one choice.
     """
 
     seeds: np.ndarray
@@ -80,10 +80,25 @@ class BankRun:
 
     @property
     def cum_loglik(self) -> np.ndarray:
-        """Cumulative log-likelihood (R, H, K) (from ``initial_loglik``); -inf once pruned."""
-        c = np.cumsum(np.where(self.active, self._kept("loglik"), 0.0), axis=-1)
-        c += np.asarray(self.initial_loglik)[..., None]
-        return np.where(self.active, c, -np.inf)
+        """Cumulative log-likelihood (R, H, K) (from ``initial_loglik``); -inf once pruned.
+
+        Summed as the bank sums while it runs, ``((initial + l_0) + l_1) + ...``: the same numbers, so a
+        selection kept as it ran (``store`` with ``"selected"``) is their maximum even at a near-tie."""
+        c = self._running_sums()
+        c[~self.active] = -np.inf
+        return c
+
+    @property
+    def final_loglik(self) -> np.ndarray:
+        """:attr:`cum_loglik` at the last step (R, H), with one (R, H, K) temporary instead of two."""
+        return np.where(self.active[..., -1], self._running_sums()[..., -1], -np.inf)
+
+    def _running_sums(self):
+        """The log-likelihoods summed in the bank's order from ``initial_loglik`` (R, H, K), a pruned entry
+        adding 0."""
+        c = np.where(self.active, self._kept("loglik"), 0.0)
+        c[..., 0] += np.asarray(self.initial_loglik)
+        return np.cumsum(c, axis=-1, out=c)
 
     @property
     def normalised_loglik(self) -> np.ndarray:
@@ -108,6 +123,7 @@ class BankRun:
 
     @property
     def selected_pos_cov(self) -> np.ndarray:
+        """Position covariance of the selected hypothesis at every step (R, K, 2, 2), SI."""
         idx = self.selected[:, None, :, None, None]
         return np.take_along_axis(self._kept("pos_cov"), idx, axis=1)[:, 0]
 

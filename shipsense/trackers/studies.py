@@ -36,6 +36,8 @@ def track_with_global_init(unit, model, measurements, gi: GlobalInit, store=None
     src = start[:, None] + j                                                  # (R, J): sample of step j
     inside = src < K
     aligned = np.where(inside[..., None], y[np.arange(R)[:, None], np.minimum(src, K - 1)], np.nan)
+    if isinstance(store, str):
+        store = (store,)
     kw = {} if store is None else {"store": tuple(dict.fromkeys((*store, "selected")))}
     bank = run_bank(unit, model, aligned, gi.seeds, gi.P0, initial_loglik=gi.loglik, **kw)
     est = unalign(bank.selected_means, start, K)

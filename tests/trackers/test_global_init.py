@@ -76,6 +76,10 @@ def test_tracking_from_the_global_initialiser_converges_on_s2():
     y = sim.measurements[..., :6]
     gi = global_init(model, y, ranges=np.geomspace(20, 150, 8), speeds=np.linspace(3, 7, 3), common_start=True)
     est, bank = track_with_global_init(get_filter("ukf"), model, y, gi)
+    lean_est, lean = track_with_global_init(get_filter("ukf"), model, y, gi, store="pos_cov")   # a lean record
+    assert lean.means is None and lean.loglik is None
+    np.testing.assert_array_equal(lean_est, est)
+    np.testing.assert_array_equal(lean.selected_pos_cov, bank.selected_pos_cov)
     truth = model.state_from_truth(sim.truth)
     final = np.hypot(*(est[:, -1, :2] - truth[:, -1, :2]).T)
     assert est.shape == truth.shape and np.all(final < 5.0), final
