@@ -54,13 +54,16 @@ def sources_digest(name, root=PACKAGE, depends=DEPENDS):
 
 
 def key_on_sources(namespace, root=PACKAGE, depends=DEPENDS):
-    """Stamp the cached kernels defined in a module (its ``globals()``) with :func:`sources_digest`; returns
-    how many.  Call it at the end of the module, after its kernels are defined (numba reads the stamp when
-    it first loads or saves a kernel, at its first call)."""
+    """Stamp the cached kernels defined in a module (its ``globals()``, and the values of its dicts: kernels
+    a factory made) with :func:`sources_digest`; returns how many.  Call it at the end of the module, after
+    its kernels are defined (numba reads the stamp when it first loads or saves a kernel, at its first call)."""
     name = Path(namespace["__file__"]).resolve().relative_to(Path(root).resolve()).as_posix()
     digest = sources_digest(name, root, depends)
     count = 0
-    for obj in list(namespace.values()):
+    found = []
+    for obj in list(namespace.values()):   # the module's kernels, also those it keeps in a dict (kernel factories)
+        found.extend(obj.values() if isinstance(obj, dict) else (obj,))
+    for obj in found:
         cache_file = getattr(getattr(obj, "_cache", None), "_cache_file", None)
         func = getattr(obj, "py_func", None)
         if cache_file is None or func is None or func.__module__ != namespace["__name__"]:

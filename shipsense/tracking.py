@@ -41,7 +41,7 @@ def first_use_notice():
     from shipsense.trackers import lm_kernel, measurement
     from shipsense.trackers.filters import fused
 
-    ready = numba_cache.cached(fused._update_kernel, fused._predict_kernel, measurement._batch_kernel,
+    ready = numba_cache.cached(fused._UPDATE_KERNELS[fused.UKF], fused._predict_kernel, measurement._batch_kernel,
                                lm_kernel._lm_kernel)
     return None if ready else FIRST_USE
 

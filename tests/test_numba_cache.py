@@ -39,7 +39,7 @@ def test_the_package_kernels_are_keyed_on_their_sources():
     from shipsense.trackers.filters import fused
 
     digest = numba_cache.sources_digest("trackers/filters/fused.py")
-    assert fused._update_kernel._cache._cache_file._source_stamp == digest
+    assert all(k._cache._cache_file._source_stamp == digest for k in fused._UPDATE_KERNELS.values())
     assert measurement._batch_kernel._cache._cache_file._source_stamp != digest      # its own sources
 
 
