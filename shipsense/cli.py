@@ -236,7 +236,7 @@ def cmd_track(args) -> int:
         times, y, truth = sim.times, sim.measurements[0], sim.truth[0]
         used_seed = sc.seed if args.seed is None else args.seed
         source = f"simulated {'random' if args.random else 'nominal'} passage of {sc.name} (seed {used_seed})"
-    notice = first_use_notice()
+    notice = first_use_notice(args.filter)
     if notice:
         print(f"track: {notice}", file=sys.stderr)
     with staged_directory(out) as stage:   # the tables and the plot, or nothing

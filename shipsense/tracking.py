@@ -34,15 +34,17 @@ FIRST_USE = ("compiling the numerical kernels on their first use on this machine
              "cores; cached for later runs)")
 
 
-def first_use_notice():
-    """:data:`FIRST_USE` if the tracker's compiled kernels (filter steps, measurement kernel, least-squares
-    loop) are not yet compiled on disk for the current sources, else None."""
+def first_use_notice(filter_name=None):
+    """:data:`FIRST_USE` if the tracker's compiled kernels (filter ``filter_name``'s update, default the
+    tracker's UKF, the predict, measurement kernel and least-squares loop) are not yet compiled on disk for the
+    current sources, else None."""
     from shipsense import numba_cache
     from shipsense.trackers import lm_kernel, measurement
     from shipsense.trackers.filters import fused
 
-    ready = numba_cache.cached(fused._UPDATE_KERNELS[fused.UKF], fused._predict_kernel, measurement._batch_kernel,
-                               lm_kernel._lm_kernel)
+    code = fused.filter_code(filter_name or "ukf")
+    ready = numba_cache.cached(fused._UPDATE_KERNELS[code], fused._UPDATE_LOOPS[code], fused._predict_kernel,
+                               measurement._batch_kernel, lm_kernel._lm_kernel)
     return None if ready else FIRST_USE
 
 

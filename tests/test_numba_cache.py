@@ -39,7 +39,8 @@ def test_the_package_kernels_are_keyed_on_their_sources():
     from shipsense.trackers.filters import fused
 
     digest = numba_cache.sources_digest("trackers/filters/fused.py")
-    assert all(k._cache._cache_file._source_stamp == digest for k in fused._UPDATE_KERNELS.values())
+    kernels = [*fused._UPDATE_KERNELS.values(), *fused._UPDATE_LOOPS.values()]      # one per filter, and loops
+    assert len(kernels) == 12 and all(k._cache._cache_file._source_stamp == digest for k in kernels)
     assert measurement._batch_kernel._cache._cache_file._source_stamp != digest      # its own sources
 
 
@@ -97,8 +98,9 @@ def test_the_first_use_notice_says_whether_the_tracker_will_compile(tmp_path):
 
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path))
     out = subprocess.run([sys.executable, "-c", "from shipsense.tracking import first_use_notice; "
-                          "print(first_use_notice())"], env=env, capture_output=True, text=True, check=True)
-    assert "compiling the numerical kernels" in out.stdout
+                          "print(first_use_notice()); print(first_use_notice('ekf'))"], env=env, capture_output=True,
+                         text=True, check=True)
+    assert out.stdout.count("compiling the numerical kernels") == 2     # the tracker's UKF, and a --filter's
     sim = simulate("S2", runs=1, seed=3, random=True)
     Tracker("S2").track(sim.times, sim.measurements)
     assert first_use_notice() is None

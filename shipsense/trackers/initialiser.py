@@ -288,6 +288,9 @@ def grid_fit(model, yw, G, off, A, clamp):
     if not (Wn == G.shape[0] == off.shape[0]):
         raise ValueError(f"the windows have {Wn} samples but the grid terms {G.shape[0]}")
     field, bearing = ~model.axial, model.axial
+    if G.shape[1] != field.sum() or off.shape[1] != bearing.sum() or G.shape[2] != C * P:
+        raise ValueError(f"grid terms of {G.shape[1]} field and {off.shape[1]} bearing channels for {C} "
+                         f"candidates do not fit this model ({field.sum()} and {bearing.sum()})")
     std = np.sqrt(model.R)
     yf = yw[:, :, field] / std[field]
     present = np.isfinite(yf).reshape(R, -1)

@@ -266,3 +266,43 @@ def test_a_large_batch_split_across_threads_equals_one_thread_bit_for_bit(name, 
         runs[threads] = fused_run(name, model, yb, xb, P0, {}, mask)
     for a, b in zip(runs["1"], runs["3"]):
         np.testing.assert_array_equal(a, b)
+
+
+CROSS_PROCESS = """
+import sys
+import numpy as np
+from shipsense import simulate
+from shipsense.trackers.filters import UPDATES, Belief, fused
+from shipsense.trackers.measurement import kernel_of
+from shipsense.trackers.models import model_from_scenario
+
+sim = simulate("S0", runs=3, seed=11)
+model = model_from_scenario("S0")
+truth = model.to_internal(model.state_from_truth(sim.truth))
+x0 = truth[:, 0] + np.array([8.0, -5.0, 0.5, 0.5, 0.0, 0.0, 0.0])
+P0 = np.diag([100.0, 100.0, 4.0, 4.0] + [(0.5 * np.abs(truth[0, 0, 4:]).max()) ** 2] * 3)
+y = sim.measurements[:, 0] / model.y_scale
+b = Belief.from_cov(x0, P0)
+for name in sys.argv[1].split(","):
+    new, inn = fused.update(name, b, y, model, kernel_of(model))
+    ref, rinn = UPDATES[name](b, y, model, None)
+    assert np.allclose(new.mean, ref.mean, rtol=1e-9, atol=1e-9), name
+    assert np.allclose(inn.loglik, rinn.loglik, rtol=1e-9), name
+"""
+
+
+def test_each_filters_kernel_is_its_own_when_compiled_in_different_processes(tmp_path):
+    """One update kernel per filter from one source: each named for its filter, since numba names a cached
+    kernel's file and machine-code symbol after the qualified name (the symbol with a per-process counter).
+    Under one name, a UKF compiled in one process and a CDKF in another linked to each other's code: the
+    second process's UKF returned the CDKF's numbers.  Here with an empty cache: the UKF alone, then the
+    CDKF compiled and the UKF loaded beside it, both against the numpy steps."""
+    import os
+    import subprocess
+    import sys
+
+    names = [f.py_func.__qualname__ for d in (fused._UPDATE_KERNELS, fused._UPDATE_LOOPS) for f in d.values()]
+    assert len(set(names)) == 12
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
+    for names in ("ukf", "cdkf,ukf"):
+        subprocess.run([sys.executable, "-c", CROSS_PROCESS, names], env=env, check=True)

@@ -356,6 +356,9 @@ def test_the_grid_fit_equals_a_least_squares_solve_per_candidate(monkeypatch):
             np.testing.assert_allclose(chi2[r, c], np.sum((d - g @ par) ** 2), rtol=1e-9)
     with pytest.raises(ValueError, match="bearing channels only"):
         _window_major(model, offset + 1.0, basis)
+    with pytest.raises(ValueError, match="grid terms of 6 field and 1 bearing channels for 600 candidates do not "
+                                         "fit this model \\(3 and 0\\)"):
+        grid_fit(model_from_scenario("S0"), yw[..., :3], Gw, off, A, True)          # another model's terms
 
 
 def test_fits_and_grid_in_chunks_of_passages_equal_one_batch(monkeypatch):

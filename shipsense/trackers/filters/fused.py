@@ -479,7 +479,6 @@ def _update_kernel_for(code):
     six; one source for the six)."""
     filt_code = code
 
-    @_loop_jit
     def loop(X, Ls_in, P_in, Yobs, mask, Rm, spec, spread, center, Wm, Wc, h, gamma, iterations, n_pu, mean_out,
              P_out, L_out, eps_out, S_out, loglik, nis_out, m_out, ok_out, work, ekf):
         """The kernel's loop over the batch, on its scratch ``work`` and ``ekf``."""
@@ -543,7 +542,6 @@ def _update_kernel_for(code):
         ``P_out``); ``ok_out`` is False where a factorisation failed or a result is not finite; returns whether
         every element is ok.  Allocates the scratch; the loop over the batch is ``_LOOP``, its filter's.
         """
-        assert filt_code >= 0   # (the filter's code: in the closure, which numba's cache key includes)
         n = X.shape[1]
         m = Yobs.shape[1]
         k = 2 * n + m
@@ -564,11 +562,17 @@ def _update_kernel_for(code):
               mean_out, P_out, L_out, eps_out, S_out, loglik, nis_out, m_out, ok_out, work, ekf)
         return ok_out.all()
 
-    # The kernel finds its loop as the global ``_LOOP`` (its own copy of the module's globals): numba keys a
-    # cached function on its bytecode and closure, and a loop in the closure (a dispatcher, pickled with a
-    # per-process id) would never match the cache; the filter's code in the closure keeps the six apart.
+    # Each filter's kernel and loop are named for it: numba names a cached function's file and its machine
+    # code's symbol after the qualified name (the symbol with a counter that restarts in every process), so
+    # six functions of one name compiled in different processes would link to each other's code.  The kernel
+    # finds its loop as the global ``_LOOP`` (its own copy of the module's globals, taken at import): numba
+    # keys a cached function on its bytecode and closure, and a loop in the closure (a dispatcher, pickled
+    # with a per-process id) would never match the cache.
+    loop.__qualname__ = f"_update_loop_{code}"
+    loop = _loop_jit(loop)
     kernel = FunctionType(kernel.__code__, {**globals(), "_LOOP": loop}, kernel.__name__, kernel.__defaults__,
                           kernel.__closure__)
+    kernel.__qualname__ = f"_update_kernel_{code}"
     return njit(cache=True, error_model="numpy", nogil=True)(kernel), loop
 
 
@@ -755,6 +759,18 @@ def predict(belief: Belief, model, square_root: bool = False):
     return _BeliefWithCov.with_cov(mean_out, L_out, _flag(prior_health(belief), batch), _shaped(P_out, batch))
 
 
+_FILTER_CODES = {"ukf": UKF, "ckf": UKF, "huber_ukf": HUBER, "cdkf": CDKF, "srcdkf": SRCDKF, "ekf": EKF,
+                 "puekf": PUEKF}
+
+
+def filter_code(name):
+    """The compiled update kernel's code of filter ``name`` (the CKF runs the UKF's with its own points)."""
+    try:
+        return _FILTER_CODES[name]
+    except KeyError:
+        raise ValueError(f"no compiled update for filter {name!r}; offered: {', '.join(_FILTER_CODES)}") from None
+
+
 def update(name, belief: Belief, y, model, spec, mask=None, **options):
     """The compiled measurement update of filter ``name`` (same result as its module's ``update``); None if an
     element failed numerically (the caller then runs the numpy step, which flags and repairs it)."""
@@ -765,22 +781,19 @@ def update(name, belief: Belief, y, model, spec, mask=None, **options):
              else _batch(mean.shape[:-1], y.shape[:-1], np.shape(mask)[:-1]))
     spread, center, Wm, Wc = 1.0, 1, _NO_WEIGHTS, _NO_WEIGHTS
     h, gamma, iterations, n_pu = H_STIRLING, GAMMA, 10, 1
+    filt = filter_code(name)
     if name in ("ukf", "huber_ukf"):
         spread, Wm, Wc = _merwe(merwe_weights, n, options.get("alpha", 1.0), options.get("beta", 2.0),
                                 options.get("kappa", 0.0))
-        filt = UKF if name == "ukf" else HUBER
         gamma = float(options.get("gamma", GAMMA))
         iterations = int(options.get("iterations", 10))
     elif name == "ckf":
-        filt, center, spread = UKF, 0, float(np.sqrt(n))
+        center, spread = 0, float(np.sqrt(n))
         Wm = Wc = _ckf_weights(n)
     elif name in ("cdkf", "srcdkf"):
-        filt = CDKF if name == "cdkf" else SRCDKF
         h = float(options.get("h", H_STIRLING))
-    elif name == "ekf":
-        filt = EKF
-    else:
-        filt, n_pu = PUEKF, int(options.get("n_pu", 5))
+    elif name == "puekf":
+        n_pu = int(options.get("n_pu", 5))
         if n_pu < 1:
             raise ValueError(f"n_pu must be >= 1, got {n_pu}")
     cov_form = filt != SRCDKF
