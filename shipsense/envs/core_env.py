@@ -73,16 +73,20 @@ class CoreVectorEnv(VectorEnv):
     ``reset`` of all or of the masked sub-environments (:func:`reset_rows`), next-step autoreset
     (:meth:`_autoreset`) and ``rgb_array`` rendering.
 
-    A subclass sets ``self.core`` (``reset_envs(envs, seeds, fresh=)``, ``render(e)``) and ``self.num_envs``,
-    calls :meth:`_batch` with its single spaces, and defines ``_observation()`` (every sub-environment's) and
+    A subclass checks its ``render_mode`` (:meth:`_check_render_mode`, before building anything), sets
+    ``self.core`` (``reset_envs(envs, seeds, fresh=)``, ``render(e)``) and ``self.num_envs``, calls
+    :meth:`_batch` with its single spaces, and defines ``_observation()`` (every sub-environment's) and
     ``step``.
     """
 
     metadata = {"render_modes": ["rgb_array"], "autoreset_mode": AutoresetMode.NEXT_STEP}
 
+    @classmethod
+    def _check_render_mode(cls, render_mode):
+        if render_mode is not None and render_mode not in cls.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be one of {cls.metadata['render_modes']}, got {render_mode!r}")
+
     def _batch(self, single_spaces, render_mode):
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
         self.single_observation_space, self.single_action_space = single_spaces
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)

@@ -316,6 +316,7 @@ class PassageVectorEnv(CoreVectorEnv):
 
     def __init__(self, num_envs=1, scenario="S2", overrides=None, filter=None, max_reads=None, energy_cost=0.01,
                  error_scale=10.0, render_mode=None, observer="tracker"):
+        self._check_render_mode(render_mode)
         self.num_envs = int(num_envs)
         self.core = PassageCore(self.num_envs, scenario, overrides, filter, max_reads, energy_cost, error_scale,
                                 observer)

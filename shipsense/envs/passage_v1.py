@@ -551,6 +551,7 @@ class PassageV1VectorEnv(CoreVectorEnv):
 
     def __init__(self, num_envs=1, scenario="S2", overrides=None, k=1, energy_cost=0.01, error_scale=1.0,
                  render_mode=None):
+        self._check_render_mode(render_mode)
         self.core = PassageV1Core(num_envs, scenario, overrides, k, energy_cost, error_scale)
         self.num_envs = self.core.E
         self.subsets = self.core.subsets
