@@ -24,7 +24,7 @@ DEPENDS = {
                                   "trackers/filters/huber_ukf.py", "trackers/filters/ukf.py",
                                   "trackers/measurement.py"),
     "trackers/lm_kernel.py": ("parallel.py", "trackers/compiled_linalg.py", "trackers/measurement.py"),
-    "trackers/initialiser.py": ("trackers/batchfit.py", "trackers/compiled_linalg.py"),
+    "trackers/initialiser.py": ("trackers/batchfit.py", "trackers/compiled_linalg.py", "trackers/measurement.py"),
     "trackers/compiled_linalg.py": (),
 }
 """Each file with compiled kernels (relative to the package) and the package modules it imports at module

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from shipsense.plotting import plt
-from shipsense.trackers.metrics import convergence_rate, mrmse
+from shipsense.trackers.metrics import convergence_rate, mrmse, squared_axis_errors
 
 LEAN = ("positions", "loglik", "selected")
 """What the studies' banks keep (``run_bank(store=)``): positions, likelihoods and the selected track -- what
@@ -130,11 +130,7 @@ class BankTally:
         track kept: :data:`LEAN`) against ``truth`` (R, K, n).  The same numbers as
         :func:`~shipsense.trackers.metrics.trmse` (formed in place: two arrays of the record's (R, H, K) size
         at a time) and ``bank.final_loglik``."""
-        pos, truth = bank.positions, np.asarray(truth)
-        sq = np.subtract(pos[..., 0], truth[:, None, :, 0])                        # (R, H, K): dx, then dx^2
-        np.square(sq, out=sq)
-        dy2 = np.subtract(pos[..., 1], truth[:, None, :, 1])
-        np.square(dy2, out=dy2)
+        sq, dy2 = squared_axis_errors(bank.positions, np.asarray(truth)[:, None])  # (R, H, K) each
         sq_err = np.stack([sq.sum(axis=0), dy2.sum(axis=0)], axis=-1)              # (H, K, 2)
         sq += dy2
         del dy2

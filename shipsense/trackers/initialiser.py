@@ -22,6 +22,7 @@ from numba import njit
 from shipsense import numba_cache
 from shipsense.trackers.batchfit import FIT_CHUNK_BYTES, fit_passages, powers
 from shipsense.trackers.compiled_linalg import solve_in_place
+from shipsense.trackers.measurement import _wrap
 
 
 @dataclass(frozen=True)
@@ -321,7 +322,8 @@ def _project(d, G, out, j_lo, j_hi):
     Every sum runs over ``k`` in ascending order from 0.0, whatever the passage's neighbours, its place in
     a block or the column split: a passage's numbers do not depend on its batch (numpy's ``d @ G`` does, a
     little, through BLAS's choice of kernel by shape; a stack of one-row products does not, but reads all of
-    ``G`` once per passage: 15x this).  Blocks of four passages by four columns keep sixteen sums in
+    ``G`` once per passage: as fast as this on an idle machine, many times slower when other processes hold
+    the CPUs and BLAS's threads wait on each other).  Blocks of four passages by four columns keep sixteen sums in
     registers, each load of ``G`` serving four passages.
     """
     R, K = d.shape
@@ -413,7 +415,7 @@ def _grid_solve_kernel(b, G, A_all, present, dd, yb, off, std_b, clamp, chi2, pa
                     continue
                 for c in range(c_lo, c_hi):
                     e = y - off[w, j, c]
-                    e = (e - math.pi * math.floor((e + 0.5 * math.pi) / math.pi)) / std_b[j]
+                    e = _wrap(e) / std_b[j]
                     bear[c - c_lo] += e * e
         for c in range(c_lo, c_hi):
             base = c * P
@@ -615,6 +617,12 @@ def grid_minima(model, yw, grid, window, stride, count, distinct_m, mid):
     return starts
 
 
+def _window_middle(model, W):
+    """The position at the middle of a ``W``-sample window as a linear map of its first state (2, n): where
+    the distinct minima are told apart."""
+    return powers(model.A, W)[W // 2][:2]
+
+
 def refine_minima(model, yfit, starts, *, stages, keep, distinct_m, prior, gof, explore_samples, taus=None,
                   huber=None):
     """The ``keep`` best distinct Levenberg-Marquardt fits of each passage's window ``yfit`` (R, W, m),
@@ -622,7 +630,7 @@ def refine_minima(model, yfit, starts, *, stages, keep, distinct_m, prior, gof, 
     in ``stages`` (a passage whose best fit so far fails the chi-square test gets the next stage's minima);
     :class:`WindowFits`."""
     R, W, _ = yfit.shape
-    mid = powers(model.A, W)[W // 2][:2]
+    mid = _window_middle(model, W)
     M = stages[-1]
     if explore_samples is not None and explore_samples < 2:
         raise ValueError(f"explore_samples must be at least 2, got {explore_samples!r}")
@@ -673,7 +681,7 @@ def window_fits(model, yfit, *, ranges, speeds, taus=None, bearing_step_deg=15.0
                           np.arange(0.0, 360.0, course_step_deg), speeds, source_z)
     stages = _refine_stages(refine, keep)
     starts = grid_minima(model, yfit[:, ::stride], grid, W, stride, stages[-1], distinct_m,
-                         powers(model.A, W)[W // 2][:2])
+                         _window_middle(model, W))
     return refine_minima(model, yfit, starts, stages=stages, keep=keep,
                          distinct_m=distinct_m, prior=depth_prior(model, z_std, source_z), gof=gof,
                          explore_samples=explore_samples, taus=taus, huber=huber)

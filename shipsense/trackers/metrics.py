@@ -17,15 +17,22 @@ def position_error(means, truth):
 
     Formed in place (``sqrt(dx^2 + dy^2)``, the same numbers as summing ``d * d`` over x and y): a study's
     bank of hypotheses over runs and steps needs two arrays of its size, not five."""
-    means, truth = np.asarray(means), np.asarray(truth)
-    dtype = np.result_type(means, truth, 1.0)                 # floating, as wide as the inputs
-    err = np.asarray(np.subtract(means[..., 0], truth[..., 0], dtype=dtype))
-    np.square(err, out=err)
-    dy = np.asarray(np.subtract(means[..., 1], truth[..., 1], dtype=dtype))
-    np.square(dy, out=dy)
+    err, dy = squared_axis_errors(means, truth)
     err += dy
     del dy
     return np.sqrt(err, out=err)[()]          # (one state: a scalar)
+
+
+def squared_axis_errors(means, truth):
+    """Squared x and y errors (..., steps) each of estimates and truth (x, y first), formed in place (new
+    arrays, floating and as wide as the inputs): what :func:`position_error` sums."""
+    means, truth = np.asarray(means), np.asarray(truth)
+    dtype = np.result_type(means, truth, 1.0)
+    out = []
+    for i in (0, 1):
+        e = np.asarray(np.subtract(means[..., i], truth[..., i], dtype=dtype))
+        out.append(np.square(e, out=e))
+    return out
 
 
 def rmse_k(means, truth, run_axis=0):
