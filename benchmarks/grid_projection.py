@@ -45,10 +45,10 @@ def main(argv=None):
         d[rng.uniform(size=d.shape) < 0.1] = 0.0
         out = np.empty((R, G2.shape[1]))
 
-        def blas():
+        def blas(d=d, out=out):
             np.matmul(d[:, None, :], G2, out=out[:, None, :])
 
-        def compiled():
+        def compiled(d=d, out=out):
             in_chunks(lambda lo, hi: _project(d, G2, out, lo, hi), G2.shape[1], split_min=4096)
 
         times = []
