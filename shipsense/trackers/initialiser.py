@@ -314,6 +314,10 @@ def grid_fit(model, yw, G, off, A, clamp):
     return chi2, params
 
 
+_PROJECT_TILE = 256
+"""Columns of ``G`` a :func:`_project` pass keeps in its sums (four passages' sums: 8 KB, in L1)."""
+
+
 @njit(cache=True, error_model="numpy", nogil=True)
 def _project(d, G, out, j_lo, j_hi):
     """``out[r, j] = sum_k d[r, k] G[k, j]`` for the columns ``j_lo:j_hi`` (passages ``d`` (R, K), a grid's
@@ -322,61 +326,44 @@ def _project(d, G, out, j_lo, j_hi):
     Every sum runs over ``k`` in ascending order from 0.0, whatever the passage's neighbours, its place in
     a block or the column split: a passage's numbers do not depend on its batch (numpy's ``d @ G`` does, a
     little, through BLAS's choice of kernel by shape; a stack of one-row products does not, but reads all of
-    ``G`` once per passage: as fast as this on an idle machine, many times slower when other processes hold
-    the CPUs and BLAS's threads wait on each other).  Blocks of four passages by four columns keep sixteen sums in
-    registers, each load of ``G`` serving four passages.
+    ``G`` once per passage and, when other processes hold the CPUs, BLAS's threads wait on each other).
+    ``G`` is read row by row, a tile of ``_PROJECT_TILE`` columns at a time, into the sums of four passages
+    at once (each load of ``G`` serves four); the sums are local arrays, so the compiler vectorises the
+    loop over columns (it cannot when the sums are ``out``'s, which might alias ``G``).
     """
     R, K = d.shape
-    j0 = j_lo
-    while j0 + 4 <= j_hi:
+    T = _PROJECT_TILE
+    s0, s1, s2, s3 = np.empty(T), np.empty(T), np.empty(T), np.empty(T)
+    for t0 in range(j_lo, j_hi, T):
+        t1 = min(t0 + T, j_hi)
+        w = t1 - t0
         r = 0
         while r + 4 <= R:
-            s00 = s01 = s02 = s03 = s10 = s11 = s12 = s13 = 0.0
-            s20 = s21 = s22 = s23 = s30 = s31 = s32 = s33 = 0.0
+            for j in range(w):
+                s0[j] = s1[j] = s2[j] = s3[j] = 0.0
             for k in range(K):
-                g0, g1, g2, g3 = G[k, j0], G[k, j0 + 1], G[k, j0 + 2], G[k, j0 + 3]
-                a = d[r, k]
-                s00 += a * g0
-                s01 += a * g1
-                s02 += a * g2
-                s03 += a * g3
-                a = d[r + 1, k]
-                s10 += a * g0
-                s11 += a * g1
-                s12 += a * g2
-                s13 += a * g3
-                a = d[r + 2, k]
-                s20 += a * g0
-                s21 += a * g1
-                s22 += a * g2
-                s23 += a * g3
-                a = d[r + 3, k]
-                s30 += a * g0
-                s31 += a * g1
-                s32 += a * g2
-                s33 += a * g3
-            out[r, j0], out[r, j0 + 1], out[r, j0 + 2], out[r, j0 + 3] = s00, s01, s02, s03
-            out[r + 1, j0], out[r + 1, j0 + 1], out[r + 1, j0 + 2], out[r + 1, j0 + 3] = s10, s11, s12, s13
-            out[r + 2, j0], out[r + 2, j0 + 1], out[r + 2, j0 + 2], out[r + 2, j0 + 3] = s20, s21, s22, s23
-            out[r + 3, j0], out[r + 3, j0 + 1], out[r + 3, j0 + 2], out[r + 3, j0 + 3] = s30, s31, s32, s33
+                a0, a1, a2, a3 = d[r, k], d[r + 1, k], d[r + 2, k], d[r + 3, k]
+                g = G[k, t0:t1]
+                for j in range(w):
+                    gj = g[j]
+                    s0[j] += a0 * gj
+                    s1[j] += a1 * gj
+                    s2[j] += a2 * gj
+                    s3[j] += a3 * gj
+            for j in range(w):
+                out[r, t0 + j], out[r + 1, t0 + j], out[r + 2, t0 + j], out[r + 3, t0 + j] = s0[j], s1[j], s2[j], s3[j]
             r += 4
         while r < R:                            # the last passages, one at a time: the same sums
-            s00 = s01 = s02 = s03 = 0.0
+            for j in range(w):
+                s0[j] = 0.0
             for k in range(K):
                 a = d[r, k]
-                s00 += a * G[k, j0]
-                s01 += a * G[k, j0 + 1]
-                s02 += a * G[k, j0 + 2]
-                s03 += a * G[k, j0 + 3]
-            out[r, j0], out[r, j0 + 1], out[r, j0 + 2], out[r, j0 + 3] = s00, s01, s02, s03
+                g = G[k, t0:t1]
+                for j in range(w):
+                    s0[j] += a * g[j]
+            for j in range(w):
+                out[r, t0 + j] = s0[j]
             r += 1
-        j0 += 4
-    for j in range(j0, j_hi):                   # the last columns
-        for r in range(R):
-            t = 0.0
-            for k in range(K):
-                t += d[r, k] * G[k, j]
-            out[r, j] = t
 
 
 @njit(cache=True, error_model="numpy", nogil=True)

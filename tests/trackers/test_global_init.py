@@ -406,24 +406,28 @@ def test_the_grid_terms_serve_shorter_windows_from_a_longer_one_exactly(monkeypa
 
 
 def test_the_grids_projection_is_each_passages_own_sum_whatever_its_batch_or_column_split():
-    """``_project`` (``G^T d`` of every candidate): equal to numpy's product to rounding, and bit for bit the
-    same for a passage alone, in any batch (blocks of four and the rest), and over any split of the columns
-    (the threads' chunks; a width not a multiple of four)."""
-    from shipsense.trackers.initialiser import _project
+    """``_project`` (``G^T d`` of every candidate): bit for bit the sums over the samples in ascending order
+    from zero (so a passage's numbers are the same alone, in any batch -- blocks of four and the rest --, and
+    over any split of the columns: the threads' chunks, across the tiles, a width not a multiple of four)."""
+    from shipsense.trackers.initialiser import _PROJECT_TILE, _project
 
     rng = np.random.default_rng(5)
-    K, N = 37, 203
+    K, N = 37, 2 * _PROJECT_TILE + 91
     G = rng.normal(size=(K, N))
     d = rng.normal(size=(11, K))
     d[rng.random(d.shape) < 0.2] = 0.0                                    # missing samples are zeros
+    ascending = np.zeros((11, N))
+    for k in range(K):                                                    # the documented order, in numpy
+        ascending = ascending + d[:, k, None] * G[k]
     out = np.empty((11, N))
     _project(d, G, out, 0, N)
+    np.testing.assert_array_equal(out, ascending)
     np.testing.assert_allclose(out, d @ G, rtol=1e-12, atol=1e-12)
     for r in range(11):                                                   # alone and in other batches
         alone = np.empty((1, N))
         _project(d[r:r + 1], G, alone, 0, N)
         np.testing.assert_array_equal(alone[0], out[r])
     part = np.empty((6, N))
-    for lo, hi in ((0, 50), (50, 51), (51, 130), (130, N)):              # column chunks, as in threads
+    for lo, hi in ((0, 50), (50, 51), (51, 300), (300, N)):              # column chunks, as in threads
         _project(d[5:], G, part, lo, hi)
     np.testing.assert_array_equal(part, out[5:])
