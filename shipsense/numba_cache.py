@@ -26,6 +26,7 @@ DEPENDS = {
     "trackers/lm_kernel.py": ("parallel.py", "trackers/compiled_linalg.py", "trackers/measurement.py"),
     "trackers/initialiser.py": ("trackers/batchfit.py", "trackers/compiled_linalg.py", "trackers/measurement.py"),
     "trackers/compiled_linalg.py": (),
+    "trackers/selection.py": (),
 }
 """Each file with compiled kernels (relative to the package) and the package modules it imports at module
 level (tests/test_numba_cache.py checks this against the sources)."""

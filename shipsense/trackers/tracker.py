@@ -81,7 +81,7 @@ from shipsense.trackers.filters._core import symmetrize
 from shipsense.trackers.initialiser import depth_prior, strongest_snr, window_fits
 from shipsense.trackers.restarts import refit_window
 from shipsense.trackers.seeding import seed_hypotheses
-from shipsense.trackers.selection import mixture_mse
+from shipsense.trackers.selection import report
 
 STATUSES = ("no data", "initialising", "tracking", "restarted", "inconsistent")
 """Status names, indexed by the status codes of :class:`TrackResult`."""
@@ -506,37 +506,13 @@ class Tracker:
 
     def _report(self, runs, out):
         """Selected estimate, its mixture mean-square error (tracker) or own covariance (bank), and the
-        selection figures of passages ``runs``."""
-        H, n = self._H, self.model.n
-        rows = (runs[:, None] * H + np.arange(H)).ravel()
-        xs = self.model.x_scale
-        means = (self.bank.belief.mean[rows] * xs).reshape(runs.size, H, n)
-        covs = (self.bank.belief.cov[rows] * np.outer(xs, xs)).reshape(runs.size, H, n, n)
-        cum = self.bank.cum[runs]
-        sel = np.argmax(cum, axis=1)
-        pick = np.arange(runs.size)
-        best = means[pick, sel]
-        if self.options.method == "tracker":
-            w = np.exp(cum - cum[pick, sel][:, None])
-            w /= w.sum(axis=1, keepdims=True)
-            cov = mixture_mse(w, means, covs, best[:, None])
-        else:
-            cov = covs[pick, sel]
-        out.estimate[runs], out.cov[runs] = best, symmetrize(cov) * self.excess[runs, None, None]
-        self.own[runs] = np.trace(covs[pick, sel, :2, :2], axis1=-2, axis2=-1)
+        selection figures of passages ``runs`` (:func:`~shipsense.trackers.selection.report`)."""
+        o, belief = self.options, self.bank.belief
+        report(belief.mean, belief.chol, np.asarray(runs, dtype=np.int64), self._H, self.model.x_scale,
+               self.bank.cum[runs], o.method == "tracker", float(o.report_nats), float(o.report_distance_m),
+               self.excess, out.estimate, out.cov, self.own, out.gap_nats, out.ambiguous, out.hypotheses,
+               out.selected)
         out.status[runs] = np.where(self.trusted[runs], TRACKING, INCONSISTENT)
-        self._selection(runs, means, cum, out)
-
-    def _selection(self, runs, means, cum, out):
-        o = self.options
-        live = cum > np.max(cum, axis=1, keepdims=True) - o.report_nats
-        ranked = np.sort(np.where(np.isfinite(cum), cum, -np.inf), axis=1)
-        out.gap_nats[runs] = ranked[:, -1] - ranked[:, -2] if cum.shape[1] > 1 else np.inf
-        d = means[:, :, None, :2] - means[:, None, :, :2]
-        far = np.einsum("rijk,rijk->rij", d, d) > o.report_distance_m ** 2
-        out.ambiguous[runs] = np.any(far & live[:, :, None] & live[:, None, :], axis=(1, 2))
-        out.hypotheses[runs] = np.isfinite(cum).sum(axis=1)
-        out.selected[runs] = np.argmax(cum, axis=1)
 
     def _seed_bank(self, fresh, y, out):
         """The studies' bank: seed passages ``fresh`` from this sample (their first with a field value) and
