@@ -232,7 +232,10 @@ def window_samples(model, K, window_s=15.0):
 
 def strongest_snr(model, y):
     """The strongest field channel's SNR per sample (R, K) of measurements in internal units (R, K, m)."""
-    return np.where(~model.axial, np.abs(np.nan_to_num(y)) / np.sqrt(model.R), 0.0).max(axis=-1)
+    a = np.abs(np.asarray(y, dtype=float))
+    a[np.isnan(a)] = 0.0                      # np.nan_to_num's values (0, the largest float), without its overhead
+    np.minimum(a, np.finfo(float).max, out=a)
+    return np.where(~model.axial, a / np.sqrt(model.R), 0.0).max(axis=-1)
 
 
 def detection_start(model, measurements, snr_start=5.0, window=0):

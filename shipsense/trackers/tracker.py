@@ -458,11 +458,14 @@ class Tracker:
         return snr
 
     def _prior_sample(self):
+        """A fresh :class:`Sample` of every passage at the prior (copies of one kept per batch size)."""
         P = self.P
-        mean, cov = self._prior
-        return Sample(np.repeat(mean[None], P, axis=0), np.repeat(cov[None], P, axis=0),
-                      np.full(P, NO_DATA, dtype=np.int8), np.full(P, np.inf), np.zeros(P, dtype=bool),
-                      np.zeros(P, dtype=np.int16), np.full(P, -1, dtype=np.int16))
+        if getattr(self, "_blank", None) is None or len(self._blank.status) != P:
+            mean, cov = self._prior
+            self._blank = Sample(np.repeat(mean[None], P, axis=0), np.repeat(cov[None], P, axis=0),
+                                 np.full(P, NO_DATA, dtype=np.int8), np.full(P, np.inf), np.zeros(P, dtype=bool),
+                                 np.zeros(P, dtype=np.int16), np.full(P, -1, dtype=np.int16))
+        return Sample(*(getattr(self._blank, f).copy() for f in Sample.__dataclass_fields__))
 
     def _step(self, runs, yi, dt, out):
         """Predict (time steps ``dt``) and update the banks of passages ``runs``; write their output."""
@@ -621,7 +624,11 @@ class Tracker:
         some = present > 0
         if some.any():   # (a window with no innovation at all has no level)
             w = window[some]
-            level[some] = np.nanmedian(w, axis=1) if o.robust else np.nanmean(w, axis=1)
+            if o.robust:
+                level[some] = np.nanmedian(w, axis=1)
+            else:        # np.nanmean's sums and counts, without its overhead (~15 us a call)
+                seen = ~np.isnan(w)
+                level[some] = np.where(seen, w, 0.0).sum(axis=1) / seen.sum(axis=1)
         diverged = (present >= max(1, o.nis_window // 2)) & (level > o.nis_limit)
         retry = ~self.trusted[runs] & (since >= o.nis_window)
         alarm = (diverged | retry) & (self.alarms[runs] < o.max_restarts)
