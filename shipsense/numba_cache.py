@@ -27,6 +27,7 @@ DEPENDS = {
     "trackers/initialiser.py": ("trackers/batchfit.py", "trackers/compiled_linalg.py", "trackers/measurement.py"),
     "trackers/compiled_linalg.py": (),
     "trackers/selection.py": (),
+    "trackers/consistency.py": (),
 }
 """Each file with compiled kernels (relative to the package) and the package modules it imports at module
 level (tests/test_numba_cache.py checks this against the sources)."""

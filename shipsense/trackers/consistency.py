@@ -44,10 +44,14 @@ up part of it).
 
 from __future__ import annotations
 
+import math
 from functools import lru_cache
 
 import numpy as np
+from numba import njit
 from scipy import special
+
+from shipsense import numba_cache
 
 _SQRT2 = np.sqrt(2.0)
 
@@ -100,6 +104,12 @@ def threshold(dof, level):
     return table[dof]
 
 
+def quantile_table(level, top):
+    """:func:`threshold`'s table: ``table[k]`` the chi-square quantile ``1 - level`` of ``k`` degrees of freedom
+    for k = 0..top at least (inf at 0; cached)."""
+    return _quantiles(float(level), max(int(top), 1))
+
+
 @lru_cache(maxsize=32)
 def _quantiles(level, top):
     """``chi2.isf(level, k)`` for k = 0..top (inf at 0), rounded up to a power of two of entries: the tracker
@@ -107,3 +117,74 @@ def _quantiles(level, top):
     size = 1 << int(top).bit_length()
     k = np.arange(size)
     return np.where(k > 0, special.chdtri(np.maximum(k, 1), level), np.inf)     # scipy.stats.chi2.isf
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _clipped_variance_scalar(sd, c):
+    """:func:`_clipped_variance` of one standard deviation."""
+    if not math.isfinite(c):
+        return sd * sd
+    a = c / sd
+    inside = math.erf(a / math.sqrt(2.0))
+    pdf = math.exp(-0.5 * a * a) / math.sqrt(2.0 * math.pi)
+    return sd * sd * (inside - 2.0 * a * pdf) + c * c * (1.0 - inside)
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def window_test(runs, sel, H, eps, S, R_used, R_declared, present, gamma, outliers, scale, table, window, count,
+                tests, fails, now, failed):
+    """The tracker's test of passages ``runs`` at one sample, in one compiled pass: each passage's
+    :func:`terms` of its selected hypothesis ``sel`` (the innovations ``eps`` (len(runs)*H, m) and their
+    covariances' diagonals from ``S`` (len(runs)*H, m, m), less the noise on them, ``R_used``
+    (len(runs)*H or 1, m)), written into its window ``window`` (P, N, 2, m) at slot ``count % N``; once
+    the window is full (``tests`` counts it), :func:`statistic` of its sums against ``table[dof]``
+    (:func:`quantile_table`).  A passage that fails has its window emptied, ``fails`` and ``now`` set;
+    ``failed`` (len(runs),) says which.  (The numpy functions above are the definitions, this their one
+    pass: tests/trackers/test_consistency.py holds them equal.)"""
+    N, m = window.shape[1], window.shape[3]
+    for p in range(runs.shape[0]):
+        r = runs[p]
+        row = p * H + sel[p]
+        slot = count[r] % N
+        for i in range(m):
+            noise = R_used[row if R_used.shape[0] > 1 else 0, i]
+            state = S[row, i, i] - noise
+            if state < 0.0:                       # (np.maximum and np.clip: NaN stays NaN)
+                state = 0.0
+            total = state + R_declared[i]
+            z = eps[row, i] / math.sqrt(total)
+            psi = gamma if z > gamma else (-gamma if z < -gamma else z)
+            v = _clipped_variance_scalar(1.0, gamma)
+            if outliers > 0.0:
+                v = (1.0 - outliers) * v + outliers * _clipped_variance_scalar(
+                    math.sqrt((state + scale * scale * R_declared[i]) / total), gamma)
+            window[r, slot, 0, i] = psi if present[p, i] else 0.0
+            window[r, slot, 1, i] = v if present[p, i] else 0.0
+        count[r] += 1
+        failed[p] = False
+        if count[r] < N:
+            continue
+        tests[r] += 1
+        T = 0.0
+        dof = 0
+        for i in range(m):
+            s = 0.0
+            v = 0.0
+            for k in range(N):
+                s += window[r, k, 0, i]
+                v += window[r, k, 1, i]
+            if v > 0.0:
+                T += s * s / v
+                dof += 1
+        if T > table[dof]:
+            failed[p] = True
+            for k in range(N):
+                for c in range(2):
+                    for i in range(m):
+                        window[r, k, c, i] = 0.0
+            count[r] = 0
+            fails[r] += 1
+            now[r] = True
+
+
+numba_cache.key_on_sources(globals())   # the caches follow the files these kernels are compiled from

@@ -75,7 +75,7 @@ import numpy as np
 
 from shipsense.trackers.bank import BankState
 from shipsense.trackers.batchfit import Huber, transitions
-from shipsense.trackers.consistency import statistic, terms, threshold
+from shipsense.trackers.consistency import quantile_table, window_test
 from shipsense.trackers.filters import get_filter
 from shipsense.trackers.filters._core import symmetrize
 from shipsense.trackers.initialiser import depth_prior, strongest_snr, window_fits
@@ -488,24 +488,15 @@ class Tracker:
         """The windowed innovation test (:mod:`~shipsense.trackers.consistency`) of passages ``runs`` with the
         innovations ``inn`` of this sample (selected hypotheses ``sel``).  Returns the passages it failed on
         (their window starts over; :meth:`_restart` refits them)."""
-        H, m, N = self._H, self.model.m, self.options.consistency_window
-        pick = np.arange(runs.size)
-        eps = inn.eps.reshape(runs.size, H, m)[pick, sel]
-        S = np.diagonal(inn.S, axis1=-2, axis2=-1).reshape(runs.size, H, m)[pick, sel]
-        noise = self.filter_model.R if inn.R is None else inn.R.reshape(runs.size, H, m)[pick, sel]
         h = self.huber
-        t = terms(eps, np.maximum(S - noise, 0.0), self.model.R, np.isfinite(yi[runs]),
-                  *((h.gamma, h.eps, h.scale) if h is not None else (np.inf, 0.0, 1.0)))
-        self.cons[runs, self.cons_n[runs] % N] = t
-        self.cons_n[runs] += 1
-        T, dof = statistic(self.cons[runs].sum(axis=1))
-        tested = self.cons_n[runs] >= N
-        self.cons_tests[runs] += tested
-        failed = runs[tested & (T > threshold(dof, self.options.consistency_level))]
-        self.cons[failed], self.cons_n[failed] = 0.0, 0
-        self.cons_fails[failed] += 1
-        self.cons_now[failed] = True
-        return failed
+        R_used = self.filter_model.R[None] if inn.R is None else inn.R
+        failed = np.empty(runs.size, dtype=bool)
+        window_test(np.asarray(runs, dtype=np.int64), np.asarray(sel, dtype=np.int64), self._H, inn.eps, inn.S,
+                    np.asarray(R_used, dtype=float), self.model.R, np.isfinite(yi[runs]),
+                    *((float(h.gamma), float(h.eps), float(h.scale)) if h is not None else (np.inf, 0.0, 1.0)),
+                    quantile_table(self.options.consistency_level, self.model.m), self.cons, self.cons_n,
+                    self.cons_tests, self.cons_fails, self.cons_now, failed)
+        return runs[failed]
 
     def _report(self, runs, out):
         """Selected estimate, its mixture mean-square error (tracker) or own covariance (bank), and the

@@ -137,3 +137,59 @@ def test_quantiles_from_scipy_special_equal_scipy_stats_and_the_tracker_leaves_s
             "b = run_bank('ukf', t.model, s.measurements, s.truth[:, :1, :7], 100.0 * np.eye(7), "
             "store=('nis', 'm', 'ok')); b.diverged(); assert 'scipy.stats' not in sys.modules, 'scipy.stats loaded'")
     subprocess.run([sys.executable, "-c", "import numpy as np; " + code], check=True)
+
+
+@pytest.mark.parametrize("huber", [None, (1.345, 0.2, 10.0)])
+def test_the_trackers_one_pass_is_the_definitions(huber):
+    """``window_test`` (the tracker's compiled pass) against :func:`terms`, :func:`statistic` and
+    :func:`threshold` over a stream of samples: the same windows (to rounding), the same tests, the same
+    failures and resets; the selected hypothesis's innovations are the ones tested, a NaN covariance stays NaN
+    (as np.maximum and np.clip leave it) and a reweighted noise (the Huber UKF's ``R``) is the one removed."""
+    from shipsense.trackers.consistency import quantile_table, window_test
+
+    rng = np.random.default_rng(2)
+    P, H, m, N, level = 5, 3, 4, 6, 0.2
+    gamma, out_eps, scale = huber if huber else (np.inf, 0.0, 1.0)
+    R_declared = np.array([1.0, 2.0, 0.5, 3.0])
+    window, count = np.zeros((P, N, 2, m)), np.zeros(P, dtype=np.int64)
+    tests, fails, now = np.zeros(P, dtype=np.int64), np.zeros(P, dtype=np.int64), np.zeros(P, dtype=bool)
+    ref_window, ref_count = window.copy(), count.copy()
+    ref_tests, ref_fails = tests.copy(), fails.copy()
+    runs = np.array([0, 1, 3, 4])
+    failures = 0
+    for k in range(40):
+        sel = rng.integers(0, H, runs.size)
+        R_used = R_declared * rng.uniform(1.0, 2.0, (runs.size * H, m))
+        S = np.zeros((runs.size * H, m, m))
+        S[:, np.arange(m), np.arange(m)] = R_used + rng.uniform(0.0, 0.5, (runs.size * H, m))
+        eps = rng.standard_normal((runs.size * H, m)) * (1.0 + 2.0 * (k % 10 > 6))   # bursts fail the test
+        present = rng.random((runs.size, m)) > 0.25
+        if k == 7:
+            S[sel[0], 1, 1] = np.nan                                         # (passage 0, selected)
+        failed = np.empty(runs.size, dtype=bool)
+        now[:] = False
+        window_test(runs, sel, H, eps, S, R_used, R_declared, present, gamma, out_eps, scale,
+                    quantile_table(level, m), window, count, tests, fails, now, failed)
+        # the definitions, as the tracker applied them before
+        pick = np.arange(runs.size)
+        e = eps.reshape(runs.size, H, m)[pick, sel]
+        Sd = np.diagonal(S, axis1=-2, axis2=-1).reshape(runs.size, H, m)[pick, sel]
+        noise = R_used.reshape(runs.size, H, m)[pick, sel]
+        t = terms(e, np.maximum(Sd - noise, 0.0), R_declared, present, gamma, out_eps, scale)
+        ref_window[runs, ref_count[runs] % N] = t
+        ref_count[runs] += 1
+        T, dof = statistic(ref_window[runs].sum(axis=1))
+        tested = ref_count[runs] >= N
+        ref_tests[runs] += tested
+        ref_failed = tested & (T > threshold(dof, level))
+        gone = runs[ref_failed]
+        ref_window[gone], ref_count[gone] = 0.0, 0
+        ref_fails[gone] += 1
+        np.testing.assert_array_equal(failed, ref_failed)
+        np.testing.assert_allclose(window, ref_window, rtol=1e-13, atol=0)   # (NaN where the reference has NaN)
+        np.testing.assert_array_equal(now, np.isin(np.arange(P), gone))
+        np.testing.assert_array_equal(count, ref_count)
+        np.testing.assert_array_equal(tests, ref_tests)
+        np.testing.assert_array_equal(fails, ref_fails)
+        failures += ref_failed.sum()
+    assert failures > 0 and (count[2], tests[2]) == (0, 0)                       # tests fail; passage 2 never ran
