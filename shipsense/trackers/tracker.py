@@ -367,7 +367,9 @@ class Tracker:
         missing: a dropout, or a sensor not read), or of the passages ``passages`` (indices) only, the others
         left as they are.  Returns the :class:`Sample` of those passages at this time."""
         act = np.arange(self.P) if passages is None else np.asarray(passages, dtype=int)
-        t = np.broadcast_to(np.asarray(t, dtype=float), act.shape)
+        t = np.asarray(t, dtype=float)
+        if t.shape != act.shape:
+            t = np.broadcast_to(t, act.shape)
         y = np.asarray(y, dtype=float)
         if y.shape != (act.size, self.model.m):
             raise ValueError(f"y must be (passages, channels) = ({act.size}, {self.model.m}), got {y.shape}")
@@ -390,7 +392,7 @@ class Tracker:
         out = self._prior_sample()
         self.cons_now[act] = False
         field = np.zeros(self.P, dtype=bool)
-        field[act] = np.isfinite(np.where(self.model.axial, np.nan, yi[act])).any(axis=1)
+        field[act] = np.isfinite(yi[act][:, ~self.model.axial]).any(axis=1)
         self.phase[(self.phase == _WAITING) & field] = _STARTING
         starting = act[self.phase[act] == _STARTING]
         out.status[starting] = INITIALISING
@@ -412,7 +414,9 @@ class Tracker:
         out.cov[bad] += self._prior[1]
         self.last_t[act] = t
         self.n[act] += 1
-        return out if passages is None else Sample(*(getattr(out, f)[act] for f in Sample.__dataclass_fields__))
+        if passages is None or (act.size == self.P and np.array_equal(act, np.arange(self.P))):
+            return out                                              # (a fresh Sample: no copy needed)
+        return Sample(*(getattr(out, f)[act] for f in Sample.__dataclass_fields__))
 
     def track(self, times, measurements, progress=False) -> TrackResult:
         """Track a batch: ``times`` (K,) or (P, K) s, ``measurements`` (P, K, m) SI (NaN = missing).
@@ -477,7 +481,7 @@ class Tracker:
         inn = self.bank.step(ysi, predict=True, runs=runs, model=model)
         nis = np.where(inn.m > 0, inn.nis / np.maximum(inn.m, 1), np.nan).reshape(runs.size, H)
         sel = self.bank.selected()[runs]
-        self.nis[runs] = np.roll(self.nis[runs], -1, axis=1)
+        self.nis[runs, :-1] = self.nis[runs, 1:]                  # the window moves on by one sample
         self.nis[runs, -1] = nis[np.arange(runs.size), sel]
         test = self.options.consistency_window and self.options.method == "tracker"   # (the bank is the studies')
         failed = self._consistency(runs, yi, inn, sel) if test else runs[:0]
