@@ -28,6 +28,7 @@ DEPENDS = {
     "trackers/compiled_linalg.py": (),
     "trackers/selection.py": (),
     "trackers/consistency.py": (),
+    "trackers/restarts.py": ("trackers/batchfit.py", "trackers/initialiser.py"),
 }
 """Each file with compiled kernels (relative to the package) and the package modules it imports at module
 level (tests/test_numba_cache.py checks this against the sources)."""

@@ -12,7 +12,8 @@ its bank from :func:`refit_window` (when, see :mod:`shipsense.trackers.tracker`)
 a refit keeps up to ``keep`` distinct fits (also started from the bank's
 hypotheses that still carry weight) as the next bank's hypotheses, weighted
 by their likelihoods.  Every refit uses only the samples before the restart
-(causal), and all passages that restart together are one batch.
+(causal), and all passages that restart together are one batch.  :func:`due` is the tracker's test of which
+passages restart at a sample.
 
 :func:`refit_at` and :func:`peak_refit_sample` are the batch form of one
 refit after the closest approach, used by the studies' ``global_init_refit``
@@ -21,8 +22,12 @@ method (:mod:`shipsense.trackers.studies`).
 
 from __future__ import annotations
 
-import numpy as np
+import math
 
+import numpy as np
+from numba import njit
+
+from shipsense import numba_cache
 from shipsense.trackers.batchfit import fit_passages, powers, transitions
 from shipsense.trackers.initialiser import GlobalInit, WindowFits, chi2_expected, chi2_limit, distinct_rows, fit_end
 
@@ -146,3 +151,72 @@ def peak_refit_sample(model, measurements, k0, start, through_peak=0.5):
     start = np.asarray(start, dtype=int)
     end = np.minimum(fit_end(model, measurements, k0, start - np.asarray(k0), through_peak), K - 1)
     return np.where(end > start, end, K - 1)
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def due(runs, n, start, nis, trusted, alarms, peak, peak_done, snr, scan, own, ref, cons_now, robust, nis_window,
+        nis_limit, max_restarts, through_peak, refit_every, rescan, collapse, status, cov, inconsistent, flags):
+    """Which of the passages ``runs`` restart at this sample (:meth:`~shipsense.trackers.Tracker.update`), in one
+    compiled pass over the tracker's per-passage arrays (indexed by passage).
+
+    ``flags`` (len(runs), 4) gets, per passage, whether it is due, and why among: an alarm (the mean NIS of
+    its window -- the median with ``robust`` -- above ``nis_limit`` on at least half a window, or an untrusted
+    fit a window old, with restarts left), the peak passed (the SNR below ``through_peak`` of its peak, once;
+    NaN: never), a scheduled refit (every ``refit_every`` samples, -1: never; with ``rescan`` also a rescan)
+    -- or a collapse (the selected hypothesis's position covariance below ``collapse`` (NaN: never) of the
+    start's within a window) or a failed consistency test.  ``peak`` is updated with ``snr``; a passage that
+    diverged with no restarts left is reported ``inconsistent`` with its covariance scaled by the NIS level.
+    """
+    N = nis.shape[1]
+    vals = np.empty(N)
+    for p in range(runs.shape[0]):
+        r = runs[p]
+        since = n[r] - start[r]
+        present = 0
+        count = 0
+        total = 0.0
+        for k in range(N):
+            v = nis[r, k]
+            if math.isfinite(v):
+                present += 1
+            if not math.isnan(v):                 # (np.nanmean and np.nanmedian count infinities)
+                vals[count] = v
+                count += 1
+                total += v
+        level = 0.0
+        if present > 0:
+            if robust:
+                for i in range(1, count):         # the window's values in order (a window is short)
+                    x = vals[i]
+                    j = i - 1
+                    while j >= 0 and vals[j] > x:
+                        vals[j + 1] = vals[j]
+                        j -= 1
+                    vals[j + 1] = x
+                h = count // 2
+                level = vals[h] if count % 2 else (vals[h - 1] + vals[h]) / 2.0
+            else:
+                level = total / count
+        diverged = present >= max(1, nis_window // 2) and level > nis_limit
+        retry = not trusted[r] and since >= nis_window
+        alarm = (diverged or retry) and alarms[r] < max_restarts
+        if snr[r] > peak[r] or math.isnan(snr[r]):
+            peak[r] = snr[r]
+        after_peak = (not math.isnan(through_peak)) and not peak_done[r] and since > 0 and (
+            snr[r] < through_peak * peak[r])
+        scheduled = refit_every >= 0 and not peak_done[r] and since >= refit_every
+        rescanned = rescan and refit_every >= 0 and not peak_done[r] and n[r] - scan[r] >= refit_every
+        collapsed = (not math.isnan(collapse)) and since < nis_window and since > 0 and own[r] < collapse * ref[r]
+        flags[p, 0] = alarm or after_peak or scheduled or rescanned or collapsed or cons_now[r]
+        flags[p, 1] = alarm
+        flags[p, 2] = after_peak
+        flags[p, 3] = rescanned
+        if diverged and not alarm:                # diverged with no restarts left: say so
+            status[r] = inconsistent
+            f = 1.0 if level <= 1.0 else level    # (np.maximum(1, level))
+            for a in range(cov.shape[1]):
+                for b in range(cov.shape[2]):
+                    cov[r, a, b] *= f
+
+
+numba_cache.key_on_sources(globals())   # the caches follow the files these kernels are compiled from

@@ -79,7 +79,7 @@ from shipsense.trackers.consistency import quantile_table, window_test
 from shipsense.trackers.filters import get_filter
 from shipsense.trackers.filters._core import symmetrize
 from shipsense.trackers.initialiser import depth_prior, strongest_snr, window_fits
-from shipsense.trackers.restarts import refit_window
+from shipsense.trackers.restarts import due, refit_window
 from shipsense.trackers.seeding import seed_hypotheses
 from shipsense.trackers.selection import report
 
@@ -610,44 +610,23 @@ class Tracker:
 
     def _restart(self, runs, snr, out):
         """Refit the passages among ``runs`` whose bank is due (alarms, schedule, peak, collapse, a failed
-        consistency test)."""
+        consistency test: :func:`~shipsense.trackers.restarts.due`)."""
         o = self.options
-        since = self.n[runs] - self.start[runs]
-        window = self.nis[runs]
-        present = np.isfinite(window).sum(axis=1)
-        level = np.zeros(runs.size)
-        some = present > 0
-        if some.any():   # (a window with no innovation at all has no level)
-            w = window[some]
-            if o.robust:
-                level[some] = np.nanmedian(w, axis=1)
-            else:        # np.nanmean's sums and counts, without its overhead (~15 us a call)
-                seen = ~np.isnan(w)
-                level[some] = np.where(seen, w, 0.0).sum(axis=1) / seen.sum(axis=1)
-        diverged = (present >= max(1, o.nis_window // 2)) & (level > o.nis_limit)
-        retry = ~self.trusted[runs] & (since >= o.nis_window)
-        alarm = (diverged | retry) & (self.alarms[runs] < o.max_restarts)
-        self.peak[runs] = np.maximum(self.peak[runs], snr[runs])
-        after_peak = (o.through_peak is not None) & ~self.peak_done[runs] & (since > 0) & (
-            snr[runs] < (o.through_peak or 0.0) * self.peak[runs])
-        scheduled = (o.refit_every is not None) & ~self.peak_done[runs] & (since >= (o.refit_every or 0))
-        rescan = o.rescan & (o.refit_every is not None) & ~self.peak_done[runs] & (
-            self.n[runs] - self.scan[runs] >= (o.refit_every or 0))
-        collapse = np.zeros(runs.size, dtype=bool)
-        if o.collapse is not None:
-            collapse = (since < o.nis_window) & (since > 0) & (self.own[runs] < o.collapse * self.ref[runs])
-        failed_test = self.cons_now[runs]
-        due = alarm | after_peak | scheduled | rescan | collapse | failed_test
-        stuck = diverged & ~alarm                     # diverged with no restarts left: say so
-        out.status[runs[stuck]] = INCONSISTENT
-        out.cov[runs[stuck]] *= np.maximum(1.0, level[stuck])[:, None, None]
-        if due.any():
-            sel = runs[due]
+        flags = np.empty((runs.size, 4), dtype=bool)
+        due(np.asarray(runs, dtype=np.int64), self.n, self.start, self.nis, self.trusted, self.alarms, self.peak,
+            self.peak_done, snr, self.scan, self.own, self.ref, self.cons_now, bool(o.robust), int(o.nis_window),
+            float(o.nis_limit), int(o.max_restarts), np.nan if o.through_peak is None else float(o.through_peak),
+            -1 if o.refit_every is None else int(o.refit_every), bool(o.rescan),
+            np.nan if o.collapse is None else float(o.collapse), out.status, out.cov, INCONSISTENT, flags)
+        due_, alarm, after_peak, rescan = flags.T
+        if due_.any():
+            sel = runs[due_]
             self.scan[runs[rescan]] = self.n[runs[rescan]]
-            self.peak_done[sel] |= after_peak[due]
-            self.alarms[sel] += alarm[due]
+            self.peak_done[sel] |= after_peak[due_]
+            self.alarms[sel] += alarm[due_]
             self.restarts[sel] += 1
-            self._refit(sel, alarm[due], rescan[due], out)
+            failed_test = self.cons_now[runs]
+            self._refit(sel, alarm[due_], rescan[due_], out)
             # a refit after a failed consistency test: the sample is still the test's (inconsistent), with the
             # refit's covariance -- unless the fit failed its own test (then as any failed fit)
             ok = runs[failed_test & self.trusted[runs]]

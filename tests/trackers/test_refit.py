@@ -84,3 +84,68 @@ def test_the_filter_collapses_after_a_refit_where_the_batch_fit_does_not_and_the
     spread0 = np.sqrt(np.trace(res0.position_cov[0, ok], axis1=-2, axis2=-1))
     spread1 = np.sqrt(np.trace(res1.position_cov[0, ok], axis1=-2, axis2=-1))
     assert np.median(spread1 / spread0) > 1.0
+
+
+@pytest.mark.parametrize("robust", [False, True])
+def test_the_compiled_restart_test_is_the_trackers_rules(robust):
+    """``restarts.due`` against the tracker's restart rules written in numpy (as they were): alarms (mean or
+    median NIS over a window with gaps and an infinity, an untrusted fit, restarts left), the peak passed,
+    the schedule, a rescan, a collapse, a failed consistency test; stuck passages reported inconsistent with
+    their covariance scaled; the peak updated; passages not asked about untouched."""
+    from shipsense.trackers.restarts import due
+
+    rng = np.random.default_rng(11)
+    P, Nw, n = 40, 10, 3
+    nis = rng.exponential(2.5, (P, Nw))
+    nis[rng.random((P, Nw)) < 0.3] = np.nan
+    nis[3] = np.nan
+    nis[4, 2] = np.inf
+    state = dict(n=rng.integers(0, 60, P), start=rng.integers(0, 30, P), trusted=rng.random(P) > 0.3,
+                 alarms=rng.integers(0, 6, P), peak=rng.uniform(0, 50, P), peak_done=rng.random(P) > 0.5,
+                 scan=rng.integers(0, 40, P), own=rng.uniform(0, 10, P), ref=rng.uniform(0, 20, P),
+                 cons_now=rng.random(P) > 0.8)
+    snr = rng.uniform(0, 60, P)
+    runs = np.sort(rng.choice(P, 30, replace=False))
+    for r, (n_, start, scan) in zip(runs[:2], ((25, 5, 25), (25, 20, 5))):   # due on the boundary only: the
+        state["n"][r], state["start"][r], state["scan"][r] = n_, start, scan  # schedule, then the rescan
+        state["peak_done"][r], state["cons_now"][r], state["trusted"][r], state["own"][r] = False, False, True, 1e9
+        nis[r], snr[r] = np.nan, 99.0
+    opts = dict(nis_window=Nw, nis_limit=3.0, max_restarts=4, through_peak=0.5, refit_every=20, rescan=True,
+                collapse=0.25)
+    # the rules in numpy
+    s = {k: v.copy() for k, v in state.items()}
+    since = s["n"][runs] - s["start"][runs]
+    window = nis[runs]
+    present = np.isfinite(window).sum(axis=1)
+    level = np.zeros(runs.size)
+    some = present > 0
+    level[some] = (np.nanmedian if robust else np.nanmean)(window[some], axis=1)
+    diverged = (present >= max(1, Nw // 2)) & (level > opts["nis_limit"])
+    alarm = (diverged | (~s["trusted"][runs] & (since >= Nw))) & (s["alarms"][runs] < opts["max_restarts"])
+    peak = s["peak"].copy()
+    peak[runs] = np.maximum(peak[runs], snr[runs])
+    after_peak = ~s["peak_done"][runs] & (since > 0) & (snr[runs] < 0.5 * peak[runs])
+    scheduled = ~s["peak_done"][runs] & (since >= 20)
+    rescan = ~s["peak_done"][runs] & (s["n"][runs] - s["scan"][runs] >= 20)
+    collapse = (since < Nw) & (since > 0) & (s["own"][runs] < 0.25 * s["ref"][runs])
+    want_due = alarm | after_peak | scheduled | rescan | collapse | s["cons_now"][runs]
+    stuck = diverged & ~alarm
+    status, cov = np.zeros(P, np.int8), rng.uniform(1, 2, (P, n, n))
+    want_status, want_cov = status.copy(), cov.copy()
+    want_status[runs[stuck]] = 4
+    want_cov[runs[stuck]] *= np.maximum(1.0, level[stuck])[:, None, None]
+
+    flags = np.empty((runs.size, 4), dtype=bool)
+    got = {k: v.copy() for k, v in state.items()}
+    due(runs, got["n"], got["start"], nis, got["trusted"], got["alarms"], got["peak"], got["peak_done"], snr,
+        got["scan"], got["own"], got["ref"], got["cons_now"], robust, Nw, 3.0, 4, 0.5, 20, True, 0.25, status, cov,
+        4, flags)
+    np.testing.assert_array_equal(flags, np.stack([want_due, alarm, after_peak, rescan], axis=1))
+    np.testing.assert_array_equal(got["peak"], peak)
+    np.testing.assert_array_equal(status, want_status)
+    np.testing.assert_allclose(cov, want_cov, rtol=1e-14)
+    assert stuck.any() and alarm.any() and after_peak.any() and collapse.any() and not want_due.all()
+    assert want_due[:2].all() and not (alarm | after_peak | collapse)[:2].any()
+    for k in state:
+        if k != "peak":
+            np.testing.assert_array_equal(got[k], state[k])
