@@ -232,9 +232,11 @@ def window_samples(model, K, window_s=15.0):
 
 def strongest_snr(model, y):
     """The strongest field channel's SNR per sample (R, K) of measurements in internal units (R, K, m)."""
-    a = np.abs(np.asarray(y, dtype=float))
-    a[np.isnan(a)] = 0.0                      # np.nan_to_num's values (0, the largest float), without its overhead
-    np.minimum(a, np.finfo(float).max, out=a)
+    a = np.abs(np.asarray(y))
+    if a.dtype.kind != "f":
+        a = a.astype(float)
+    a[np.isnan(a)] = 0.0                      # np.nan_to_num's values (0, the dtype's largest), without its overhead
+    np.minimum(a, np.finfo(a.dtype).max, out=a)
     return np.where(~model.axial, a / np.sqrt(model.R), 0.0).max(axis=-1)
 
 

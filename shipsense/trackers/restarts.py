@@ -159,30 +159,31 @@ def due(runs, n, start, nis, trusted, alarms, peak, peak_done, snr, scan, own, r
     """Which of the passages ``runs`` restart at this sample (:meth:`~shipsense.trackers.Tracker.update`), in one
     compiled pass over the tracker's per-passage arrays (indexed by passage).
 
-    ``flags`` (len(runs), 4) gets, per passage, whether it is due, and why among: an alarm (the mean NIS of
+    The options are numbers as given (floats compare as the tracker's options did; NaN for an option that is
+    None).  ``flags`` (len(runs), 4) gets, per passage, whether it is due, and why among: an alarm (the mean NIS of
     its window -- the median with ``robust`` -- above ``nis_limit`` on at least half a window, or an untrusted
     fit a window old, with restarts left), the peak passed (the SNR below ``through_peak`` of its peak, once;
-    NaN: never), a scheduled refit (every ``refit_every`` samples, -1: never; with ``rescan`` also a rescan)
+    NaN: never), a scheduled refit (every ``refit_every`` samples, NaN: never; with ``rescan`` also a rescan)
     -- or a collapse (the selected hypothesis's position covariance below ``collapse`` (NaN: never) of the
     start's within a window) or a failed consistency test.  ``peak`` is updated with ``snr``; a passage that
     diverged with no restarts left is reported ``inconsistent`` with its covariance scaled by the NIS level.
     """
     N = nis.shape[1]
     vals = np.empty(N)
+    zeroed = np.empty(N)
     for p in range(runs.shape[0]):
         r = runs[p]
         since = n[r] - start[r]
         present = 0
         count = 0
-        total = 0.0
         for k in range(N):
             v = nis[r, k]
             if math.isfinite(v):
                 present += 1
+            zeroed[k] = 0.0 if math.isnan(v) else v
             if not math.isnan(v):                 # (np.nanmean and np.nanmedian count infinities)
                 vals[count] = v
                 count += 1
-                total += v
         level = 0.0
         if present > 0:
             if robust:
@@ -195,17 +196,17 @@ def due(runs, n, start, nis, trusted, alarms, peak, peak_done, snr, scan, own, r
                     vals[j + 1] = x
                 h = count // 2
                 level = vals[h] if count % 2 else (vals[h - 1] + vals[h]) / 2.0
-            else:
-                level = total / count
-        diverged = present >= max(1, nis_window // 2) and level > nis_limit
+            else:                                 # np.nanmean: the sum with NaN as 0, numpy's way
+                level = _numpy_sum(zeroed) / count
+        diverged = present >= max(1.0, nis_window // 2) and level > nis_limit
         retry = not trusted[r] and since >= nis_window
         alarm = (diverged or retry) and alarms[r] < max_restarts
         if snr[r] > peak[r] or math.isnan(snr[r]):
             peak[r] = snr[r]
         after_peak = (not math.isnan(through_peak)) and not peak_done[r] and since > 0 and (
             snr[r] < through_peak * peak[r])
-        scheduled = refit_every >= 0 and not peak_done[r] and since >= refit_every
-        rescanned = rescan and refit_every >= 0 and not peak_done[r] and n[r] - scan[r] >= refit_every
+        scheduled = not peak_done[r] and since >= refit_every          # (NaN: never)
+        rescanned = rescan and not peak_done[r] and n[r] - scan[r] >= refit_every
         collapsed = (not math.isnan(collapse)) and since < nis_window and since > 0 and own[r] < collapse * ref[r]
         flags[p, 0] = alarm or after_peak or scheduled or rescanned or collapsed or cons_now[r]
         flags[p, 1] = alarm
@@ -217,6 +218,36 @@ def due(runs, n, start, nis, trusted, alarms, peak, peak_done, snr, scan, own, r
             for a in range(cov.shape[1]):
                 for b in range(cov.shape[2]):
                     cov[r, a, b] *= f
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _numpy_sum(a):
+    """``np.sum`` of a short contiguous row as numpy adds it (its pairwise sum: in order from 0 below eight
+    values; from eight up to 128, eight running sums combined as a tree, then the remainder), so that the
+    restart level is ``np.nanmean``'s to the bit (tests/trackers/test_refit.py checks this numpy's)."""
+    n = a.shape[0]
+    if n < 8:
+        s = 0.0
+        for i in range(n):
+            s += a[i]
+        return s
+    r0, r1, r2, r3, r4, r5, r6, r7 = a[0], a[1], a[2], a[3], a[4], a[5], a[6], a[7]
+    i = 8
+    while i < n - n % 8:
+        r0 += a[i]
+        r1 += a[i + 1]
+        r2 += a[i + 2]
+        r3 += a[i + 3]
+        r4 += a[i + 4]
+        r5 += a[i + 5]
+        r6 += a[i + 6]
+        r7 += a[i + 7]
+        i += 8
+    s = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < n:
+        s += a[i]
+        i += 1
+    return s
 
 
 numba_cache.key_on_sources(globals())   # the caches follow the files these kernels are compiled from

@@ -611,13 +611,10 @@ class Tracker:
     def _restart(self, runs, snr, out):
         """Refit the passages among ``runs`` whose bank is due (alarms, schedule, peak, collapse, a failed
         consistency test: :func:`~shipsense.trackers.restarts.due`)."""
-        o = self.options
         flags = np.empty((runs.size, 4), dtype=bool)
         due(np.asarray(runs, dtype=np.int64), self.n, self.start, self.nis, self.trusted, self.alarms, self.peak,
-            self.peak_done, snr, self.scan, self.own, self.ref, self.cons_now, bool(o.robust), int(o.nis_window),
-            float(o.nis_limit), int(o.max_restarts), np.nan if o.through_peak is None else float(o.through_peak),
-            -1 if o.refit_every is None else int(o.refit_every), bool(o.rescan),
-            np.nan if o.collapse is None else float(o.collapse), out.status, out.cov, INCONSISTENT, flags)
+            self.peak_done, snr, self.scan, self.own, self.ref, self.cons_now, *_restart_options(self.options),
+            out.status, out.cov, INCONSISTENT, flags)
         due_, alarm, after_peak, rescan = flags.T
         if due_.any():
             sel = runs[due_]
@@ -663,6 +660,16 @@ class Tracker:
         self.seconds["refits"] += time.perf_counter() - t0
         self._start_banks(runs, fits, taus[:, -1], 1.0, out)
         out.status[runs] = np.where(fits.fit_ok, RESTARTED, INCONSISTENT)
+
+
+def _restart_options(o):
+    """The options of :func:`~shipsense.trackers.restarts.due` as it takes them: numbers as given (a fractional,
+    infinite or negative value compares as it did in numpy), NaN for None (every comparison with it False)."""
+    def number(value):
+        return np.nan if value is None else float(value)
+
+    return (bool(o.robust), float(o.nis_window), float(o.nis_limit), float(o.max_restarts), number(o.through_peak),
+            number(o.refit_every), bool(o.rescan), number(o.collapse))
 
 
 def _grid(sc):

@@ -139,12 +139,14 @@ def test_quantiles_from_scipy_special_equal_scipy_stats_and_the_tracker_leaves_s
     subprocess.run([sys.executable, "-c", "import numpy as np; " + code], check=True)
 
 
+@pytest.mark.parametrize("shared", [False, True])
 @pytest.mark.parametrize("huber", [None, (1.345, 0.2, 10.0)])
-def test_the_trackers_one_pass_is_the_definitions(huber):
+def test_the_trackers_one_pass_is_the_definitions(huber, shared):
     """``window_test`` (the tracker's compiled pass) against :func:`terms`, :func:`statistic` and
     :func:`threshold` over a stream of samples: the same windows (to rounding), the same tests, the same
     failures and resets; the selected hypothesis's innovations are the ones tested, a NaN covariance stays NaN
-    (as np.maximum and np.clip leave it) and a reweighted noise (the Huber UKF's ``R``) is the one removed."""
+    (as np.maximum and np.clip leave it) and the noise removed is the filter's (one row for every element, as the
+    tracker passes its model's) or a reweighted one per element (the Huber UKF's ``R``)."""
     from shipsense.trackers.consistency import quantile_table, window_test
 
     rng = np.random.default_rng(2)
@@ -159,7 +161,7 @@ def test_the_trackers_one_pass_is_the_definitions(huber):
     failures = 0
     for k in range(40):
         sel = rng.integers(0, H, runs.size)
-        R_used = R_declared * rng.uniform(1.0, 2.0, (runs.size * H, m))
+        R_used = R_declared * rng.uniform(1.0, 2.0, (1 if shared else runs.size * H, m))
         S = np.zeros((runs.size * H, m, m))
         S[:, np.arange(m), np.arange(m)] = R_used + rng.uniform(0.0, 0.5, (runs.size * H, m))
         eps = rng.standard_normal((runs.size * H, m)) * (1.0 + 2.0 * (k % 10 > 6))   # bursts fail the test
@@ -174,7 +176,7 @@ def test_the_trackers_one_pass_is_the_definitions(huber):
         pick = np.arange(runs.size)
         e = eps.reshape(runs.size, H, m)[pick, sel]
         Sd = np.diagonal(S, axis1=-2, axis2=-1).reshape(runs.size, H, m)[pick, sel]
-        noise = R_used.reshape(runs.size, H, m)[pick, sel]
+        noise = R_used if shared else R_used.reshape(runs.size, H, m)[pick, sel]
         t = terms(e, np.maximum(Sd - noise, 0.0), R_declared, present, gamma, out_eps, scale)
         ref_window[runs, ref_count[runs] % N] = t
         ref_count[runs] += 1

@@ -35,8 +35,9 @@ def _numpy_report(mean, chol, runs, H, xs, cum, mixture, nats, far_m, excess):
             np.isfinite(cum).sum(axis=1), sel)
 
 
+@pytest.mark.parametrize("far_m", [0.5, 40.0])
 @pytest.mark.parametrize("mixture", [True, False])
-def test_the_compiled_report_is_the_numpy_selection(mixture):
+def test_the_compiled_report_is_the_numpy_selection(mixture, far_m):
     rng = np.random.default_rng(4)
     P, H, n = 7, 5, 7
     mean = rng.normal(size=(P * H, n))
@@ -48,14 +49,18 @@ def test_the_compiled_report_is_the_numpy_selection(mixture):
     cum[2, 1] = np.nan                                       # a failed hypothesis: argmax picks the NaN
     cum[3] = -np.inf                                         # nothing finite
     cum[4, 2] = cum[4, 0] = cum[4].max() + 1.0               # a tie: the first
-    cum[5, :] = 0.0
+    cum[5, :] = 0.0                                          # all live, all within 24 m of each other
+    rows5 = runs[5] * H + np.arange(H)
+    mean[rows5, 0], mean[rows5, 1] = 0.2 * np.arange(H), 1.0
     excess = rng.uniform(1.0, 3.0, P)
     outs = (np.full((P, n), -7.0), np.full((P, n, n), -7.0), np.full(P, -7.0), np.full(P, -7.0),
             np.zeros(P, bool), np.full(P, -7, np.int16), np.full(P, -7, np.int16))
-    report(mean, chol, runs, H, xs, cum, mixture, 3.0, 0.5, excess, *outs)
+    report(mean, chol, runs, H, xs, cum, mixture, 3.0, far_m, excess, *outs)
     with np.errstate(invalid="ignore"):
-        expected = _numpy_report(mean, chol, runs, H, xs, cum, mixture, 3.0, 0.5, excess)
+        expected = _numpy_report(mean, chol, runs, H, xs, cum, mixture, 3.0, far_m, excess)
     for got, want in zip(outs, expected):
         np.testing.assert_allclose(got[runs], want, rtol=1e-12, atol=0)
     assert (outs[0][1] == -7.0).all() and outs[5][1] == -7    # a passage not reported is left alone
     assert outs[6][runs[2]] == 1 and outs[6][runs[4]] == 0
+    if far_m == 40.0:                                        # hypotheses both near and far apart (30 m units)
+        assert outs[4][runs].any() and not outs[4][runs[5]]
