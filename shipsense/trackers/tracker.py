@@ -86,7 +86,7 @@ from shipsense.trackers.selection import report
 STATUSES = ("no data", "initialising", "tracking", "restarted", "inconsistent")
 """Status names, indexed by the status codes of :class:`TrackResult`."""
 NO_DATA, INITIALISING, TRACKING, RESTARTED, INCONSISTENT = range(5)
-_WAITING, _STARTING, _RUNNING = 0, 1, 2   # phases of a passage
+_WAITING, _STARTING, _RUNNING, _PENDING = 0, 1, 2, 3   # phases of a passage (_PENDING: its window fits deferred)
 BANK_INFLATION_MAX = 100.0   # largest chi-square inflation a failed fit's bank starts from (the rest is reported)
 
 
@@ -362,11 +362,19 @@ class Tracker:
             len(self.bank_config.levels) * len(self.bank_config.bearings_deg))
 
     # -- one sample ---------------------------------------------------------------------------------------------
-    def update(self, t, y, passages=None) -> Sample:
+    def update(self, t, y, passages=None, defer_fits=False) -> Sample:
         """Process one sample: times ``t`` (P,) s and measurements ``y`` (P, m) SI of every passage (NaN =
         missing: a dropout, or a sensor not read), or of the passages ``passages`` (indices) only, the others
-        left as they are.  Returns the :class:`Sample` of those passages at this time."""
+        left as they are.  Returns the :class:`Sample` of those passages at this time.
+
+        With ``defer_fits``, a passage whose initialisation window completes at this sample is not fitted
+        yet: it is left pending (:meth:`pending`, still initialising here) and takes no further samples
+        until :meth:`fit_pending` fits every pending passage in one batch, as this call would have."""
         act = np.arange(self.P) if passages is None else np.asarray(passages, dtype=int)
+        waiting = act[self.phase[act] == _PENDING]
+        if waiting.size:
+            raise ValueError(f"passage {int(waiting[0])} has its window fits deferred: call fit_pending() before "
+                             f"giving it another sample")
         t = np.asarray(t, dtype=float)
         if t.shape != act.shape:
             t = np.broadcast_to(t, act.shape)
@@ -403,7 +411,7 @@ class Tracker:
             if starting.size:
                 self._seed_bank(starting, yi * self.model.y_scale, out)
         else:
-            self._initialise(starting, snr, out)
+            self._initialise(starting, snr, out, defer_fits)
             if running.size:
                 self._restart(running, snr, out)
         # a failed fit or a diverged bank: the model does not explain the data, so the estimate is located no
@@ -535,8 +543,31 @@ class Tracker:
         taus = np.where(inside, tw - tw[:, :1], tw[:, -1:] - tw[:, :1])
         return yw, taus
 
-    def _initialise(self, starting, snr, out):
-        """Detection and, once a passage's window is complete, its global fits: the bank starts from them."""
+    def pending(self, passages=None):
+        """Whether the passages (indices; default all) have window fits deferred by ``update(...,
+        defer_fits=True)``."""
+        return self.phase[slice(None) if passages is None else np.asarray(passages, dtype=int)] == _PENDING
+
+    def fit_pending(self):
+        """Fit the deferred windows of every pending passage in one batch (a passage's fits do not depend on
+        the passages beside it in a batch) and start their banks as :meth:`update` would have at the sample
+        their windows completed.  Returns the passages (indices) and their :class:`Sample` at that sample."""
+        pend = np.flatnonzero(self.phase == _PENDING)
+        out = self._prior_sample()
+        if pend.size:
+            self.n[pend] -= 1                       # back at the sample the window completed at, for its fits
+            try:
+                out.status[pend] = INITIALISING
+                self._fit_windows(pend, out)
+                bad = pend[out.status[pend] == INCONSISTENT]   # (as update: a failed fit is no better than
+                out.cov[bad] += self._prior[1]                 # the passage prior)
+            finally:
+                self.n[pend] += 1
+        return pend, Sample(*(getattr(out, f)[pend] for f in Sample.__dataclass_fields__))
+
+    def _initialise(self, starting, snr, out, defer=False):
+        """Detection and, once a passage's window is complete, its global fits: the bank starts from them
+        (with ``defer``, the passage is left pending for :meth:`fit_pending`)."""
         o = self.options
         detect = starting[(self.k0[starting] < 0) & (snr[starting] > o.snr_start)]
         self.k0[detect] = self.n[detect]
@@ -548,14 +579,28 @@ class Tracker:
         ready = seen[(have >= self.window) | (passed & (have >= max(4, self.window // 5)))]
         if ready.size == 0:
             return
-        yw, taus = self._window(ready, self.k0[ready])
-        t0 = time.perf_counter()
-        fits = self._fits(yw, taus)
-        self.seconds["initialiser"] += time.perf_counter() - t0
-        self.win[ready], self.win_t0[ready] = fits.theta, self.t_hist[ready, self.k0[ready] % self.y_hist.shape[1]]
-        self.scan[ready] = self.n[ready]
-        self.phase[ready] = _RUNNING
-        self._start_banks(ready, fits, taus[:, -1], o.inflate, out)
+        if defer:
+            self.phase[ready] = _PENDING
+            return
+        self._fit_windows(ready, out)
+
+    def _fit_windows(self, ready, out):
+        """The global fits of the windows of passages ``ready`` (complete at their current sample) and their
+        banks' start, one batch per window length: a passage's fits are those it would have alone (a batch of
+        windows of different lengths would pad the shorter ones, and their fits would move at rounding)."""
+        o = self.options
+        have = self.n[ready] - self.k0[ready] + 1
+        for length in np.unique(have):
+            group = ready[have == length]
+            yw, taus = self._window(group, self.k0[group])
+            t0 = time.perf_counter()
+            fits = self._fits(yw, taus)
+            self.seconds["initialiser"] += time.perf_counter() - t0
+            self.win[group] = fits.theta
+            self.win_t0[group] = self.t_hist[group, self.k0[group] % self.y_hist.shape[1]]
+            self.scan[group] = self.n[group]
+            self.phase[group] = _RUNNING
+            self._start_banks(group, fits, taus[:, -1], o.inflate, out)
 
     def _fits(self, yw, taus):
         """The global initialiser's fits of windows ``yw`` (R, W, m) with times ``taus`` (R, W)."""

@@ -282,3 +282,55 @@ def test_a_passage_the_observer_never_tracks_leaves_one_step_and_no_gains():
     assert env.baseline("greedy")(obs) == env.baseline("round-robin")(obs)
     _, r, term, _, info = env.step(1)
     assert term and info["episode_metrics"]["steps"] == 1.0 and info["error"] > 10.0 and np.isfinite(r)
+
+
+def test_the_run_in_fits_every_window_together_and_observes_what_one_at_a_time_did(monkeypatch):
+    """The run-in defers each observer's window fits to its end (``Tracker.fit_pending``: one batch for all the
+    environments reset together, whose windows complete at different samples and lengths): observations,
+    rewards and errors equal, to the bit, those of the run-in fitting each window at the sample it completes
+    (the loop before, replayed here), over reset cycles of a vector env and a single env."""
+    from shipsense.envs import passage_v1
+
+    def one_at_a_time(self, envs, seeds, fresh=False):
+        envs = np.asarray(envs, dtype=int)
+        for e, s in zip(envs, seeds):
+            queue = self._passages.setdefault(int(e), [])
+            if fresh:
+                queue.clear()
+            if not queue:
+                sim = passage_v1.simulate(self.scenario, runs=passage_v1.PASSAGE_BLOCK, seed=int(s), random=True)
+                queue.extend(zip(sim.measurements, self.model.state_from_truth(sim.truth)))
+            self.y[e], self.truth[e] = queue.pop(0)
+        self.tracker.reset_passages(envs)
+        self.k[envs] = 0
+        self._record(self.tracker.update(self.times[0], self.y[envs, 0], passages=envs), envs)
+        waiting = envs[self._blind(envs) & (self.k[envs] < self.K - 2)]
+        while waiting.size:
+            self.k[waiting] += 1
+            self._record(self.tracker.update(self.times[self.k[waiting]], self.y[waiting, self.k[waiting]],
+                                             passages=waiting), waiting)
+            waiting = waiting[self._blind(waiting) & (self.k[waiting] < self.K - 2)]
+        self.start[envs] = self.k[envs]
+        self.since[envs] = 0.0
+        self.last_read[envs] = True
+        self.returns[envs] = 0.0
+        self.reads[envs] = 0.0
+        self._measure(envs)
+        self._predict_gains(envs)
+        return self.observe()[envs]
+
+    def run():
+        out = []
+        venv = gym.make_vec("shipsense/Passage-v1", num_envs=12, vectorization_mode="vector_entry_point")
+        obs, _ = venv.reset(seed=3)
+        out.append(obs)
+        rng = np.random.default_rng(0)
+        for _ in range(2 * venv.unwrapped.core.K):                      # two reset cycles
+            o, r, _, _, info = venv.step(rng.integers(0, venv.single_action_space.n, 12))
+            out += [o, r, info["error"]]
+        return out
+
+    deferred = run()
+    monkeypatch.setattr(passage_v1.PassageV1Core, "reset_envs", one_at_a_time)
+    for a, b in zip(deferred, run()):
+        np.testing.assert_array_equal(a, b)
