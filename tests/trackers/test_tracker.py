@@ -63,9 +63,9 @@ def test_deferred_window_fits_are_the_fits_update_makes(scenario, runs):
     then catch up) get exactly ``track``'s estimates, covariances and statuses, though their windows, of
     different lengths (the demo's end early past their peak), complete at different samples and are fitted
     together.  A pending passage refuses another sample.  (The passages' different paces also put their later
-    refits in other batches than ``track``'s: for the demo's electrodes, whose refits move at rounding with
-    their batch, estimates agree to 1e-9 and covariances to 1e-8 relative from the first such refit on; S2's
-    exactly.)"""
+    refits in other batches than ``track``'s; the demo's move at rounding with their batch (seen from its
+    first refit on; where, not traced: refit_window alone is batch-independent): its estimates agree to 1e-9
+    and covariances to 1e-8 relative; S2's exactly.)"""
     sim = simulate(scenario, runs=runs, seed=7, random=True)
     t, y = np.broadcast_to(sim.times, sim.measurements.shape[:2]), sim.measurements
     ref = Tracker(scenario, passages=runs).track(sim.times, y)
