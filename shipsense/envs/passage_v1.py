@@ -233,17 +233,7 @@ class PassageV1Core:
         self.tracker.reset_passages(envs)
         self.k[envs] = 0
         self._record(self.tracker.update(self.times[0], self.y[envs, 0], passages=envs), envs)
-        # the run-in: every sensor is read until the observer has a track (detection and its first fit); an
-        # environment stops at the sample its window completes, and the windows of all of them are fitted
-        # together at the end (the same fits, one batch: Tracker.fit_pending)
-        waiting = envs[self._blind(envs) & (self.k[envs] < self.K - 2)]
-        while waiting.size:
-            self.k[waiting] += 1
-            self._record(self.tracker.update(self.times[self.k[waiting]], self.y[waiting, self.k[waiting]],
-                                             passages=waiting, defer_fits=True), waiting)
-            waiting = waiting[~self.tracker.pending(waiting) & self._blind(waiting) & (self.k[waiting] < self.K - 2)]
-        fitted, sample = self.tracker.fit_pending()
-        self._record(sample, fitted)
+        self._run_in(envs)
         self.start[envs] = self.k[envs]
         self.since[envs] = 0.0
         self.last_read[envs] = True
@@ -252,6 +242,19 @@ class PassageV1Core:
         self._measure(envs)
         self._predict_gains(envs)
         return self.observe()[envs]
+
+    def _run_in(self, envs):
+        """Every sensor of ``envs`` is read until its observer has a track (detection and its first fit): an
+        environment stops at the sample its window completes, and the windows of all of them are fitted
+        together at the end (the same fits as one at a time, in one batch: :meth:`Tracker.fit_pending`)."""
+        waiting = envs[self._blind(envs) & (self.k[envs] < self.K - 2)]
+        while waiting.size:
+            self.k[waiting] += 1
+            self._record(self.tracker.update(self.times[self.k[waiting]], self.y[waiting, self.k[waiting]],
+                                             passages=waiting, defer_fits=True), waiting)
+            waiting = waiting[~self.tracker.pending(waiting) & self._blind(waiting) & (self.k[waiting] < self.K - 2)]
+        fitted, sample = self.tracker.fit_pending()
+        self._record(sample, fitted)
 
     def _record(self, sample, envs):
         for name in ("estimate", "cov", "status", "selected"):

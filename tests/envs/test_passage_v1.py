@@ -291,33 +291,13 @@ def test_the_run_in_fits_every_window_together_and_observes_what_one_at_a_time_d
     (the loop before, replayed here), over reset cycles of a vector env and a single env."""
     from shipsense.envs import passage_v1
 
-    def one_at_a_time(self, envs, seeds, fresh=False):
-        envs = np.asarray(envs, dtype=int)
-        for e, s in zip(envs, seeds):
-            queue = self._passages.setdefault(int(e), [])
-            if fresh:
-                queue.clear()
-            if not queue:
-                sim = passage_v1.simulate(self.scenario, runs=passage_v1.PASSAGE_BLOCK, seed=int(s), random=True)
-                queue.extend(zip(sim.measurements, self.model.state_from_truth(sim.truth)))
-            self.y[e], self.truth[e] = queue.pop(0)
-        self.tracker.reset_passages(envs)
-        self.k[envs] = 0
-        self._record(self.tracker.update(self.times[0], self.y[envs, 0], passages=envs), envs)
-        waiting = envs[self._blind(envs) & (self.k[envs] < self.K - 2)]
+    def one_at_a_time(self, envs):                                   # the run-in before: each window fitted
+        waiting = envs[self._blind(envs) & (self.k[envs] < self.K - 2)]   # at the sample it completes
         while waiting.size:
             self.k[waiting] += 1
             self._record(self.tracker.update(self.times[self.k[waiting]], self.y[waiting, self.k[waiting]],
                                              passages=waiting), waiting)
             waiting = waiting[self._blind(waiting) & (self.k[waiting] < self.K - 2)]
-        self.start[envs] = self.k[envs]
-        self.since[envs] = 0.0
-        self.last_read[envs] = True
-        self.returns[envs] = 0.0
-        self.reads[envs] = 0.0
-        self._measure(envs)
-        self._predict_gains(envs)
-        return self.observe()[envs]
 
     def run():
         out = []
@@ -331,6 +311,6 @@ def test_the_run_in_fits_every_window_together_and_observes_what_one_at_a_time_d
         return out
 
     deferred = run()
-    monkeypatch.setattr(passage_v1.PassageV1Core, "reset_envs", one_at_a_time)
+    monkeypatch.setattr(passage_v1.PassageV1Core, "_run_in", one_at_a_time)
     for a, b in zip(deferred, run()):
         np.testing.assert_array_equal(a, b)
