@@ -48,22 +48,37 @@ import math
 from functools import lru_cache
 
 import numpy as np
-from numba import njit
+from numba import njit, vectorize
 from scipy import special
 
 from shipsense import numba_cache
 
-_SQRT2 = np.sqrt(2.0)
 
-
+@njit(cache=True, error_model="numpy", inline="always")
 def _clipped_variance(sd, c):
     """``E[psi(e)^2]`` for ``e ~ N(0, sd^2)`` and Huber's clip ``psi`` at ``c``."""
-    if not np.isfinite(c):
+    if not math.isfinite(c):
         return sd * sd
     a = c / sd
-    inside = special.erf(a / _SQRT2)                                          # P(|u| < a)
-    pdf = np.exp(-0.5 * a * a) / np.sqrt(2.0 * np.pi)
+    inside = math.erf(a / math.sqrt(2.0))                                     # P(|u| < a)
+    pdf = math.exp(-0.5 * a * a) / math.sqrt(2.0 * math.pi)
     return sd * sd * (inside - 2.0 * a * pdf) + c * c * (1.0 - inside)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _psi_variance(state_var, noise_var, gamma, eps, scale):
+    """:func:`psi_variance` of one component (the formula the tracker's compiled pass uses too)."""
+    v = _clipped_variance(1.0, gamma)
+    if eps > 0.0:
+        total = state_var + noise_var
+        v = (1.0 - eps) * v + eps * _clipped_variance(math.sqrt((state_var + scale * scale * noise_var) / total),
+                                                       gamma)
+    return v
+
+
+@vectorize(["float64(float64, float64, float64, float64, float64)"], cache=True)
+def _psi_variance_ufunc(state_var, noise_var, gamma, eps, scale):
+    return _psi_variance(state_var, noise_var, gamma, eps, scale)
 
 
 def psi_variance(state_var, noise_var, gamma=np.inf, eps=0.0, scale=1.0):
@@ -73,11 +88,8 @@ def psi_variance(state_var, noise_var, gamma=np.inf, eps=0.0, scale=1.0):
     ``eps`` (outliers of ``scale`` times the noise's standard deviation) ``(state_var + scale^2 noise_var) /
     (state_var + noise_var)``.  Arrays broadcast.
     """
-    total = state_var + noise_var
-    v = _clipped_variance(np.ones_like(total), gamma)
-    if eps > 0.0:
-        v = (1.0 - eps) * v + eps * _clipped_variance(np.sqrt((state_var + scale * scale * noise_var) / total), gamma)
-    return v
+    with np.errstate(all="ignore"):   # (the compiled loop may evaluate an unused branch: inf * 0 for no clip)
+        return _psi_variance_ufunc(state_var, noise_var, gamma, eps, scale)
 
 
 def terms(eps, state_var, noise_var, present, gamma=np.inf, outliers=0.0, scale=1.0):
@@ -119,17 +131,6 @@ def _quantiles(level, top):
     return np.where(k > 0, special.chdtri(np.maximum(k, 1), level), np.inf)     # scipy.stats.chi2.isf
 
 
-@njit(cache=True, error_model="numpy", inline="always")
-def _clipped_variance_scalar(sd, c):
-    """:func:`_clipped_variance` of one standard deviation."""
-    if not math.isfinite(c):
-        return sd * sd
-    a = c / sd
-    inside = math.erf(a / math.sqrt(2.0))
-    pdf = math.exp(-0.5 * a * a) / math.sqrt(2.0 * math.pi)
-    return sd * sd * (inside - 2.0 * a * pdf) + c * c * (1.0 - inside)
-
-
 @njit(cache=True, error_model="numpy", nogil=True)
 def window_test(runs, sel, H, eps, S, R_used, R_declared, present, gamma, outliers, scale, table, window, count,
                 tests, fails, now, failed):
@@ -154,10 +155,7 @@ def window_test(runs, sel, H, eps, S, R_used, R_declared, present, gamma, outlie
             total = state + R_declared[i]
             z = eps[row, i] / math.sqrt(total)
             psi = gamma if z > gamma else (-gamma if z < -gamma else z)
-            v = _clipped_variance_scalar(1.0, gamma)
-            if outliers > 0.0:
-                v = (1.0 - outliers) * v + outliers * _clipped_variance_scalar(
-                    math.sqrt((state + scale * scale * R_declared[i]) / total), gamma)
+            v = _psi_variance(state, R_declared[i], gamma, outliers, scale)
             window[r, slot, 0, i] = psi if present[p, i] else 0.0
             window[r, slot, 1, i] = v if present[p, i] else 0.0
         count[r] += 1

@@ -309,6 +309,7 @@ class Tracker:
             setattr(self, name, np.full((P, *shape), value, dtype=dtype))
         self.gaps = []
         self.seconds = {"initialiser": 0.0, "refits": 0.0}   # time spent in window fits and in refits
+        self._blank = None                                    # the prior Sample of P passages (_prior_sample)
         self.bank = BankState(self.unit, self.filter_model, np.broadcast_to(self._prior[0], (P, H, n)),
                               self._prior[1])
         return self
@@ -470,9 +471,9 @@ class Tracker:
         return snr
 
     def _prior_sample(self):
-        """A fresh :class:`Sample` of every passage at the prior (copies of one kept per batch size)."""
+        """A fresh :class:`Sample` of every passage at the prior (copies of one kept until the next reset)."""
         P = self.P
-        if getattr(self, "_blank", None) is None or len(self._blank.status) != P:
+        if self._blank is None:
             mean, cov = self._prior
             self._blank = Sample(np.repeat(mean[None], P, axis=0), np.repeat(cov[None], P, axis=0),
                                  np.full(P, NO_DATA, dtype=np.int8), np.full(P, np.inf), np.zeros(P, dtype=bool),
