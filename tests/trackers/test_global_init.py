@@ -315,6 +315,38 @@ def test_distinct_rows_is_the_greedy_selection_of_every_row():
     assert all(idx[r].tolist() == _greedy(chi2[r], shared[0], 9, 15.0) for r in range(200))
 
 
+
+def test_distinct_rows_of_a_grid_walks_as_deep_as_its_picks_need():
+    """Rows of a grid's size: the walk sorts only a row's lowest values first, then four times as many, then
+    the whole row; picks that lie among the lowest 20, beyond the first 160, beyond 640, or that never fill
+    (fewer distinct positions than picks), with ties at every depth, equal the plain greedy selection."""
+    from shipsense.trackers import initialiser
+    from shipsense.trackers.initialiser import distinct_rows
+
+    rng = np.random.default_rng(11)
+    C, M = 6912, 20
+    assert max(initialiser._WALK_PREFIX, 8 * M) == 160
+    chi2 = rng.integers(0, 400, (6, C)).astype(float)       # ties everywhere
+    chi2[:, rng.uniform(size=C) < 0.05] = np.inf
+    pos = np.zeros((6, C, 2))
+    pos[0] = rng.uniform(0, 3000, (C, 2))                   # spread: the first picks are the lowest values
+    depth = [0, 0, 300, 1500, 0, 0]                          # rows 2, 3: the lowest candidates share a place
+    for r in (2, 3):
+        low = np.argsort(chi2[r], kind="stable")[:depth[r]]
+        pos[r] = rng.uniform(0, 3000, (C, 2))
+        pos[r, low] = 5.0
+    pos[4] = rng.integers(0, 4, (C, 2)) * 100.0              # 16 places: never 20 picks
+    pos[5] = rng.uniform(0, 3000, (C, 2))
+    chi2[5, :C - 100] = np.inf                               # fewer finite values than a second pass sorts
+    pos[1] = pos[0]
+    chi2[1] = np.floor(chi2[1] / 50.0)                       # ties of the 160th value run past it
+    idx, found = distinct_rows(chi2, pos, M, 15.0)
+    for r in range(6):
+        assert idx[r].tolist() == _greedy(chi2[r], pos[r], M, 15.0), r
+    assert found[4].sum() == 16 and found[:4].all() and found[5].all()
+    order = np.argsort(chi2[3], kind="stable")
+    assert np.flatnonzero(order == idx[3, 1])[0] > 640      # row 3's second pick lies past the second pass
+
 def test_the_grid_fit_equals_a_least_squares_solve_per_candidate(monkeypatch):
     """Bearings (wrapped residuals against non-zero offsets), missing samples (a few: the window's normal
     matrix less theirs; most: the present ones'; none) and the clamp, candidate by candidate against numpy's
@@ -404,6 +436,33 @@ def test_the_grid_terms_serve_shorter_windows_from_a_longer_one_exactly(monkeypa
         assert not (G.flags.writeable or off.flags.writeable or A.flags.writeable)
     assert {v["steps"] for v in initialiser._TERMS_CACHE.values()} == {30}    # 12 -> 30 (stride 1); 30 (stride 4)
 
+
+
+def test_the_candidate_grid_is_kept_and_its_terms_found_by_identity_only_when_frozen():
+    """candidate_grid hands back the same read-only array for the same model and arguments (a new one for
+    another model or other arguments); grid_terms of that frozen grid is served without hashing, while a
+    writable grid changed in place gets terms of its new values (it is hashed every call)."""
+    from shipsense.trackers import initialiser
+    from shipsense.trackers.initialiser import grid_terms
+
+    model = model_from_scenario("S2")
+    args = ([50.0, 150.0], np.arange(0.0, 360.0, 90.0), np.arange(0.0, 360.0, 120.0), [4.0])
+    grid = candidate_grid(model, *args)
+    assert candidate_grid(model, *args) is grid and not grid.flags.writeable
+    assert candidate_grid(model, args[0], args[1], args[2], [5.0]) is not grid
+    assert candidate_grid(model_from_scenario("S2"), *args) is not grid
+    initialiser._TERMS_CACHE.clear()
+    G = grid_terms(model, grid, 12)[0]
+    hashed = []
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(initialiser, "hash", lambda b: hashed.append(1) or hash(b), raising=False)
+        assert np.shares_memory(grid_terms(model, grid, 12)[0], G) and not hashed
+        mine = np.array(grid)                                   # writable: hashed, and its own terms
+        assert np.shares_memory(grid_terms(model, mine, 12)[0], G) and hashed
+        mine[:, 0] += 10.0
+        G2 = grid_terms(model, mine, 12)[0]
+    np.testing.assert_array_equal(G2, grid_terms(model, np.array(mine), 12)[0])
+    assert not np.array_equal(G2, G)
 
 def test_the_grids_projection_is_each_passages_own_sum_whatever_its_batch_or_column_split():
     """``_project`` (``G^T d`` of every candidate): bit for bit the sums over the samples in ascending order
