@@ -17,6 +17,8 @@ import hashlib
 from pathlib import Path
 
 DEPENDS = {
+    "envs/passage_v1.py": ("config.py", "envs/arguments.py", "envs/core_env.py", "simulator.py",
+                           "trackers/compiled_linalg.py", "trackers/tracker.py"),
     "physics/kernels.py": ("physics/magnetic.py",),
     "physics/hed_kernel.py": (),
     "trackers/measurement.py": ("parallel.py", "physics/hed_kernel.py", "physics/kernels.py"),

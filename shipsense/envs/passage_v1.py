@@ -130,17 +130,21 @@ its whole ``overrides`` dict.
 
 from __future__ import annotations
 
+import math
 from itertools import combinations
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
+from numba import njit
 
+from shipsense import numba_cache
 from shipsense.config import load_scenario
 from shipsense.envs.arguments import number
 from shipsense.envs.core_env import SEED_HIGH, ClosesItsFigure, CoreVectorEnv, RebuiltOnUnpickle
 from shipsense.simulator import simulate
 from shipsense.trackers import Tracker
+from shipsense.trackers.compiled_linalg import solve_in_place
 from shipsense.trackers.tracker import INITIALISING, NO_DATA
 
 PASSAGE_BLOCK = 16
@@ -416,18 +420,57 @@ def observation_potential(obs):
 def information_gains(Hm, Rinv, P, first_channel, subsets):
     """Drop (nats) of the position block's log-det of covariances ``P`` (E, n, n) when the sensors of each of
     ``subsets`` (A, S) are read, in information form: Jacobians ``Hm`` (E, m, n), inverse noise variances
-    ``Rinv`` (m,), channels grouped by sensor from ``first_channel`` (S,).  Returns (E, A)."""
-    Hw = Hm * Rinv[:, None]
-    Jc = Hw[..., :, None] * Hm[..., None, :]                     # (E, m, n, n) per channel
-    Js = np.add.reduceat(Jc, first_channel, axis=1)              # (E, S, n, n) per sensor
-    Ja = np.einsum("as,esij->eaij", subsets.astype(float), Js)   # (E, A, n, n) per action
-    with np.errstate(all="ignore"):
-        Pinv = np.linalg.inv(P)
-        post = np.linalg.inv(Pinv[:, None] + Ja)
-        before = np.linalg.slogdet(P[:, :2, :2])[1]
-        after = np.linalg.slogdet(post[..., :2, :2])[1]
-    g = before[:, None] - after
-    return np.where(np.isfinite(g), np.maximum(g, 0.0), 0.0)
+    ``Rinv`` (m,), channels grouped by sensor from ``first_channel`` (S,).  Returns (E, A): ``log det P_pp -
+    log det ((P^-1 + sum over the read channels of H_i^T H_i / R_i)^-1)_pp`` (``pp`` the position block), 0
+    where that is negative or not finite (a singular ``P``).  Compiled (:func:`_gains`): the environment
+    calls it every step."""
+    Hm, P = (np.ascontiguousarray(a, dtype=float) for a in (Hm, P))
+    out = np.empty((P.shape[0], len(subsets)))
+    _gains(Hm, np.ascontiguousarray(Rinv, dtype=float), P, np.asarray(first_channel, dtype=np.int64),
+           np.ascontiguousarray(subsets, dtype=np.bool_), out)
+    return out
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def _gains(Hm, Rinv, P, first_channel, subsets, out):
+    E, m, n = Hm.shape
+    S = first_channel.size
+    Js = np.empty((S, n, n))
+    Pinv, M, X = np.empty((n, n)), np.empty((n, n)), np.empty((n, n))
+    col = np.empty(n)
+    for e in range(E):
+        for s in range(S):                      # each sensor's information sum_i H_i^T H_i / R_i
+            hi = first_channel[s + 1] if s + 1 < S else m
+            for a in range(n):
+                for b in range(n):
+                    acc = 0.0
+                    for i in range(first_channel[s], hi):
+                        acc += Hm[e, i, a] * Rinv[i] * Hm[e, i, b]
+                    Js[s, a, b] = acc
+        for j in range(n):                      # P^-1, a column at a time
+            for a in range(n):
+                for b in range(n):
+                    M[a, b] = P[e, a, b]
+                col[a] = 1.0 if a == j else 0.0
+            solve_in_place(M, col, n)
+            for a in range(n):
+                Pinv[a, j] = col[a]
+        before = math.log(abs(P[e, 0, 0] * P[e, 1, 1] - P[e, 0, 1] * P[e, 1, 0]))
+        for t in range(subsets.shape[0]):
+            for j in range(2):                  # the first two columns of (P^-1 + J)^-1
+                for a in range(n):
+                    for b in range(n):
+                        acc = Pinv[a, b]
+                        for s in range(S):
+                            if subsets[t, s]:
+                                acc += Js[s, a, b]
+                        M[a, b] = acc
+                    col[a] = 1.0 if a == j else 0.0
+                solve_in_place(M, col, n)
+                for a in range(2):
+                    X[a, j] = col[a]
+            g = before - math.log(abs(X[0, 0] * X[1, 1] - X[0, 1] * X[1, 0]))
+            out[e, t] = max(g, 0.0) if math.isfinite(g) else 0.0
 
 
 def action_of(table, want):
@@ -600,3 +643,6 @@ class PassageV1VectorEnv(CoreVectorEnv):
 
 __all__ = ["BASELINES", "PassageV1Core", "PassageV1Env", "PassageV1VectorEnv", "information_gains",
            "observation_potential", "subsets"]
+
+
+numba_cache.key_on_sources(globals())   # the caches follow the files these kernels are compiled from

@@ -214,6 +214,34 @@ def _brute_force_gains(model, R, x, P, subsets, h=1e-6):
     return np.array(out)
 
 
+
+def test_the_compiled_gains_equal_the_kalman_form_and_are_zero_where_undefined():
+    """information_gains (information form, compiled) against the covariance (Kalman) form on the stacked read
+    channels, for random covariances, Jacobians and subsets (the empty one: 0); a singular covariance gives 0
+    instead of raising."""
+    from shipsense.envs.passage_v1 import information_gains, subsets
+
+    rng = np.random.default_rng(4)
+    E, n, first = 6, 7, np.array([0, 3, 6, 7])          # sensors of 3, 3, 1 and 2 channels
+    m, S = 9, 4
+    L = rng.normal(size=(E, n, n))
+    P = L @ np.swapaxes(L, -1, -2) + 0.1 * np.eye(n)
+    Hm = rng.normal(size=(E, m, n))
+    Rinv = rng.uniform(0.5, 4.0, m)
+    table = subsets(S, 2)
+    sensor = np.repeat(np.arange(S), np.diff(np.append(first, m)))
+    got = information_gains(Hm, Rinv, P, first, table)
+    for e in range(E):
+        for t, row in enumerate(table):
+            ch = row[sensor]
+            Hs = Hm[e, ch]
+            post = P[e] - P[e] @ Hs.T @ np.linalg.solve(Hs @ P[e] @ Hs.T + np.diag(1.0 / Rinv[ch]), Hs @ P[e])
+            want = np.linalg.slogdet(P[e, :2, :2])[1] - np.linalg.slogdet(post[:2, :2])[1]
+            np.testing.assert_allclose(got[e, t], max(want, 0.0), rtol=1e-9, atol=1e-12)
+    assert (got[:, ~table.any(axis=1)] == 0).all() and (got[:, table.any(axis=1)] > 0).all()
+    P[2] = 0.0
+    assert (information_gains(Hm, Rinv, P, first, table)[2] == 0).all()
+
 def test_greedy_is_the_brute_force_argmax_of_the_predicted_gain():
     env = PassageV1Env(k=2, **KW)
     greedy = env.baseline("greedy")
