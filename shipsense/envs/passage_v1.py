@@ -265,18 +265,11 @@ class PassageV1Core:
             getattr(self.last, name)[envs] = getattr(sample, name)
 
     def _measure(self, envs):
-        """Error and 95 % ellipse coverage of ``envs`` at their current sample (stored in the histories)."""
-        k = self.k[envs]
-        est, cov = self.last.estimate[envs, :2], self.last.cov[envs, :2, :2]
-        d = est - self.truth[envs, k, :2]
-        a, b, c = cov[:, 0, 0], cov[:, 0, 1], cov[:, 1, 1]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            nees = (c * d[:, 0] ** 2 - 2 * b * d[:, 0] * d[:, 1] + a * d[:, 1] ** 2) / (a * c - b * b)
-        nees = np.where(np.isfinite(nees), nees, np.inf)
-        error = np.hypot(d[:, 0], d[:, 1])
-        self.est_hist[envs, k] = est
-        self.errors[envs, k] = error
-        self.inside[envs, k] = nees <= CHI2_2_95
+        """Error and 95 % ellipse coverage of ``envs`` at their current sample (stored in the histories;
+        compiled, :func:`_measure`)."""
+        error, nees = np.empty(envs.size), np.empty(envs.size)
+        _measure(envs, self.k, self.last.estimate, self.last.cov, self.truth, CHI2_2_95, self.est_hist, self.errors,
+                 self.inside, error, nees)
         return error, nees
 
     def _predict_gains(self, envs):
@@ -340,24 +333,11 @@ class PassageV1Core:
                 "return": self.returns[envs].copy()}
 
     def observe(self):
-        """Observations (E, obs_dim) float32 (see the module docstring's table)."""
-        S, est, cov = self.S, self.last.estimate, self.last.cov
-        obs = np.empty((self.E, self.obs_dim))
-        obs[:, 0:2] = (est[:, :2] - self.centre) / self.position_scale
-        obs[:, 2:4] = est[:, 2:4] * 0.1
-        vx, vy, cxy = cov[:, 0, 0], cov[:, 1, 1], cov[:, 0, 1]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            obs[:, 4] = np.log10(np.maximum(vx, 1e-12)) / 6.0
-            obs[:, 5] = np.log10(np.maximum(vy, 1e-12)) / 6.0
-            obs[:, 6] = cxy / np.sqrt(np.maximum(vx * vy, 1e-300))
-        obs[:, 7] = self.last.status / 4.0
-        obs[:, 8] = self.k / max(self.K - 1, 1)
-        obs[:, 9:9 + S] = self.since / max(self.K - 1, 1)
-        g = np.maximum(self.gains[:, 1:1 + S], 0.0)   # the single-sensor actions
-        obs[:, 9 + S:] = g / (1.0 + g)
-        obs = np.nan_to_num(obs, nan=0.0, posinf=1.0, neginf=-1.0)
-        np.clip(obs, -1.0, 1.0, out=obs)
-        return obs.astype(np.float32)
+        """Observations (E, obs_dim) float32 (see the module docstring's table; compiled, :func:`_observe`)."""
+        obs = np.empty((self.E, self.obs_dim), dtype=np.float32)
+        _observe(self.last.estimate, self.last.cov, self.last.status, self.k, self.since, self.gains, self.centre,
+                 float(self.position_scale), float(max(self.K - 1, 1)), obs)
+        return obs
 
     # -- baselines (batched: one action per environment) ---------------------------
     def round_robin_actions(self):
@@ -471,6 +451,56 @@ def _gains(Hm, Rinv, P, first_channel, subsets, out):
                     X[a, j] = col[a]
             g = before - math.log(abs(X[0, 0] * X[1, 1] - X[0, 1] * X[1, 0]))
             out[e, t] = max(g, 0.0) if math.isfinite(g) else 0.0
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def _observe(est, cov, status, k, since, gains, centre, position_scale, steps, obs):
+    """:meth:`PassageV1Core.observe` into ``obs`` (E, 9 + 2 S) float32: the table's entries in float64 (NaN
+    -> 0, +-inf -> +-1), clipped to [-1, 1]."""
+    S = since.shape[1]
+    row = np.empty(obs.shape[1])
+    for e in range(est.shape[0]):
+        vx, vy, cxy = cov[e, 0, 0], cov[e, 1, 1], cov[e, 0, 1]
+        row[0] = (est[e, 0] - centre[0]) / position_scale
+        row[1] = (est[e, 1] - centre[1]) / position_scale
+        row[2] = est[e, 2] * 0.1
+        row[3] = est[e, 3] * 0.1
+        row[4] = math.log10(_at_least(vx, 1e-12)) / 6.0
+        row[5] = math.log10(_at_least(vy, 1e-12)) / 6.0
+        row[6] = cxy / math.sqrt(_at_least(vx * vy, 1e-300))
+        row[7] = status[e] / 4.0
+        row[8] = k[e] / steps
+        for s in range(S):
+            row[9 + s] = since[e, s] / steps
+            g = _at_least(gains[e, 1 + s], 0.0)            # the single-sensor actions
+            row[9 + S + s] = g / (1.0 + g)
+        for i in range(row.size):
+            v = row[i]
+            v = 0.0 if v != v else v
+            obs[e, i] = min(max(v, -1.0), 1.0)
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def _measure(envs, k, est, cov, truth, limit, est_hist, errors, inside, error, nees):
+    """:meth:`PassageV1Core._measure` of environments ``envs``: the position error (into ``error``) and NEES
+    (``nees``; inf where not finite) at each one's current sample, stored in the histories."""
+    for r in range(envs.size):
+        e = envs[r]
+        ke = k[e]
+        d0, d1 = est[e, 0] - truth[e, ke, 0], est[e, 1] - truth[e, ke, 1]
+        a, b, c = cov[e, 0, 0], cov[e, 0, 1], cov[e, 1, 1]
+        q = (c * (d0 * d0) - 2 * b * d0 * d1 + a * (d1 * d1)) / (a * c - b * b)
+        nees[r] = q if math.isfinite(q) else np.inf
+        error[r] = math.hypot(d0, d1)
+        est_hist[e, ke, 0], est_hist[e, ke, 1] = est[e, 0], est[e, 1]
+        errors[e, ke] = error[r]
+        inside[e, ke] = nees[r] <= limit
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _at_least(a, b):
+    """``np.maximum(a, b)`` of numbers (NaN if ``a`` is)."""
+    return a if not a <= b else b
 
 
 def action_of(table, want):

@@ -242,6 +242,70 @@ def test_the_compiled_gains_equal_the_kalman_form_and_are_zero_where_undefined()
     P[2] = 0.0
     assert (information_gains(Hm, Rinv, P, first, table)[2] == 0).all()
 
+
+def _observe_numpy(c):
+    """The observation table written in numpy (the reference of the compiled ``observe``)."""
+    S, est, cov = c.S, c.last.estimate, c.last.cov
+    obs = np.empty((c.E, c.obs_dim))
+    obs[:, 0:2] = (est[:, :2] - c.centre) / c.position_scale
+    obs[:, 2:4] = est[:, 2:4] * 0.1
+    vx, vy, cxy = cov[:, 0, 0], cov[:, 1, 1], cov[:, 0, 1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        obs[:, 4] = np.log10(np.maximum(vx, 1e-12)) / 6.0
+        obs[:, 5] = np.log10(np.maximum(vy, 1e-12)) / 6.0
+        obs[:, 6] = cxy / np.sqrt(np.maximum(vx * vy, 1e-300))
+    obs[:, 7] = c.last.status / 4.0
+    obs[:, 8] = c.k / max(c.K - 1, 1)
+    obs[:, 9:9 + S] = c.since / max(c.K - 1, 1)
+    g = np.maximum(c.gains[:, 1:1 + S], 0.0)
+    with np.errstate(invalid="ignore"):
+        obs[:, 9 + S:] = g / (1.0 + g)
+    obs = np.nan_to_num(obs, nan=0.0, posinf=1.0, neginf=-1.0)
+    return np.clip(obs, -1.0, 1.0).astype(np.float32)
+
+
+def test_the_compiled_observation_and_measures_equal_numpys_with_nan_and_inf():
+    """observe (within one float32 ulp: numba's log10 and numpy's differ in the last bit of some float64s) and
+    _measure (exactly) against numpy, on states with NaN, infinities, zero and negative variances."""
+    from shipsense.envs.passage_v1 import PassageV1Core
+
+    rng = np.random.default_rng(8)
+    c = PassageV1Core(num_envs=40, **KW)
+    E, n = c.E, c.model.n
+    c.last.estimate[:] = rng.normal(0, 300, (E, n))
+    L = rng.normal(0, 5, (E, n, n))
+    c.last.cov[:] = L @ np.swapaxes(L, -1, -2) * 10.0 ** rng.integers(-16, 6, (E, 1, 1))
+    c.last.cov[0, 0, 0] = np.nan
+    c.last.cov[1, 1, 1] = np.inf
+    c.last.cov[2, :2, :2] = 0.0
+    c.last.cov[3, 0, 0] = -1.0
+    c.last.cov[4, 0, 1] = c.last.cov[4, 1, 0] = np.inf
+    c.last.estimate[5, 0] = np.nan
+    c.last.estimate[6, 2] = -np.inf
+    c.last.status[:] = rng.integers(0, 5, E)
+    c.k[:] = rng.integers(0, c.K, E)
+    c.since[:] = rng.integers(0, c.K, (E, c.S))
+    c.gains[:] = rng.normal(0, 3, c.gains.shape)
+    c.gains[7, 1] = np.nan
+    c.gains[8, 2] = np.inf
+    c.truth[:] = rng.normal(0, 300, c.truth.shape)
+    obs = c.observe()
+    assert obs.dtype == np.float32 and np.isfinite(obs).all()
+    np.testing.assert_array_max_ulp(obs, _observe_numpy(c), maxulp=1)
+    envs = rng.permutation(E)[:25]
+    error, nees = c._measure(envs)
+    k = c.k[envs]
+    d = c.last.estimate[envs, :2] - c.truth[envs, k, :2]
+    cov = c.last.cov[envs, :2, :2]
+    a, b, cc = cov[:, 0, 0], cov[:, 0, 1], cov[:, 1, 1]
+    with np.errstate(all="ignore"):
+        want = (cc * d[:, 0] ** 2 - 2 * b * d[:, 0] * d[:, 1] + a * d[:, 1] ** 2) / (a * cc - b * b)
+    np.testing.assert_array_equal(nees, np.where(np.isfinite(want), want, np.inf))
+    np.testing.assert_array_equal(error, np.hypot(d[:, 0], d[:, 1]))
+    np.testing.assert_array_equal(c.errors[envs, k], error)
+    np.testing.assert_array_equal(c.inside[envs, k], nees <= CHI2_2_95)
+    np.testing.assert_array_equal(c.est_hist[envs, k], c.last.estimate[envs, :2])
+
 def test_greedy_is_the_brute_force_argmax_of_the_predicted_gain():
     env = PassageV1Env(k=2, **KW)
     greedy = env.baseline("greedy")
