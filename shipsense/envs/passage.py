@@ -73,10 +73,14 @@ or the scenario's for the bank), ``max_reads`` (default: all sensors),
 
 from __future__ import annotations
 
+import math
+
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
+from numba import njit
 
+from shipsense import numba_cache
 from shipsense.config import load_scenario
 from shipsense.envs.arguments import number
 from shipsense.envs.core_env import SEED_HIGH, CoreVectorEnv, RebuiltOnUnpickle
@@ -191,50 +195,20 @@ class PassageCore:
         for name in ("estimate", "cov", "status", "selected"):
             getattr(self.last, name)[envs] = getattr(sample, name)
 
-    def _selected(self):
-        return self.last.selected, self.last.estimate, self.last.cov[:, :2, :2]
-
     def _rewards(self, read, trimmed):
-        self._cache = sel, est, cov = self._selected()
-        truth = self.truth[self._env_index, self.k]
-        d = est[:, :2] - truth[:, :2]
-        error = np.hypot(d[:, 0], d[:, 1])
-        a, b, c = cov[:, 0, 0], cov[:, 0, 1], cov[:, 1, 1]     # 2 x 2 inverse in closed form
-        nees = (c * d[:, 0] ** 2 - 2 * b * d[:, 0] * d[:, 1] + a * d[:, 1] ** 2) / (a * c - b * b)
-        reads = read.sum(axis=1)
-        error_term = -np.minimum(error / self.error_scale, 10.0)
-        energy_term = -self.energy_cost * reads
-        info = {"truth": truth[:, :2].copy(), "estimate": est[:, :2].copy(), "error": error, "nees": nees,
-                "selected": sel, "reads": reads, "trimmed": trimmed, "error_term": error_term,
-                "energy_term": energy_term}
-        return error_term + energy_term, self.k >= self.K - 1, info
+        E = self.E
+        truth, est, error, nees = np.empty((E, 2)), np.empty((E, 2)), np.empty(E), np.empty(E)
+        reads, error_term, energy_term, rewards = np.empty(E, dtype=np.int64), np.empty(E), np.empty(E), np.empty(E)
+        _rewards(self.truth, self.k, self.last.estimate, self.last.cov, read, self.error_scale, self.energy_cost,
+                 truth, est, error, nees, reads, error_term, energy_term, rewards)
+        info = {"truth": truth, "estimate": est, "error": error, "nees": nees, "selected": self.last.selected.copy(),
+                "reads": reads, "trimmed": trimmed, "error_term": error_term, "energy_term": energy_term}
+        return rewards, self.k >= self.K - 1, info
 
     def _observe(self):
-        cached, self._cache = getattr(self, "_cache", None), None
-        sel, est, cov = cached if cached is not None else self._selected()
-        obs = np.empty((self.E, self.obs_dim))
-        obs[:, 0:2] = est[:, :2]
-        obs[:, 0:2] -= self.centre
-        obs[:, 0:2] /= self.position_scale
-        np.multiply(est[:, 2:4], 0.1, out=obs[:, 2:4])
-        var = obs[:, 4:6]
-        var[:, 0], var[:, 1] = cov[:, 0, 0], cov[:, 1, 1]
-        np.log10(np.maximum(var, 1e-12, out=var), out=var)
-        var /= 6.0                                                   # log10(std) / 3
-        cum = self.tracker.bank.cum
-        with np.errstate(invalid="ignore"):
-            np.subtract(cum, cum.max(axis=1, keepdims=True), out=obs[:, 6:6 + self.H])
-        obs[:, 6:6 + self.H] /= 50.0
-        np.multiply(self._snr_obs[self._env_index, self.k], self.last_read, out=obs[:, 6 + self.H:-2])
-        obs[:, -2] = self.last.status / 4.0
-        obs[:, -1] = self.k
-        obs[:, -1] /= max(self.K - 1, 1)
-        np.clip(obs, -1.0, 1.0, out=obs)
-        obs = obs.astype(np.float32)
-        if not np.isfinite(obs.sum()):   # rare: a run with no finite likelihood gets -1 there, other NaN 0
-            ll = obs[:, 6:6 + self.H]
-            ll[np.isnan(ll)] = -1.0
-            obs = np.nan_to_num(obs)
+        obs = np.empty((self.E, self.obs_dim), dtype=np.float32)
+        _observe(self.last.estimate, self.last.cov, self.tracker.bank.cum, self._snr_obs, self.k, self.last_read,
+                 self.last.status, self.centre, float(self.position_scale), float(max(self.K - 1, 1)), obs)
         return obs
 
     def render(self, e=0):
@@ -256,6 +230,60 @@ class PassageCore:
         ax.legend(loc="upper right", fontsize=7)
         ax.set_title(f"step {k}", fontsize=9)
         return figure_to_rgb(fig)
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def _rewards(truth_all, k, est_all, cov, read, error_scale, energy_cost, truth, est, error, nees, reads, error_term,
+             energy_term, rewards):
+    """:meth:`PassageCore._rewards`' numbers of every environment (see the module docstring's rewards)."""
+    for e in range(k.size):
+        ke = k[e]
+        truth[e, 0], truth[e, 1] = truth_all[e, ke, 0], truth_all[e, ke, 1]
+        est[e, 0], est[e, 1] = est_all[e, 0], est_all[e, 1]
+        d0, d1 = est[e, 0] - truth[e, 0], est[e, 1] - truth[e, 1]
+        error[e] = math.hypot(d0, d1)
+        a, b, c = cov[e, 0, 0], cov[e, 0, 1], cov[e, 1, 1]
+        nees[e] = (c * (d0 * d0) - 2 * b * d0 * d1 + a * (d1 * d1)) / (a * c - b * b)
+        n = 0
+        for s in range(read.shape[1]):
+            n += read[e, s]
+        reads[e] = n
+        x = error[e] / error_scale
+        error_term[e] = -(x if not x >= 10.0 else 10.0)
+        energy_term[e] = -energy_cost * n
+        rewards[e] = error_term[e] + energy_term[e]
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def _observe(est, cov, cum, snr_obs, k, last_read, status, centre, position_scale, steps, obs):
+    """:meth:`PassageCore._observe` into ``obs`` (E, 8 + H + S) float32: the table's entries in float64,
+    clipped to [-1, 1]; NaN -> -1 among the log-likelihoods (a run with no finite likelihood), 0 elsewhere."""
+    H, S = cum.shape[1], last_read.shape[1]
+    row = np.empty(obs.shape[1])
+    for e in range(est.shape[0]):
+        row[0] = (est[e, 0] - centre[0]) / position_scale
+        row[1] = (est[e, 1] - centre[1]) / position_scale
+        row[2] = est[e, 2] * 0.1
+        row[3] = est[e, 3] * 0.1
+        for i in range(2):                                     # log10(std) / 3
+            v = cov[e, i, i]
+            row[4 + i] = math.log10(v if not v <= 1e-12 else 1e-12) / 6.0
+        top = cum[e, 0]                                        # np.max: NaN if any is
+        for h in range(1, H):
+            if top == top and not cum[e, h] <= top:
+                top = cum[e, h]
+        for h in range(H):
+            row[6 + h] = (cum[e, h] - top) / 50.0
+        for s in range(S):
+            row[6 + H + s] = snr_obs[e, k[e], s] * (1.0 if last_read[e, s] else 0.0)
+        row[6 + H + S] = status[e] / 4.0
+        row[7 + H + S] = k[e] / steps
+        for i in range(row.size):
+            v = row[i]
+            if v != v:
+                obs[e, i] = -1.0 if 6 <= i < 6 + H else 0.0
+            else:
+                obs[e, i] = min(max(v, -1.0), 1.0)
 
 
 def _spaces(core):
@@ -337,3 +365,6 @@ class PassageVectorEnv(CoreVectorEnv):
         self._prev_done = terminated.copy()
         truncated = np.zeros(self.num_envs, dtype=bool)
         return obs, rewards.astype(np.float64), terminated, truncated, info
+
+
+numba_cache.key_on_sources(globals())   # the caches follow the files these kernels are compiled from

@@ -231,3 +231,74 @@ def test_both_passage_vector_envs_refuse_an_unknown_render_mode():
     for cls in (PassageVectorEnv, PassageV1VectorEnv):
         with pytest.raises(ValueError, match="render_mode must be one of \\['rgb_array'\\], got 'human'"):
             cls(2, render_mode="human")
+
+
+def _numpy_outputs(c, read):
+    """Passage-v0's rewards, info numbers and observation table written in numpy (the compiled kernels'
+    reference)."""
+    est, cov = c.last.estimate, c.last.cov[:, :2, :2]
+    truth = c.truth[np.arange(c.E), c.k]
+    d = est[:, :2] - truth[:, :2]
+    a, b, cc = cov[:, 0, 0], cov[:, 0, 1], cov[:, 1, 1]
+    with np.errstate(all="ignore"):
+        nees = (cc * d[:, 0] ** 2 - 2 * b * d[:, 0] * d[:, 1] + a * d[:, 1] ** 2) / (a * cc - b * b)
+        error = np.hypot(d[:, 0], d[:, 1])
+        error_term = -np.minimum(error / c.error_scale, 10.0)
+        energy_term = -c.energy_cost * read.sum(axis=1)
+        obs = np.empty((c.E, c.obs_dim))
+        obs[:, 0:2] = (est[:, :2] - c.centre) / c.position_scale
+        obs[:, 2:4] = est[:, 2:4] * 0.1
+        obs[:, 4] = np.log10(np.maximum(cov[:, 0, 0], 1e-12)) / 6.0
+        obs[:, 5] = np.log10(np.maximum(cov[:, 1, 1], 1e-12)) / 6.0
+        cum = c.tracker.bank.cum
+        obs[:, 6:6 + c.H] = (cum - cum.max(axis=1, keepdims=True)) / 50.0
+    obs[:, 6 + c.H:-2] = c._snr_obs[np.arange(c.E), c.k] * c.last_read
+    obs[:, -2] = c.last.status / 4.0
+    obs[:, -1] = c.k / max(c.K - 1, 1)
+    obs = np.clip(obs, -1.0, 1.0).astype(np.float32)
+    ll = obs[:, 6:6 + c.H]
+    ll[np.isnan(ll)] = -1.0
+    numbers = {"truth": truth[:, :2], "estimate": est[:, :2], "error": error, "nees": nees,
+               "error_term": error_term, "energy_term": energy_term, "reads": read.sum(axis=1)}
+    return error_term + energy_term, numbers, np.nan_to_num(obs)
+
+
+def test_the_compiled_rewards_and_observation_equal_numpys_with_nan_and_inf():
+    """The step's rewards and info numbers (exactly) and the observation (within one float32 ulp: numba's log10
+    and numpy's differ in the last bit of some float64s) against numpy, on states with NaN, infinities, zero
+    and negative variances and banks with NaN or no finite log-likelihood."""
+    from shipsense.envs.passage import PassageCore
+
+    rng = np.random.default_rng(9)
+    c = PassageCore(num_envs=40, scenario="S2", overrides={"steps": 30}, max_reads=2)
+    E, n = c.E, c.model.n
+    c.last.estimate[:] = rng.normal(0, 300, (E, n))
+    L = rng.normal(0, 5, (E, n, n))
+    c.last.cov[:] = L @ np.swapaxes(L, -1, -2) * 10.0 ** rng.integers(-16, 6, (E, 1, 1))
+    c.last.cov[0, 0, 0] = np.nan
+    c.last.cov[1, 1, 1] = np.inf
+    c.last.cov[2, :2, :2] = 0.0
+    c.last.cov[3, 0, 0] = -1.0
+    c.last.estimate[4, 0] = np.nan
+    c.last.estimate[5, 2] = -np.inf
+    c.last.status[:] = rng.integers(0, 5, E)
+    c.k[:] = rng.integers(0, c.K, E)
+    c.truth[:] = rng.normal(0, 300, c.truth.shape)
+    c._snr_obs[:] = rng.uniform(0, 1.5, c._snr_obs.shape)
+    c.last_read[:] = rng.integers(0, 2, c.last_read.shape).astype(bool)
+    cum = c.tracker.bank.cum
+    cum[:] = rng.normal(-100, 60, cum.shape)
+    cum[6] = -np.inf                                      # no finite likelihood
+    cum[7, 1] = -np.inf
+    cum[8, 2] = np.nan
+    read = rng.integers(0, 2, (E, c.S)).astype(bool)
+    rewards, terminated, info = c._rewards(read, np.zeros(E, dtype=int))
+    want_rewards, numbers, want_obs = _numpy_outputs(c, read)
+    np.testing.assert_array_equal(rewards, want_rewards)
+    for name, value in numbers.items():
+        np.testing.assert_array_equal(info[name], value, err_msg=name)
+    np.testing.assert_array_equal(terminated, c.k >= c.K - 1)
+    obs = c._observe()
+    assert obs.dtype == np.float32 and np.isfinite(obs).all()
+    assert (obs[6, 6:6 + c.H] == -1).all() and (obs[8, 6:6 + c.H] == -1).all()
+    np.testing.assert_array_max_ulp(obs, want_obs, maxulp=1)
