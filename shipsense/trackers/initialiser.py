@@ -251,13 +251,36 @@ def window_samples(model, K, window_s=15.0):
 
 
 def strongest_snr(model, y):
-    """The strongest field channel's SNR per sample (R, K) of measurements in internal units (R, K, m)."""
-    a = np.abs(np.asarray(y))
+    """The strongest field channel's SNR per sample (R, K) of measurements in internal units (R, K, m):
+    ``max_i |y_i| / sqrt(R_i)`` over the field channels, a missing value counting 0 and an infinite one the
+    dtype's largest (compiled, :func:`_strongest`; the tracker calls it every sample)."""
+    a = np.asarray(y)
     if a.dtype.kind != "f":
         a = a.astype(float)
-    a[np.isnan(a)] = 0.0                      # np.nan_to_num's values (0, the dtype's largest), without its overhead
-    np.minimum(a, np.finfo(a.dtype).max, out=a)
-    return np.where(~model.axial, a / np.sqrt(model.R), 0.0).max(axis=-1)
+    out = np.empty(a.shape[:-1])
+    _strongest(np.ascontiguousarray(a).reshape(-1, a.shape[-1]), ~model.axial, np.sqrt(model.R),
+               np.finfo(a.dtype).max.item(), out.reshape(-1))
+    return out
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def _strongest(y, field, std, big, out):
+    """``out[s] = max_i (min(|y[s, i]|, big) / std[i] if field[i] else 0)`` (NaN -> 0; the max NaN if any
+    ratio is, as numpy's)."""
+    for s in range(y.shape[0]):
+        best = 0.0
+        for i in range(y.shape[1]):
+            v = 0.0
+            if field[i]:
+                a = abs(y[s, i])
+                if a != a:
+                    a = 0.0
+                v = min(a, big) / std[i]
+            if i == 0:
+                best = v
+            elif best == best and not v <= best:
+                best = v
+        out[s] = best
 
 
 def detection_start(model, measurements, snr_start=5.0, window=0):

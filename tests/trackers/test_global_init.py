@@ -490,3 +490,28 @@ def test_the_grids_projection_is_each_passages_own_sum_whatever_its_batch_or_col
     for lo, hi in ((0, 50), (50, 51), (51, 300), (300, N)):              # column chunks, as in threads
         _project(d[5:], G, part, lo, hi)
     np.testing.assert_array_equal(part, out[5:])
+
+
+def test_strongest_snr_is_the_largest_field_channel_ratio_with_missing_as_zero():
+    """strongest_snr against its definition written in numpy, for vector and envelope field channels beside
+    bearings: NaN counts 0, +-inf the dtype's largest, float32 and integer inputs, (R, K, m) and (R, m)."""
+    from shipsense.trackers.initialiser import strongest_snr
+
+    def numpy_snr(model, y):
+        a = np.abs(np.asarray(y, dtype=np.result_type(np.asarray(y).dtype, np.float16)))
+        a[np.isnan(a)] = 0.0
+        a = np.minimum(a, np.finfo(a.dtype).max)
+        with np.errstate(over="ignore"):                      # (an infinite value's ratio)
+            return np.where(~model.axial, a / np.sqrt(model.R), 0.0).max(axis=-1)
+
+    rng = np.random.default_rng(6)
+    for name in ("S2", "S1-P2"):
+        model = model_from_scenario(name)
+        y = rng.normal(size=(5, 30, model.m)) * 10.0 ** rng.integers(-3, 4, (5, 30, model.m))
+        y[rng.random(y.shape) < 0.2] = np.nan
+        y[0, 0], y[1, 1, 0], y[2, 2] = np.inf, -np.inf, np.nan
+        for arr in (y, y.astype(np.float32), np.round(np.nan_to_num(y, posinf=9e9, neginf=-9e9)).astype(int), y[:, 3]):
+            got = strongest_snr(model, arr)
+            assert got.dtype == np.float64 and got.shape == arr.shape[:-1]
+            np.testing.assert_array_equal(got, numpy_snr(model, arr))
+        assert strongest_snr(model, y)[2, 2] == 0
