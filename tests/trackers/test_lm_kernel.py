@@ -103,3 +103,33 @@ def test_mismatched_shapes_are_refused_before_the_compiled_loop(change, message)
         kw["taus"] = np.tile(np.arange(24) * model.period, (change["taus_rows"], 1))
     with pytest.raises(ValueError, match=message):
         fit_passages(model, y, theta0, change.get("steps", 24), **kw)
+
+
+@pytest.mark.parametrize("name", ["S2", "S1-P2", "S0"])
+def test_the_constant_velocity_path_is_the_dense_products_bit_for_bit(monkeypatch, name):
+    """Transitions that are constant-velocity ones take only their nonzero terms in the state and the Jacobian
+    rows: the fits (from wild starts, with missing samples, Huber weights and per-fit times) are those of the
+    dense products to the bit; other transitions are not taken for constant-velocity ones."""
+    from shipsense.trackers import lm_kernel
+    from shipsense.trackers.batchfit import transitions
+
+    model, y, _, theta0 = _problem(name, 5, 3, 30, spread=0.3)
+    y[1, ::3, 0] = np.nan
+    taus = np.cumsum(np.random.default_rng(2).uniform(0.5, 1.5, (5, 30)), axis=1) * model.period
+    taus -= taus[:, :1]
+    assert lm_kernel._constant_velocity(transitions(model, taus))
+    for kw in ({"prior": depth_prior(model, 1.0)}, {"huber": 1.345, "taus": taus}):
+        fast = fit_passages(model, y, theta0, 30, return_information=True, **kw)
+        with monkeypatch.context() as m:
+            m.setattr(lm_kernel, "_constant_velocity", lambda Ak: False)
+            dense = fit_passages(model, y, theta0, 30, return_information=True, **kw)
+        for a, b in zip(fast, dense):
+            np.testing.assert_array_equal(a, b)
+    A = transitions(model, taus[:2])
+    assert A.ndim == 4 and lm_kernel._constant_velocity(A[:, :1])
+    assert lm_kernel._constant_velocity(np.eye(5)[None, None])
+    for i, j, v in ((0, 3, 0.5), (2, 2, 0.999), (1, 3, 0.25), (4, 4, 2.0)):
+        bad = A.copy()
+        bad[1, 7, i, j] = v
+        assert not lm_kernel._constant_velocity(bad), (i, j)
+    assert not lm_kernel._constant_velocity(np.eye(3)[None, None])
