@@ -102,7 +102,6 @@ def _candidate_grid(model, ranges, bearings_deg, courses_deg, speeds, source_z):
 _GRID_CACHE: dict = {}
 _TERMS_CACHE: dict = {}
 _TERMS_CACHE_SIZE = 4
-_GRAMS_KEPT = 8
 
 
 def linear_basis(model, theta, steps, stride=1):
@@ -124,7 +123,9 @@ def grid_terms(model, theta, steps, stride=1):
     ``G`` and ``off`` are window-major, so a shorter window is a prefix (a view, no copy): the last few grids'
     terms are kept for the longest window asked so far, and a longer one extends them to at least twice
     its length -- a tracker whose windows vary from passage to passage computes them a few times, not once
-    per window.  Treat the results as read-only.
+    per window.  The Gram matrices of each window length asked for are kept with them, each continued from
+    the longest shorter one's (:func:`_gram_on`: the sums a fresh one would make).  Treat the results as
+    read-only.
     """
     theta = np.ascontiguousarray(theta, dtype=float)
     frozen = theta.flags.owndata and not theta.flags.writeable    # (candidate_grid's: no one can change it)
@@ -148,16 +149,15 @@ def grid_terms(model, theta, steps, stride=1):
         _TERMS_CACHE[key] = hit
     W = len(range(0, steps, stride))
     G, off = hit["G"][:W], hit["off"][:W]
-    A = hit["grams"].pop(W, None)
-    if A is not None:
-        hit["grams"][W] = A                          # the most recently used last
-    else:
-        A = _gram(G.reshape(G.shape[0] * G.shape[1], G.shape[2]), theta.shape[0], hit["P"])
-        A.flags.writeable = False
-        if len(hit["grams"]) >= _GRAMS_KEPT:
-            hit["grams"].pop(next(iter(hit["grams"])))
-        hit["grams"][W] = A
-    return G, off, A
+    grams = hit["grams"]
+    if W not in grams:          # from the longest shorter window's: only the samples after it are added
+        rows = G.shape[1]
+        below = max((w for w in grams if w < W), default=0)
+        start = grams[below] if below else np.zeros((len(theta), hit["P"], hit["P"]))
+        full = hit["G"].reshape(hit["G"].shape[0] * rows, hit["G"].shape[2])
+        grams[W] = _gram_on(start, full, below * rows, W * rows)
+        grams[W].flags.writeable = False
+    return G, off, grams[W]
 
 
 _BASIS_CHUNK = 512
@@ -198,8 +198,16 @@ def _window_major(model, offset, basis):
 @njit(cache=True, nogil=True)
 def _gram(G, C, P):
     """``A[c] = sum_k G[k, c P:(c + 1) P]^T G[k, c P:(c + 1) P]`` (C, P, P) of a whitened basis (K, C*P)."""
-    A = np.zeros((C, P, P))
-    for k in range(G.shape[0]):
+    return _gram_on(np.zeros((C, P, P)), G, 0, G.shape[0])
+
+
+@njit(cache=True, nogil=True)
+def _gram_on(A0, G, k0, k1):
+    """:func:`_gram` of rows ``k0:k1`` of ``G`` added to ``A0`` (C, P, P), the Gram matrices of its rows before
+    ``k0`` (not changed): the same sums, in the same order, as :func:`_gram` of rows ``:k1``."""
+    C, P = A0.shape[0], A0.shape[1]
+    A = A0.copy()
+    for k in range(k0, k1):
         for c in range(C):
             base = c * P
             for p in range(P):
