@@ -57,8 +57,8 @@ def filter_table(steps, batches=(1, 24, 2400)):
 
 
 def env_table(steps, n=64):
-    print(f"\n2. Environments: steps per second (autoresets included; {env_bench.REPEATS} runs together, "
-          f"from seeds 0, 1, ...; a Passage vector env's runs are whole episodes)")
+    print(f"\n2. Environments: steps per second (autoresets included; {env_bench.REPEATS} runs together after an "
+          f"untimed one, from seeds 0, 1, ...; a Passage vector env's runs are whole episodes)")
     cart = env_bench.single_rate(gym.make("CartPole-v1"), steps, 1)
     cart_vec = env_bench.vector_rate(gym.make_vec("CartPole-v1", num_envs=n, vectorization_mode="vector_entry_point"),
                                      steps // 10, np.ones(n, dtype=np.int64))
@@ -93,8 +93,10 @@ def study(name):
     """
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     with tempfile.TemporaryDirectory() as tmp:
+        # (from the directory that holds this run's package: ``python -c`` puts the working directory first on
+        # its path, so a study started elsewhere could import another copy of shipsense)
         out = subprocess.run([sys.executable, "-c", STUDY, name, os.path.join(tmp, name)], capture_output=True,
-                             text=True)
+                             text=True, cwd=os.path.dirname(os.path.dirname(os.path.abspath(shipsense.__file__))))
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     lines = [ln for ln in out.stdout.splitlines() if ln.startswith("WALL ")]
     if out.returncode != 0 or not lines or lines[-1].split()[2] != "0":
