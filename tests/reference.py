@@ -19,3 +19,21 @@ def kalman_reference(A, Q, C, R, y, x0, P0):
         xs.append(x)
         Ps.append(P)
     return np.array(xs), np.array(Ps), np.array(ll)
+
+
+def odd_observer_outputs(last, rng):
+    """Fill an environment's record of its observer's output (``last.estimate`` (E, n), ``last.cov`` (E, n, n),
+    E >= 7) with covariances over 22 decades and, in rows 0-6, what a broken track can report: a NaN or an
+    infinite variance, a zero position block, a negative variance, an infinite covariance, a NaN position,
+    an infinite velocity."""
+    E, n = last.estimate.shape
+    last.estimate[:] = rng.normal(0, 300, (E, n))
+    L = rng.normal(0, 5, (E, n, n))
+    last.cov[:] = L @ np.swapaxes(L, -1, -2) * 10.0 ** rng.integers(-16, 6, (E, 1, 1))
+    last.cov[0, 0, 0] = np.nan
+    last.cov[1, 1, 1] = np.inf
+    last.cov[2, :2, :2] = 0.0
+    last.cov[3, 0, 0] = -1.0
+    last.cov[4, 0, 1] = last.cov[4, 1, 0] = np.inf
+    last.estimate[5, 0] = np.nan
+    last.estimate[6, 2] = -np.inf

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from reference import odd_observer_outputs
 
 import shipsense  # noqa: F401  (registers the environments)
 from shipsense.envs.passage import PassageEnv, PassageVectorEnv
@@ -271,16 +272,8 @@ def test_the_compiled_rewards_and_observation_equal_numpys_with_nan_and_inf():
 
     rng = np.random.default_rng(9)
     c = PassageCore(num_envs=40, scenario="S2", overrides={"steps": 30}, max_reads=2)
-    E, n = c.E, c.model.n
-    c.last.estimate[:] = rng.normal(0, 300, (E, n))
-    L = rng.normal(0, 5, (E, n, n))
-    c.last.cov[:] = L @ np.swapaxes(L, -1, -2) * 10.0 ** rng.integers(-16, 6, (E, 1, 1))
-    c.last.cov[0, 0, 0] = np.nan
-    c.last.cov[1, 1, 1] = np.inf
-    c.last.cov[2, :2, :2] = 0.0
-    c.last.cov[3, 0, 0] = -1.0
-    c.last.estimate[4, 0] = np.nan
-    c.last.estimate[5, 2] = -np.inf
+    E = c.E
+    odd_observer_outputs(c.last, rng)
     c.last.status[:] = rng.integers(0, 5, E)
     c.k[:] = rng.integers(0, c.K, E)
     c.truth[:] = rng.normal(0, 300, c.truth.shape)
