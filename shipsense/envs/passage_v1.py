@@ -400,10 +400,12 @@ def observation_potential(obs):
 def information_gains(Hm, Rinv, P, first_channel, subsets):
     """Drop (nats) of the position block's log-det of covariances ``P`` (E, n, n) when the sensors of each of
     ``subsets`` (A, S) are read, in information form: Jacobians ``Hm`` (E, m, n), inverse noise variances
-    ``Rinv`` (m,), channels grouped by sensor from ``first_channel`` (S,).  Returns (E, A): ``log det P_pp -
-    log det ((P^-1 + sum over the read channels of H_i^T H_i / R_i)^-1)_pp`` (``pp`` the position block), 0
-    where that is negative or not finite (a singular ``P``).  Compiled (:func:`_gains`): the environment
-    calls it every step."""
+    ``Rinv`` (m,), channels grouped by sensor from ``first_channel`` (S,, increasing; a sensor whose start
+    equals the next one's has no channel).  Returns (E, A): ``log det P_pp - log det ((P^-1 + sum over the
+    read channels of H_i^T H_i / R_i)^-1)_pp`` (``pp`` the position block), 0 where that is negative or not
+    finite (a singular ``P``, a non-finite Jacobian row of a sensor read) and for a subset that reads
+    nothing.  ``subsets`` are booleans (any nonzero entry reads its sensor).  Compiled (:func:`_gains`): the
+    environment calls it every step."""
     Hm, P = (np.ascontiguousarray(a, dtype=float) for a in (Hm, P))
     out = np.empty((P.shape[0], len(subsets)))
     _gains(Hm, np.ascontiguousarray(Rinv, dtype=float), P, np.asarray(first_channel, dtype=np.int64),
@@ -418,6 +420,10 @@ def _gains(Hm, Rinv, P, first_channel, subsets, out):
     Js = np.empty((S, n, n))
     Pinv, M, X = np.empty((n, n)), np.empty((n, n)), np.empty((n, n))
     col = np.empty(n)
+    reads = np.zeros(subsets.shape[0], dtype=np.bool_)
+    for t in range(subsets.shape[0]):
+        for s in range(S):
+            reads[t] |= subsets[t, s]
     for e in range(E):
         for s in range(S):                      # each sensor's information sum_i H_i^T H_i / R_i
             hi = first_channel[s + 1] if s + 1 < S else m
@@ -450,7 +456,7 @@ def _gains(Hm, Rinv, P, first_channel, subsets, out):
                 for a in range(2):
                     X[a, j] = col[a]
             g = before - math.log(abs(X[0, 0] * X[1, 1] - X[0, 1] * X[1, 0]))
-            out[e, t] = max(g, 0.0) if math.isfinite(g) else 0.0
+            out[e, t] = max(g, 0.0) if math.isfinite(g) and reads[t] else 0.0
 
 
 @njit(cache=True, error_model="numpy", nogil=True)

@@ -14,6 +14,8 @@ checked by a chi-square goodness-of-fit test (:func:`chi2_limit`).
 from __future__ import annotations
 
 import math
+import threading
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -71,16 +73,20 @@ def _parameter_slots(model):
 def candidate_grid(model, ranges, bearings_deg, courses_deg, speeds, source_z=None):
     """Candidate initial states (C, n) (internal units, parameters zero) around the array centroid.
 
-    Read-only; the last few grids are kept, so a tracker asking for its grid at every window gets the same
-    array back (and :func:`grid_terms` finds its terms without hashing it)."""
+    Read-only (a view that cannot be made writeable) and shared: the last few grids are kept, so a tracker
+    asking for its grid at every window gets the same array back, whose terms :func:`grid_terms` then finds
+    without hashing it."""
     args = tuple(np.asarray(a, dtype=float) for a in (ranges, bearings_deg, courses_deg, speeds))
-    key = (id(model), *((a.shape, a.tobytes()) for a in args), source_z)
-    hit = _GRID_CACHE.pop(key, None)
-    if hit is None or hit[0] is not model:
-        hit = (model, _candidate_grid(model, *args, source_z))
-        if len(_GRID_CACHE) >= _TERMS_CACHE_SIZE:
-            _GRID_CACHE.pop(next(iter(_GRID_CACHE)))
-    _GRID_CACHE[key] = hit                           # the most recently used last
+    z = None if source_z is None else float(source_z)
+    key = (id(model), *((a.shape, a.tobytes()) for a in args), z)
+    with _CACHE_LOCK:
+        hit = _GRID_CACHE.pop(key, None)
+        if hit is None or hit[0] is not model:
+            hit = (model, _candidate_grid(model, *args, z))
+            _MADE[id(hit[1])] = hit[1]
+            if len(_GRID_CACHE) >= _TERMS_CACHE_SIZE:
+                _GRID_CACHE.pop(next(iter(_GRID_CACHE)))
+        _GRID_CACHE[key] = hit                       # the most recently used last
     return hit[1]
 
 
@@ -96,12 +102,16 @@ def _candidate_grid(model, ranges, bearings_deg, courses_deg, speeds, source_z):
     if "z" in model.labels:
         theta[:, model.labels.index("z")] = model.source_z if source_z is None else source_z
     theta.flags.writeable = False
-    return theta
+    view = theta.view()                              # (its base is read-only: the view cannot be made writeable)
+    view.flags.writeable = False
+    return view
 
 
 _GRID_CACHE: dict = {}
 _TERMS_CACHE: dict = {}
 _TERMS_CACHE_SIZE = 4
+_MADE = weakref.WeakValueDictionary()   # id -> a grid candidate_grid made (whose values cannot change)
+_CACHE_LOCK = threading.RLock()         # the caches are shared by the threads of a process
 
 
 def linear_basis(model, theta, steps, stride=1):
@@ -128,9 +138,15 @@ def grid_terms(model, theta, steps, stride=1):
     read-only.
     """
     theta = np.ascontiguousarray(theta, dtype=float)
-    frozen = theta.flags.owndata and not theta.flags.writeable    # (candidate_grid's: no one can change it)
+    with _CACHE_LOCK:
+        return _grid_terms(model, theta, steps, stride)
+
+
+def _grid_terms(model, theta, steps, stride):
+    """:func:`grid_terms` under the caches' lock."""
+    frozen = _MADE.get(id(theta)) is theta                        # (candidate_grid's: its values cannot change)
     key = next((k for k, v in _TERMS_CACHE.items() if v["theta"] is theta and k[0] == id(model) and k[-1] == stride),
-               None) if frozen else None                          # a frozen grid seen before: not hashed again
+               None) if frozen else None                          # a grid of candidate_grid's: not hashed again
     if key is None:
         key = (id(model), theta.shape, hash(theta.tobytes()), stride)
     hit = _TERMS_CACHE.pop(key, None)
@@ -263,12 +279,19 @@ def strongest_snr(model, y):
     ``max_i |y_i| / sqrt(R_i)`` over the field channels, a missing value counting 0 and an infinite one the
     dtype's largest (compiled, :func:`_strongest`; the tracker calls it every sample)."""
     a = np.asarray(y)
+    if a.dtype.kind == "c":
+        a = np.abs(a)                                 # the modulus
     if a.dtype.kind != "f":
         a = a.astype(float)
+    big = np.finfo(a.dtype).max
+    if a.dtype not in (np.float32, np.float64) or not a.dtype.isnative:   # (float16, long double, byte-swapped)
+        with np.errstate(over="ignore", invalid="ignore"):
+            a = np.minimum(np.abs(a), big).astype(float)   # clamped at their own largest, then as doubles
+        big = np.finfo(float).max
     out = np.empty(a.shape[:-1])
-    _strongest(np.ascontiguousarray(a).reshape(-1, a.shape[-1]), ~model.axial, np.sqrt(model.R),
-               np.finfo(a.dtype).max.item(), out.reshape(-1))
-    return out
+    _strongest(np.ascontiguousarray(a).reshape(-1, a.shape[-1]), ~model.axial, np.sqrt(model.R), float(big),
+               out.reshape(-1))
+    return out if out.ndim else out[()]
 
 
 @njit(cache=True, error_model="numpy", nogil=True)

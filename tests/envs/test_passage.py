@@ -291,6 +291,7 @@ def test_the_compiled_rewards_and_observation_equal_numpys_with_nan_and_inf():
     for name, value in numbers.items():
         np.testing.assert_array_equal(info[name], value, err_msg=name)
     np.testing.assert_array_equal(terminated, c.k >= c.K - 1)
+    assert not np.shares_memory(info["selected"], c.last.selected)     # later steps overwrite the core's
     obs = c._observe()
     assert obs.dtype == np.float32 and np.isfinite(obs).all()
     assert (obs[6, 6:6 + c.H] == -1).all() and (obs[8, 6:6 + c.H] == -1).all()

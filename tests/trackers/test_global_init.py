@@ -418,8 +418,8 @@ def test_fits_and_grid_in_chunks_of_passages_equal_one_batch(monkeypatch):
 @pytest.mark.parametrize("chunk", [512, 5])
 def test_the_grid_terms_serve_shorter_windows_from_a_longer_one_exactly(monkeypatch, chunk):
     """grid_terms keeps each grid's terms for the longest window and serves shorter ones as prefixes: the same
-    numbers as computing them (bit for bit, also filled a few candidates at a time), read-only; a longer window
-    extends the cache."""
+    numbers as computing them (bit for bit, also filled a few candidates at a time, and Gram matrices continued
+    from a shorter window's), read-only; a longer window extends the cache."""
     from shipsense.trackers import initialiser
     from shipsense.trackers.initialiser import _gram, _window_major, grid_terms
 
@@ -427,7 +427,8 @@ def test_the_grid_terms_serve_shorter_windows_from_a_longer_one_exactly(monkeypa
     grid = candidate_grid(model, [50.0, 150.0], np.arange(0.0, 360.0, 90.0), np.arange(0.0, 360.0, 120.0), [4.0])
     monkeypatch.setattr(initialiser, "_BASIS_CHUNK", chunk)                  # 24 candidates: one chunk, or five
     initialiser._TERMS_CACHE.clear()
-    for steps, stride in ((12, 1), (5, 1), (30, 1), (7, 1), (30, 4), (9, 4)):
+    # (5 then 7 and 11: continued from the shorter ones' Gram matrices; 30 extends the terms; 20 then 25 again)
+    for steps, stride in ((12, 1), (5, 1), (7, 1), (11, 1), (30, 1), (20, 1), (25, 1), (30, 4), (9, 4)):
         G, off, A = grid_terms(model, grid, steps, stride)
         G0, off0 = _window_major(model, *linear_basis(model, grid, steps, stride))
         np.testing.assert_array_equal(G, G0)
@@ -440,8 +441,9 @@ def test_the_grid_terms_serve_shorter_windows_from_a_longer_one_exactly(monkeypa
 
 def test_the_candidate_grid_is_kept_and_its_terms_found_by_identity_only_when_frozen():
     """candidate_grid hands back the same read-only array for the same model and arguments (a new one for
-    another model or other arguments); grid_terms of that frozen grid is served without hashing, while a
-    writable grid changed in place gets terms of its new values (it is hashed every call)."""
+    another model, other arguments or another source depth); grid_terms of that grid is served without
+    hashing, while a writable grid changed in place gets terms of its new values (it is hashed every
+    call)."""
     from shipsense.trackers import initialiser
     from shipsense.trackers.initialiser import grid_terms
 
@@ -449,8 +451,15 @@ def test_the_candidate_grid_is_kept_and_its_terms_found_by_identity_only_when_fr
     args = ([50.0, 150.0], np.arange(0.0, 360.0, 90.0), np.arange(0.0, 360.0, 120.0), [4.0])
     grid = candidate_grid(model, *args)
     assert candidate_grid(model, *args) is grid and not grid.flags.writeable
+    with pytest.raises(ValueError):
+        grid.flags.writeable = True                             # shared: no one can change it
     assert candidate_grid(model, args[0], args[1], args[2], [5.0]) is not grid
     assert candidate_grid(model_from_scenario("S2"), *args) is not grid
+    electrodes = model_from_scenario("S1-P2")                   # a source depth in the state
+    deep = candidate_grid(electrodes, *args, source_z=np.array(-8.0))
+    assert candidate_grid(electrodes, *args, source_z=-8.0) is deep
+    assert candidate_grid(electrodes, *args, source_z=-4.0) is not deep
+    assert (deep[:, electrodes.labels.index("z")] == -8.0).all()
     initialiser._TERMS_CACHE.clear()
     G = grid_terms(model, grid, 12)[0]
     hashed = []
@@ -515,3 +524,95 @@ def test_strongest_snr_is_the_largest_field_channel_ratio_with_missing_as_zero()
             assert got.dtype == np.float64 and got.shape == arr.shape[:-1]
             np.testing.assert_array_equal(got, numpy_snr(model, arr))
         assert strongest_snr(model, y)[2, 2] == 0
+    # other dtypes as doubles (clamped at their own largest), a complex value's modulus, one sample a scalar
+    model = model_from_scenario("S2")
+    y = np.array([3.0, -4.0, np.nan, 1.0, np.inf, 2.0, 0.5])
+    want = numpy_snr(model, y)
+    assert isinstance(strongest_snr(model, y), np.float64) and strongest_snr(model, y) == want
+    for other in (y.astype(np.longdouble), y.astype(">f8")):
+        assert strongest_snr(model, other) == want
+    assert strongest_snr(model, y.astype(np.float16)) == numpy_snr(model, y.astype(np.float16))
+    with np.errstate(invalid="ignore"):
+        assert strongest_snr(model, y * 1j) == numpy_snr(model, np.abs(y * 1j)) == want
+    # a variance of 0 gives an infinite ratio, or NaN for a zero reading (as numpy's quotient); NaN wins the max
+    from types import SimpleNamespace
+
+    odd = SimpleNamespace(axial=np.zeros(3, dtype=bool), R=np.array([1.0, 0.0, 4.0]))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for row in ([1.0, 2.0, 3.0], [1.0, 0.0, 3.0], [5.0, np.nan, 1.0]):
+            np.testing.assert_array_equal(strongest_snr(odd, np.array([row])), numpy_snr(odd, np.array([row])))
+
+
+def test_the_grid_caches_serve_threads_at_once():
+    """Threads asking for grids and their terms at once (windows of many lengths and two strides, more grids
+    than the caches keep, the interpreter switching threads every microsecond) get the numbers of a call
+    alone, and no error."""
+    import sys
+    import threading
+
+    from shipsense.trackers import initialiser
+    from shipsense.trackers.initialiser import _gram, grid_terms
+
+    model = model_from_scenario("S2")
+    speeds = [[2.0], [4.0], [6.0], [8.0], [10.0], [12.0]]
+    errors = []
+
+    def work(seed):
+        rng = np.random.default_rng(seed)
+        try:
+            for _ in range(150):
+                sp = speeds[rng.integers(len(speeds))]
+                grid = candidate_grid(model, [50.0, 150.0], np.arange(0.0, 360.0, 90.0), [0.0, 180.0], sp)
+                steps, stride = int(rng.integers(1, 40)), int(rng.integers(1, 3))
+                G, _, A = grid_terms(model, grid, steps, stride)
+                if not np.array_equal(A, _gram(G.reshape(-1, G.shape[-1]), len(grid), 3)):
+                    errors.append(f"wrong Gram matrices for {sp} at {steps}, stride {stride}")
+        except Exception as exc:   # noqa: BLE001 - any failure in a thread is the test's
+            errors.append(repr(exc))
+
+    initialiser._TERMS_CACHE.clear()
+    interval = sys.getswitchinterval()
+    sys.setswitchinterval(1e-6)
+    try:
+        threads = [threading.Thread(target=work, args=(i,)) for i in range(4)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+    finally:
+        sys.setswitchinterval(interval)
+    assert not errors, errors[:3]
+
+
+def test_one_thread_at_a_time_fills_the_grid_caches(monkeypatch):
+    """While one thread fills a grid's terms, another asking for another grid's waits for it (the caches'
+    bookkeeping is not interleaved: interleaved, dict iterations raised 'changed size during iteration')."""
+    import threading
+
+    from shipsense.trackers import initialiser
+    from shipsense.trackers.initialiser import grid_terms
+
+    model = model_from_scenario("S2")
+    fill, entered, go = initialiser._grid_arrays, [], threading.Event()
+    first_inside = threading.Event()
+
+    def slow_fill(*args):
+        entered.append(threading.current_thread().name)
+        first_inside.set()
+        go.wait(5.0)
+        return fill(*args)
+
+    monkeypatch.setattr(initialiser, "_grid_arrays", slow_fill)
+    initialiser._TERMS_CACHE.clear()
+    grids = [candidate_grid(model, [50.0], [0.0, 90.0], [0.0], [v]) for v in (3.0, 7.0)]
+    a = threading.Thread(target=grid_terms, args=(model, grids[0], 6), name="a")
+    b = threading.Thread(target=grid_terms, args=(model, grids[1], 6), name="b")
+    a.start()
+    assert first_inside.wait(5.0)
+    b.start()
+    b.join(0.3)
+    assert b.is_alive() and entered == ["a"]                   # b waits at the lock, not inside
+    go.set()
+    a.join(5.0)
+    b.join(5.0)
+    assert entered == ["a", "b"]
