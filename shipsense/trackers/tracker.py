@@ -290,6 +290,7 @@ class Tracker:
         self.filter_model = replace(self.model, R=self.model.R * kappa)
         self.kappa = kappa
         self.window = max(4, int(round(opts.window_s / sc.period)))
+        self._field_channels = np.flatnonzero(~self.model.axial)
         self._grid = _grid(sc)
         self._prior = prior_belief(self.model, sc, self.bank_config)
         self._prior_info = np.diag(self.model.x_scale ** 2 / np.diag(self._prior[1]))   # internal units
@@ -390,18 +391,19 @@ class Tracker:
             raise ValueError(f"time must increase: passage {p} goes from {self.last_t[p]:.9g} s to "
                              f"{t[np.argmax(back)]:.9g} s")
         yi = np.full((self.P, self.model.m), np.nan)
-        yi[act] = y / self.model.y_scale
+        yi[act] = ya = y / self.model.y_scale
         dt = np.full(self.P, np.nan)
-        dt[act] = t - self.last_t[act]
-        for p in act[dt[act] > self.options.gap_limit_s]:
-            self.gaps.append(Gap(int(p), float(self.last_t[p]), float(t[act == p][0])))
+        dt[act] = step = t - self.last_t[act]
+        if (step > self.options.gap_limit_s).any():
+            for p in act[step > self.options.gap_limit_s]:
+                self.gaps.append(Gap(int(p), float(self.last_t[p]), float(t[act == p][0])))
         slot = self.n[act] % self.y_hist.shape[1]
-        self.y_hist[act, slot], self.t_hist[act, slot] = yi[act], t
+        self.y_hist[act, slot], self.t_hist[act, slot] = ya, t
         snr = self._snr(yi, act)
         out = self._prior_sample()
         self.cons_now[act] = False
         field = np.zeros(self.P, dtype=bool)
-        field[act] = np.isfinite(yi[act][:, ~self.model.axial]).any(axis=1)
+        field[act] = np.isfinite(ya[:, self._field_channels]).any(axis=1)
         self.phase[(self.phase == _WAITING) & field] = _STARTING
         starting = act[self.phase[act] == _STARTING]
         out.status[starting] = INITIALISING
@@ -420,10 +422,12 @@ class Tracker:
         # centimetres to metres while it was 20-150 m off, EXPERIMENTS.md)
         # (not a failed consistency test whose refit passed its own: that sample has the refit's covariance)
         bad = act[(out.status[act] == INCONSISTENT) & ~self.cons_now[act]]
-        out.cov[bad] += self._prior[1]
+        if bad.size:
+            out.cov[bad] += self._prior[1]
         self.last_t[act] = t
         self.n[act] += 1
-        if passages is None or (act.size == self.P and np.array_equal(act, np.arange(self.P))):
+        if passages is None or (act.size == self.P and (act[0] == 0 if self.P == 1 else
+                                                        np.array_equal(act, np.arange(self.P)))):
             return out                                              # (a fresh Sample: no copy needed)
         return Sample(*(getattr(out, f)[act] for f in Sample.__dataclass_fields__))
 
@@ -483,13 +487,13 @@ class Tracker:
     def _step(self, runs, yi, dt, out):
         """Predict (time steps ``dt``) and update the banks of passages ``runs``; write their output."""
         H = self._H
-        d = dt[runs]
-        regular = np.all(np.abs(d - self.model.period) <= 1e-9 * self.model.period)
+        d, T = dt[runs], self.model.period
+        regular = all(abs(step - T) <= 1e-9 * T for step in d.tolist())
         model = None if regular else self.filter_model.stepped(np.repeat(d, H))
         ysi = yi * self.model.y_scale
         inn = self.bank.step(ysi, predict=True, runs=runs, model=model)
         nis = np.where(inn.m > 0, inn.nis / np.maximum(inn.m, 1), np.nan).reshape(runs.size, H)
-        sel = self.bank.selected()[runs]
+        sel = np.argmax(self.bank.cum[runs], axis=1)              # (the bank's selected(), of these runs)
         self.nis[runs, :-1] = self.nis[runs, 1:]                  # the window moves on by one sample
         self.nis[runs, -1] = nis[np.arange(runs.size), sel]
         test = self.options.consistency_window and self.options.method == "tracker"   # (the bank is the studies')
