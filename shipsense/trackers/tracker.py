@@ -492,10 +492,11 @@ class Tracker:
         model = None if regular else self.filter_model.stepped(np.repeat(d, H))
         ysi = yi * self.model.y_scale
         inn = self.bank.step(ysi, predict=True, runs=runs, model=model)
-        nis = np.where(inn.m > 0, inn.nis / np.maximum(inn.m, 1), np.nan).reshape(runs.size, H)
         sel = np.argmax(self.bank.cum[runs], axis=1)              # (the bank's selected(), of these runs)
+        pick = np.arange(runs.size) * H + sel                     # the selected hypotheses' rows of inn
+        m_sel = inn.m.reshape(-1)[pick]
         self.nis[runs, :-1] = self.nis[runs, 1:]                  # the window moves on by one sample
-        self.nis[runs, -1] = nis[np.arange(runs.size), sel]
+        self.nis[runs, -1] = np.where(m_sel > 0, inn.nis.reshape(-1)[pick] / np.maximum(m_sel, 1), np.nan)
         test = self.options.consistency_window and self.options.method == "tracker"   # (the bank is the studies')
         failed = self._consistency(runs, yi, inn, sel) if test else runs[:0]
         self._report(runs, out)
