@@ -574,70 +574,74 @@ def distinct_rows(chi2, positions, M, distinct_m):
     are walked in ascending ``chi2`` (a stable sort: ties in index order), each kept unless within
     ``distinct_m`` of a pick (:func:`_distinct_walk`, every row in one compiled call).
     """
-    chi2 = np.where(np.isfinite(chi2), chi2, np.inf)          # (not fitted, or failed: never picked)
+    chi2 = np.ascontiguousarray(np.where(np.isfinite(chi2), chi2, np.inf), dtype=float)   # (never picked)
     idx = np.zeros((chi2.shape[0], M), dtype=np.int64)
-    count = _distinct_walk(chi2, np.ascontiguousarray(positions, dtype=float), float(distinct_m) ** 2, idx,
-                           max(_WALK_PREFIX, 8 * M))
+    count = _distinct_walk(chi2, np.ascontiguousarray(positions, dtype=float), float(distinct_m) ** 2, idx)
     found = np.arange(M)[None, :] < count[:, None]
     return np.where(found, idx, idx[:, :1]), found
 
 
-_WALK_PREFIX = 64
-"""Candidates a row's walk in :func:`_distinct_walk` sorts first (at least ``8 M``): a stable sort of a
-grid's 6,912 chi-squares cost ~0.5 ms, and its 20 picks were among the lowest 250 in every window of 32
-tracked passages of S2, S0 and S1 (median 98)."""
-
-
 @njit(cache=True, nogil=True)
-def _distinct_walk(chi2, positions, limit2, picks, prefix):
+def _distinct_walk(chi2, positions, limit2, picks):
     """The picks (R, M) of every row of :func:`distinct_rows` (``chi2`` (R, C), non-finite as ``inf``) into
     ``picks``; returns their counts (R,).
 
-    The walk's order is the stable sort's: a row's ``prefix`` lowest values and any ties of the last (every
-    ``chi2 <=`` that value) are its first candidates, sorted stably; a row whose picks are not complete
-    among them walks four times as many, and so on up to its whole stable sort."""
+    A row's finite candidates are taken from a binary heap ordered by ``(chi2, index)`` -- the stable sort's
+    order -- only as far as the walk needs them: a grid's 20 picks were among its lowest 250 of 6,912 in
+    every window of 32 tracked passages (a whole stable sort of them cost ~0.5 ms a row)."""
     R, M = picks.shape
+    C = chi2.shape[1]
     count = np.zeros(R, dtype=np.int64)
+    heap = np.empty(C, dtype=np.int64)
     for r in range(R):
         row = chi2[r]
         pos = positions[r if positions.shape[0] > 1 else 0]
-        finite = 0
-        for c in range(row.size):
-            finite += row[c] < np.inf
-        if finite == 0:
-            continue
-        size = prefix
-        while size < finite:
-            head = np.flatnonzero(row <= np.partition(row, size - 1)[size - 1])
-            if _walk(head[np.argsort(row[head], kind="mergesort")], pos, limit2, picks[r]) == M:
-                break
-            size *= 4
-        if size < finite:
-            count[r] = M
-        else:
-            count[r] = _walk(np.argsort(row, kind="mergesort")[:finite], pos, limit2, picks[r])
+        size = 0
+        for c in range(C):
+            if row[c] < np.inf:
+                heap[size] = c
+                size += 1
+        for i in range(size // 2 - 1, -1, -1):
+            _sift(heap, i, size, row)
+        n = 0
+        while size > 0 and n < M:
+            c = heap[0]
+            size -= 1
+            heap[0] = heap[size]
+            _sift(heap, 0, size, row)
+            keep = True
+            for i in range(n):
+                d0 = pos[c, 0] - pos[picks[r, i], 0]
+                d1 = pos[c, 1] - pos[picks[r, i], 1]
+                if not d0 * d0 + d1 * d1 > limit2:
+                    keep = False
+                    break
+            if keep:
+                picks[r, n] = c
+                n += 1
+        count[r] = n
     return count
 
 
-@njit(cache=True, nogil=True)
-def _walk(order, pos, limit2, picks):
-    """Walk candidates ``order``, keeping each more than ``sqrt(limit2)`` from every earlier pick, until
-    ``picks`` (M,) is full; returns the number picked."""
-    n = 0
-    for c in order:
-        if n == picks.size:
+@njit(cache=True, nogil=True, inline="always")
+def _sift(heap, i, size, key):
+    """Sift ``heap[i]`` down a min-heap of ``size`` indices ordered by ``(key[index], index)``."""
+    item = heap[i]
+    while True:
+        child = 2 * i + 1
+        if child >= size:
             break
-        keep = True
-        for i in range(n):
-            d0 = pos[c, 0] - pos[picks[i], 0]
-            d1 = pos[c, 1] - pos[picks[i], 1]
-            if not d0 * d0 + d1 * d1 > limit2:
-                keep = False
-                break
-        if keep:
-            picks[n] = c
-            n += 1
-    return n
+        other = child + 1
+        if other < size and (key[heap[other]] < key[heap[child]] or
+                             (key[heap[other]] == key[heap[child]] and heap[other] < heap[child])):
+            child = other
+        c = heap[child]
+        if key[c] < key[item] or (key[c] == key[item] and c < item):
+            heap[i] = c
+            i = child
+        else:
+            break
+    heap[i] = item
 
 
 def distinct_loglik(chi2, found):

@@ -317,15 +317,13 @@ def test_distinct_rows_is_the_greedy_selection_of_every_row():
 
 
 def test_distinct_rows_of_a_grid_walks_as_deep_as_its_picks_need():
-    """Rows of a grid's size: the walk sorts only a row's lowest values first, then four times as many, then
-    the whole row; picks that lie among the lowest 20, beyond the first 160, beyond 640, or that never fill
-    (fewer distinct positions than picks), with ties at every depth, equal the plain greedy selection."""
-    from shipsense.trackers import initialiser
+    """Rows of a grid's size, walked from a heap only as far as their picks need: picks that lie among the
+    lowest 20, beyond the lowest 160, beyond 640, or that never fill (fewer distinct positions than picks),
+    with ties at every depth and few finite values, equal the plain greedy selection."""
     from shipsense.trackers.initialiser import distinct_rows
 
     rng = np.random.default_rng(11)
     C, M = 6912, 20
-    assert max(initialiser._WALK_PREFIX, 8 * M) == 160
     chi2 = rng.integers(0, 400, (6, C)).astype(float)       # ties everywhere
     chi2[:, rng.uniform(size=C) < 0.05] = np.inf
     pos = np.zeros((6, C, 2))
@@ -337,7 +335,7 @@ def test_distinct_rows_of_a_grid_walks_as_deep_as_its_picks_need():
         pos[r, low] = 5.0
     pos[4] = rng.integers(0, 4, (C, 2)) * 100.0              # 16 places: never 20 picks
     pos[5] = rng.uniform(0, 3000, (C, 2))
-    chi2[5, :C - 100] = np.inf                               # fewer finite values than a second pass sorts
+    chi2[5, :C - 100] = np.inf                               # few finite values
     pos[1] = pos[0]
     chi2[1] = np.floor(chi2[1] / 50.0)                       # ties of the 160th value run past it
     idx, found = distinct_rows(chi2, pos, M, 15.0)
@@ -345,7 +343,7 @@ def test_distinct_rows_of_a_grid_walks_as_deep_as_its_picks_need():
         assert idx[r].tolist() == _greedy(chi2[r], pos[r], M, 15.0), r
     assert found[4].sum() == 16 and found[:4].all() and found[5].all()
     order = np.argsort(chi2[3], kind="stable")
-    assert np.flatnonzero(order == idx[3, 1])[0] > 640      # row 3's second pick lies past the second pass
+    assert np.flatnonzero(order == idx[3, 1])[0] > 640      # row 3's second pick lies deep
 
 def test_the_grid_fit_equals_a_least_squares_solve_per_candidate(monkeypatch):
     """Bearings (wrapped residuals against non-zero offsets), missing samples (a few: the window's normal
