@@ -17,8 +17,9 @@ import hashlib
 from pathlib import Path
 
 DEPENDS = {
-    "envs/passage.py": ("config.py", "envs/arguments.py", "envs/core_env.py", "simulator.py"),
-    "envs/passage_v1.py": ("config.py", "envs/arguments.py", "envs/core_env.py", "simulator.py",
+    "envs/features.py": (),
+    "envs/passage.py": ("config.py", "envs/arguments.py", "envs/core_env.py", "envs/features.py", "simulator.py"),
+    "envs/passage_v1.py": ("config.py", "envs/arguments.py", "envs/core_env.py", "envs/features.py", "simulator.py",
                            "trackers/compiled_linalg.py", "trackers/tracker.py"),
     "physics/kernels.py": ("physics/magnetic.py",),
     "physics/hed_kernel.py": (),

@@ -73,8 +73,6 @@ or the scenario's for the bank), ``max_reads`` (default: all sensors),
 
 from __future__ import annotations
 
-import math
-
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
@@ -84,6 +82,7 @@ from shipsense import numba_cache
 from shipsense.config import load_scenario
 from shipsense.envs.arguments import number
 from shipsense.envs.core_env import SEED_HIGH, CoreVectorEnv, RebuiltOnUnpickle
+from shipsense.envs.features import error_and_nees, track_features
 from shipsense.simulator import simulate
 from shipsense.trackers import Tracker
 
@@ -240,10 +239,8 @@ def _rewards(truth_all, k, est_all, cov, read, error_scale, energy_cost, truth, 
         ke = k[e]
         truth[e, 0], truth[e, 1] = truth_all[e, ke, 0], truth_all[e, ke, 1]
         est[e, 0], est[e, 1] = est_all[e, 0], est_all[e, 1]
-        d0, d1 = est[e, 0] - truth[e, 0], est[e, 1] - truth[e, 1]
-        error[e] = math.hypot(d0, d1)
-        a, b, c = cov[e, 0, 0], cov[e, 0, 1], cov[e, 1, 1]
-        nees[e] = (c * (d0 * d0) - 2 * b * d0 * d1 + a * (d1 * d1)) / (a * c - b * b)
+        error[e], nees[e] = error_and_nees(est[e, 0] - truth[e, 0], est[e, 1] - truth[e, 1], cov[e, 0, 0],
+                                           cov[e, 0, 1], cov[e, 1, 1])
         n = 0
         for s in range(read.shape[1]):
             n += read[e, s]
@@ -261,13 +258,7 @@ def _observe(est, cov, cum, snr_obs, k, last_read, status, centre, position_scal
     H, S = cum.shape[1], last_read.shape[1]
     row = np.empty(obs.shape[1])
     for e in range(est.shape[0]):
-        row[0] = (est[e, 0] - centre[0]) / position_scale
-        row[1] = (est[e, 1] - centre[1]) / position_scale
-        row[2] = est[e, 2] * 0.1
-        row[3] = est[e, 3] * 0.1
-        for i in range(2):                                     # log10(std) / 3
-            v = cov[e, i, i]
-            row[4 + i] = math.log10(v if not v <= 1e-12 else 1e-12) / 6.0
+        track_features(est[e], cov[e], centre, position_scale, row)
         top = cum[e, 0]                                        # np.max: NaN if any is
         for h in range(1, H):
             if top == top and not cum[e, h] <= top:

@@ -142,6 +142,7 @@ from shipsense import numba_cache
 from shipsense.config import load_scenario
 from shipsense.envs.arguments import number
 from shipsense.envs.core_env import SEED_HIGH, ClosesItsFigure, CoreVectorEnv, RebuiltOnUnpickle
+from shipsense.envs.features import at_least, error_and_nees, track_features
 from shipsense.simulator import simulate
 from shipsense.trackers import Tracker
 from shipsense.trackers.compiled_linalg import solve_in_place
@@ -466,19 +467,13 @@ def _observe(est, cov, status, k, since, gains, centre, position_scale, steps, o
     S = since.shape[1]
     row = np.empty(obs.shape[1])
     for e in range(est.shape[0]):
-        vx, vy, cxy = cov[e, 0, 0], cov[e, 1, 1], cov[e, 0, 1]
-        row[0] = (est[e, 0] - centre[0]) / position_scale
-        row[1] = (est[e, 1] - centre[1]) / position_scale
-        row[2] = est[e, 2] * 0.1
-        row[3] = est[e, 3] * 0.1
-        row[4] = math.log10(_at_least(vx, 1e-12)) / 6.0
-        row[5] = math.log10(_at_least(vy, 1e-12)) / 6.0
-        row[6] = cxy / math.sqrt(_at_least(vx * vy, 1e-300))
+        track_features(est[e], cov[e], centre, position_scale, row)
+        row[6] = cov[e, 0, 1] / math.sqrt(at_least(cov[e, 0, 0] * cov[e, 1, 1], 1e-300))
         row[7] = status[e] / 4.0
         row[8] = k[e] / steps
         for s in range(S):
             row[9 + s] = since[e, s] / steps
-            g = _at_least(gains[e, 1 + s], 0.0)            # the single-sensor actions
+            g = at_least(gains[e, 1 + s], 0.0)             # the single-sensor actions
             row[9 + S + s] = g / (1.0 + g)
         for i in range(row.size):
             v = row[i]
@@ -493,20 +488,12 @@ def _measure(envs, k, est, cov, truth, limit, est_hist, errors, inside, error, n
     for r in range(envs.size):
         e = envs[r]
         ke = k[e]
-        d0, d1 = est[e, 0] - truth[e, ke, 0], est[e, 1] - truth[e, ke, 1]
-        a, b, c = cov[e, 0, 0], cov[e, 0, 1], cov[e, 1, 1]
-        q = (c * (d0 * d0) - 2 * b * d0 * d1 + a * (d1 * d1)) / (a * c - b * b)
+        error[r], q = error_and_nees(est[e, 0] - truth[e, ke, 0], est[e, 1] - truth[e, ke, 1], cov[e, 0, 0],
+                                     cov[e, 0, 1], cov[e, 1, 1])
         nees[r] = q if math.isfinite(q) else np.inf
-        error[r] = math.hypot(d0, d1)
         est_hist[e, ke, 0], est_hist[e, ke, 1] = est[e, 0], est[e, 1]
         errors[e, ke] = error[r]
         inside[e, ke] = nees[r] <= limit
-
-
-@njit(cache=True, error_model="numpy", inline="always")
-def _at_least(a, b):
-    """``np.maximum(a, b)`` of numbers (NaN if ``a`` is)."""
-    return a if not a <= b else b
 
 
 def action_of(table, want):
