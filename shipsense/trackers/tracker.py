@@ -207,6 +207,10 @@ class Sample:
     hypotheses: np.ndarray
     selected: np.ndarray
 
+    def take(self, rows):
+        """The :class:`Sample` of passages ``rows`` (indices or a slice; fancy indices copy)."""
+        return Sample(*(getattr(self, f)[rows] for f in Sample.__dataclass_fields__))
+
 
 @dataclass
 class TrackResult:
@@ -417,19 +421,23 @@ class Tracker:
             self._initialise(starting, snr, out, defer_fits)
             if running.size:
                 self._restart(running, snr, out)
-        # a failed fit or a diverged bank: the model does not explain the data, so the estimate is located no
-        # better than the passage prior says (its spread is added: an inconsistent track's own covariance was
-        # centimetres to metres while it was 20-150 m off, EXPERIMENTS.md)
-        # (not a failed consistency test whose refit passed its own: that sample has the refit's covariance)
-        bad = act[(out.status[act] == INCONSISTENT) & ~self.cons_now[act]]
-        if bad.size:
-            out.cov[bad] += self._prior[1]
+        self._widen_inconsistent(act, out)
         self.last_t[act] = t
         self.n[act] += 1
         if passages is None or (act.size == self.P and (act[0] == 0 if self.P == 1 else
                                                         np.array_equal(act, np.arange(self.P)))):
             return out                                              # (a fresh Sample: no copy needed)
-        return Sample(*(getattr(out, f)[act] for f in Sample.__dataclass_fields__))
+        return out.take(act)
+
+    def _widen_inconsistent(self, act, out):
+        """A failed fit or a diverged bank among passages ``act``: the model does not explain the data, so the
+        estimate is located no better than the passage prior says (its spread is added to ``out.cov``: an
+        inconsistent track's own covariance was centimetres to metres while it was 20-150 m off,
+        EXPERIMENTS.md); not a failed consistency test whose refit passed its own (that sample has the
+        refit's covariance)."""
+        bad = act[(out.status[act] == INCONSISTENT) & ~self.cons_now[act]]
+        if bad.size:
+            out.cov[bad] += self._prior[1]
 
     def track(self, times, measurements, progress=False) -> TrackResult:
         """Track a batch: ``times`` (K,) or (P, K) s, ``measurements`` (P, K, m) SI (NaN = missing).
@@ -565,11 +573,10 @@ class Tracker:
             try:
                 out.status[pend] = INITIALISING
                 self._fit_windows(pend, out)
-                bad = pend[out.status[pend] == INCONSISTENT]   # (as update: a failed fit is no better than
-                out.cov[bad] += self._prior[1]                 # the passage prior)
+                self._widen_inconsistent(pend, out)            # (as update)
             finally:
                 self.n[pend] += 1
-        return pend, Sample(*(getattr(out, f)[pend] for f in Sample.__dataclass_fields__))
+        return pend, out.take(pend)
 
     def _initialise(self, starting, snr, out, defer=False):
         """Detection and, once a passage's window is complete, its global fits: the bank starts from them
