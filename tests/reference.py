@@ -37,3 +37,13 @@ def odd_observer_outputs(last, rng):
     last.cov[4, 0, 1] = last.cov[4, 1, 0] = np.inf
     last.estimate[5, 0] = np.nan
     last.estimate[6, 2] = -np.inf
+
+
+def gram_reference(G, C, P):
+    """The grid's Gram matrices ``A[c] = sum_k G[k, c P:(c + 1) P]^T G[k, c P:(c + 1) P]`` (C, P, P) of a
+    whitened basis ``G`` (K, C*P), in numpy: each row's outer products added in row order from zeros (the
+    sums the compiled ``initialiser._gram_on`` makes, to the bit)."""
+    A = np.zeros((C, P, P))
+    for g in np.asarray(G).reshape(len(G), C, P):
+        A += g[:, :, None] * g[:, None, :]
+    return A

@@ -212,15 +212,10 @@ def _window_major(model, offset, basis):
 
 
 @njit(cache=True, nogil=True)
-def _gram(G, C, P):
-    """``A[c] = sum_k G[k, c P:(c + 1) P]^T G[k, c P:(c + 1) P]`` (C, P, P) of a whitened basis (K, C*P)."""
-    return _gram_on(np.zeros((C, P, P)), G, 0, G.shape[0])
-
-
-@njit(cache=True, nogil=True)
 def _gram_on(A0, G, k0, k1):
-    """:func:`_gram` of rows ``k0:k1`` of ``G`` added to ``A0`` (C, P, P), the Gram matrices of its rows before
-    ``k0`` (not changed): the same sums, in the same order, as :func:`_gram` of rows ``:k1``."""
+    """The Gram matrices ``A[c] = sum_k G[k, c P:(c + 1) P]^T G[k, c P:(c + 1) P]`` (C, P, P) of rows ``k0:k1``
+    of a whitened basis ``G`` (K, C*P) added, in row order, to ``A0``, those of its rows before ``k0`` (not
+    changed; zeros for ``k0 = 0``): the same sums, in the same order, as from zeros over rows ``:k1``."""
     C, P = A0.shape[0], A0.shape[1]
     A = A0.copy()
     for k in range(k0, k1):

@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from reference import gram_reference
 
 from shipsense import load_scenario, simulate
 from shipsense.trackers.filters import get_filter
@@ -351,7 +352,7 @@ def test_the_grid_fit_equals_a_least_squares_solve_per_candidate(monkeypatch):
     solve of the masked normal equations; passages in chunks, alone, and candidates on one thread give the
     same numbers."""
     from shipsense.trackers import initialiser
-    from shipsense.trackers.initialiser import _gram, _window_major, grid_fit
+    from shipsense.trackers.initialiser import _window_major, grid_fit
     from shipsense.trackers.models import model_from_scenario
 
     model = model_from_scenario("S2")
@@ -368,7 +369,7 @@ def test_the_grid_fit_equals_a_least_squares_solve_per_candidate(monkeypatch):
     std = np.sqrt(model.R)
     G = basis / std[:, None]
     Gw, off = _window_major(model, offset, basis)
-    A = _gram(Gw.reshape(W * (~ax).sum(), C * P), C, P)
+    A = gram_reference(Gw.reshape(W * (~ax).sum(), C * P), C, P)
     chi2, params = grid_fit(model, yw, Gw, off, A, True)
     monkeypatch.setattr(initialiser, "FIT_CHUNK_BYTES", 8 * C * P)     # one passage at a time
     monkeypatch.setenv("SHIPSENSE_THREADS", "1")
@@ -419,7 +420,7 @@ def test_the_grid_terms_serve_shorter_windows_from_a_longer_one_exactly(monkeypa
     numbers as computing them (bit for bit, also filled a few candidates at a time, and Gram matrices continued
     from a shorter window's), read-only; a longer window extends the cache."""
     from shipsense.trackers import initialiser
-    from shipsense.trackers.initialiser import _gram, _window_major, grid_terms
+    from shipsense.trackers.initialiser import _window_major, grid_terms
 
     model = model_from_scenario("S2")          # magnetometers and a bearing: offset and basis both nonzero
     grid = candidate_grid(model, [50.0, 150.0], np.arange(0.0, 360.0, 90.0), np.arange(0.0, 360.0, 120.0), [4.0])
@@ -431,7 +432,7 @@ def test_the_grid_terms_serve_shorter_windows_from_a_longer_one_exactly(monkeypa
         G0, off0 = _window_major(model, *linear_basis(model, grid, steps, stride))
         np.testing.assert_array_equal(G, G0)
         np.testing.assert_array_equal(off, off0)
-        np.testing.assert_array_equal(A, _gram(G0.reshape(-1, G0.shape[-1]), len(grid), 3))
+        np.testing.assert_array_equal(A, gram_reference(G0.reshape(-1, G0.shape[-1]), len(grid), 3))
         assert not (G.flags.writeable or off.flags.writeable or A.flags.writeable)
     assert {v["steps"] for v in initialiser._TERMS_CACHE.values()} == {30}    # 12 -> 30 (stride 1); 30 (stride 4)
 
@@ -549,7 +550,7 @@ def test_the_grid_caches_serve_threads_at_once():
     import threading
 
     from shipsense.trackers import initialiser
-    from shipsense.trackers.initialiser import _gram, grid_terms
+    from shipsense.trackers.initialiser import grid_terms
 
     model = model_from_scenario("S2")
     speeds = [[2.0], [4.0], [6.0], [8.0], [10.0], [12.0]]
@@ -563,7 +564,7 @@ def test_the_grid_caches_serve_threads_at_once():
                 grid = candidate_grid(model, [50.0, 150.0], np.arange(0.0, 360.0, 90.0), [0.0, 180.0], sp)
                 steps, stride = int(rng.integers(1, 40)), int(rng.integers(1, 3))
                 G, _, A = grid_terms(model, grid, steps, stride)
-                if not np.array_equal(A, _gram(G.reshape(-1, G.shape[-1]), len(grid), 3)):
+                if not np.array_equal(A, gram_reference(G.reshape(-1, G.shape[-1]), len(grid), 3)):
                     errors.append(f"wrong Gram matrices for {sp} at {steps}, stride {stride}")
         except Exception as exc:   # noqa: BLE001 - any failure in a thread is the test's
             errors.append(repr(exc))
