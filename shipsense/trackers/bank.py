@@ -280,13 +280,17 @@ class BankState:
         else:
             if len(self.idx) != self.R * self.H:
                 raise ValueError("stepping a subset of runs needs a bank without pruning")
-            rows = (np.asarray(runs, dtype=int)[:, None] * self.H + np.arange(self.H)).ravel()
+            runs = np.asarray(runs, dtype=int)
+            rows = (runs[:, None] * self.H + np.arange(self.H)).ravel()
             sub = Belief(*(a[rows] for a in self.belief))
-            run, hyp = rows // self.H, rows % self.H
-        b = self.unit.predict(sub, model if model is not None else self.model) if predict else sub
+            run = np.repeat(runs, self.H)
         yy = np.asarray(y, dtype=float)[run] / self.model.y_scale
         mk = None if mask is None else np.asarray(mask)[run]
-        new, inn = self.unit.update(b, yy, self.model, mk)
+        if predict and model is None:
+            new, inn = self.unit.step(sub, yy, self.model, mk)
+        else:
+            b = self.unit.predict(sub, model) if predict else sub
+            new, inn = self.unit.update(b, yy, self.model, mk)
         new = _project(new, self.model)
         if rows is None:
             self.belief = new
@@ -294,7 +298,9 @@ class BankState:
             for arr, part in zip(self.belief, new):
                 arr[rows] = part
             self.belief = Belief(*self.belief)   # written in place: drop a filter's covariance cache
-        if rows is None and len(self.idx) == self.R * self.H:
+        if rows is not None:
+            self.cum[runs] += inn.loglik.reshape(runs.size, self.H)
+        elif len(self.idx) == self.R * self.H:
             self.cum += inn.loglik.reshape(self.R, self.H)
         else:
             self.cum[run, hyp] += inn.loglik

@@ -113,10 +113,8 @@ def run_filter(unit, model, measurements, x0, P0, mask=None, progress=False, sto
 
         iterator = tqdm(iterator, desc=f"{unit.name} x {int(np.prod(batch))}", unit="step", leave=False, disable=None)
     for k in iterator:
-        if k:
-            belief = unit.predict(belief, model)
         mk = None if mask is None else mask[..., k, :]
-        belief, inn = unit.update(belief, y[..., k, :], model, mk)
+        belief, inn = (unit.step if k else unit.update)(belief, y[..., k, :], model, mk)
         if means is not None:
             means[..., k, :] = belief.mean
         if covs is not None:

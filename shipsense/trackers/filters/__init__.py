@@ -53,6 +53,18 @@ class FilterUnit:
                 return out
         return predict(belief, model, square_root=square_root)
 
+    def step(self, belief: Belief, y, model, mask=None):
+        """Time update then measurement update; returns ``(belief, innovation)``: the numbers of
+        :meth:`predict` then :meth:`update`, in one compiled call for models with a compiled kernel."""
+        spec = kernel_of(model)
+        if spec is not None:
+            prior, out = fused.step(self.name, belief, y, model, spec, mask, **self.options)
+            if out is not None:
+                return out
+            if prior is not None:
+                return UPDATES[self.name](prior, y, model, mask, **self.options)
+        return self.update(self.predict(belief, model), y, model, mask)
+
     def update(self, belief: Belief, y, model, mask=None):
         """Measurement update; returns ``(belief, innovation)``.
 

@@ -743,7 +743,7 @@ def predict(belief: Belief, model, square_root: bool = False):
         cached = getattr(belief, "_cov", None)
         src = cached if cached is not None else belief.chol @ np.swapaxes(belief.chol, -1, -2)
         Qf = _per_element(model.Q, batch, n)
-        sqQ = np.zeros((1, n, 0))
+        sqQ = _no_sqrt(n)
     X = _flat(mean, batch, (n,))
     B = X.shape[0]
     mean_out = np.empty((B, n))
@@ -779,6 +779,89 @@ def update(name, belief: Belief, y, model, spec, mask=None, **options):
     n, m = mean.shape[-1], y.shape[-1]
     batch = (_batch(mean.shape[:-1], y.shape[:-1]) if mask is None
              else _batch(mean.shape[:-1], y.shape[:-1], np.shape(mask)[:-1]))
+    consts = _constants(name, n, options)
+    cov_form = consts[0] != SRCDKF
+    P = belief.cov if cov_form else _NO_COV
+    X = _flat(mean, batch, (n,))
+    mask_f = _all_read(m) if mask is None else _flat(np.asarray(mask, dtype=bool), batch, (m,))
+    L = belief.chol if consts[0] not in (EKF, PUEKF) else P   # the linearised filters do not read the factor
+    out = _run_update(consts, X, _flat(L, batch, (n, n)), _flat(P, batch, (n, n)) if cov_form else _NO_COV,
+                      _flat(y, batch, (m,)), mask_f, model, spec)
+    if out is None:
+        return None
+    mean_out, P_out, L_out, inn = out
+    inn = Innovation(*(_shaped(a, batch) for a in inn))
+    mean_out, P_out = _shaped(mean_out, batch), _shaped(P_out, batch)
+    if not cov_form:
+        return Belief(mean_out, P_out, _flag(belief.ok, batch)), inn
+    return _BeliefWithCov.with_cov(mean_out, _shaped(L_out, batch), _flag(prior_health(belief), batch), P_out), inn
+
+
+def step(name, belief: Belief, y, model, spec, mask=None, **options):
+    """The compiled time update then measurement update of filter ``name``: the numbers of :func:`predict` then
+    :func:`update`, without preparing the arguments twice.  Returns ``(prior, (belief, innovation))``; the
+    second is None when the update failed (``prior`` is then the compiled prior, for the numpy update), both
+    are None when the time update failed.
+
+    The covariance-form filters on a batch of one axis (``mean`` (B, n), ``y`` (B, m), no mask) with a
+    transition and noise shared by the batch -- the bank's and the tracker's step -- take one short path;
+    any other step is :func:`predict` then :func:`update`."""
+    mean, A, Q = belief.mean, model.A, model.Q
+    n, B = mean.shape[-1], mean.shape[0]
+    y = np.asarray(y, dtype=float)
+    consts = _constants(name, n, options)
+    if not (mean.ndim == 2 and np.ndim(A) == 2 and np.ndim(Q) == 2 and y.shape == (B, model.m) and mask is None
+            and consts[0] != SRCDKF):
+        prior = predict(belief, model, consts[0] == SRCDKF)
+        return (None, None) if prior is None else (prior, update(name, prior, y, model, spec, mask, **options))
+    cached = getattr(belief, "_cov", None)
+    src = cached if cached is not None else belief.chol @ np.swapaxes(belief.chol, -1, -2)
+    x, P, L = np.empty((B, n)), np.empty((B, n, n)), np.zeros((B, n, n))
+    ok = np.empty(B, dtype=bool)
+    if not _split(_predict_kernel, _PREDICT_ROWS, _flat(mean, (B,), (n,)), _flat(src, (B,), (n, n)),
+                  _per_element(A, (B,), n), _per_element(Q, (B,), n), _no_sqrt(n), False, x, P, L, ok):
+        return None, None
+    health = prior_health(belief).copy()
+    out = _run_update(consts, x, L, P, _flat(y, (B,), (model.m,)), _all_read(model.m), model, spec)
+    if out is None:
+        return _BeliefWithCov.with_cov(x, L, health, P), None
+    mean_out, P_out, L_out, inn = out
+    return None, (_BeliefWithCov.with_cov(mean_out, L_out, health.copy(), P_out), Innovation(*inn))
+
+
+def _run_update(consts, X, L, P, y, mask, model, spec):
+    """The update kernel of ``consts`` (:func:`_constants`) on flat (B, ...) arguments: ``(mean, P, L,
+    (eps, S, loglik, nis, m))`` (B, ...), or None if an element failed."""
+    filt, spread, center, Wm, Wc, h, gamma, iterations, n_pu = consts
+    nb, n = X.shape
+    m = y.shape[1]
+    mean_out = np.empty((nb, n))
+    P_out = np.empty((nb, n, n))
+    L_out = np.zeros((nb, n, n)) if filt != SRCDKF else _NO_COV
+    eps = np.empty((nb, m))
+    S = np.empty((nb, m, m))
+    loglik = np.empty(nb)
+    nis = np.empty(nb)
+    cnt = np.empty(nb, dtype=np.int64)
+    ok = np.empty(nb, dtype=bool)
+    if not _split(_UPDATE_KERNELS[filt], _UPDATE_ROWS, X, L, P, y, mask, _noise(model), spec, spread, center, Wm, Wc,
+                  h, gamma, iterations, n_pu, mean_out, P_out, L_out, eps, S, loglik, nis, cnt, ok):
+        return None
+    return mean_out, P_out, L_out, (eps, S, loglik, nis, cnt)
+
+
+def _constants(name, n, options):
+    """The update kernel's constants of filter ``name`` on ``n`` states with keyword ``options``: ``(code,
+    spread, center, Wm, Wc, h, gamma, iterations, n_pu)`` (kept for the options' last few values)."""
+    try:
+        return _constants_of(name, n, tuple(sorted(options.items())))
+    except TypeError:    # an option value that is not hashable
+        return _constants_of.__wrapped__(name, n, tuple(sorted(options.items())))
+
+
+@lru_cache(maxsize=64)
+def _constants_of(name, n, items):
+    options = dict(items)
     spread, center, Wm, Wc = 1.0, 1, _NO_WEIGHTS, _NO_WEIGHTS
     h, gamma, iterations, n_pu = H_STIRLING, GAMMA, 10, 1
     filt = filter_code(name)
@@ -796,32 +879,7 @@ def update(name, belief: Belief, y, model, spec, mask=None, **options):
         n_pu = int(options.get("n_pu", 5))
         if n_pu < 1:
             raise ValueError(f"n_pu must be >= 1, got {n_pu}")
-    cov_form = filt != SRCDKF
-    P = belief.cov if cov_form else _NO_COV
-    X = _flat(mean, batch, (n,))
-    nb = X.shape[0]
-    mask_f = _all_read(m) if mask is None else _flat(np.asarray(mask, dtype=bool), batch, (m,))
-    mean_out = np.empty((nb, n))
-    P_out = np.empty((nb, n, n))
-    L_out = np.zeros((nb, n, n)) if cov_form else _NO_COV
-    eps = np.empty((nb, m))
-    S = np.empty((nb, m, m))
-    loglik = np.empty(nb)
-    nis = np.empty(nb)
-    cnt = np.empty(nb, dtype=np.int64)
-    ok = np.empty(nb, dtype=bool)
-    L = belief.chol if filt not in (EKF, PUEKF) else P   # the linearised filters do not read the factor
-    if not _split(_UPDATE_KERNELS[filt], _UPDATE_ROWS, X, _flat(L, batch, (n, n)),
-                  _flat(P, batch, (n, n)) if cov_form else _NO_COV, _flat(y, batch, (m,)), mask_f, _noise(model), spec,
-                  spread, center, Wm, Wc, h, gamma, iterations, n_pu, mean_out, P_out, L_out, eps, S, loglik, nis,
-                  cnt, ok):
-        return None
-    inn = Innovation(_shaped(eps, batch), _shaped(S, batch), _shaped(loglik, batch), _shaped(nis, batch),
-                     _shaped(cnt, batch))
-    mean_out, P_out = _shaped(mean_out, batch), _shaped(P_out, batch)
-    if filt == SRCDKF:
-        return Belief(mean_out, P_out, _flag(belief.ok, batch)), inn
-    return _BeliefWithCov.with_cov(mean_out, _shaped(L_out, batch), _flag(prior_health(belief), batch), P_out), inn
+    return filt, spread, center, Wm, Wc, h, gamma, iterations, n_pu
 
 
 def _noise(model):
@@ -837,6 +895,12 @@ def _all_read(m):
 
 _NO_WEIGHTS = np.zeros(1)
 _NO_COV = np.zeros((1, 1, 1))
+
+
+@lru_cache(maxsize=64)
+def _no_sqrt(n):
+    """The covariance-form predict's (empty) square root of Q, (1, n, 0)."""
+    return np.zeros((1, n, 0))
 
 
 @lru_cache(maxsize=64)
