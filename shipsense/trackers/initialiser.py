@@ -274,19 +274,24 @@ def strongest_snr(model, y):
     ``max_i |y_i| / sqrt(R_i)`` over the field channels, a missing value counting 0 and an infinite one the
     dtype's largest (compiled, :func:`_strongest`; the tracker calls it every sample)."""
     a = np.asarray(y)
-    if a.dtype.kind == "c":
-        a = np.abs(a)                                 # the modulus
-    if a.dtype.kind != "f":
-        a = a.astype(float)
-    big = np.finfo(a.dtype).max
-    if a.dtype not in (np.float32, np.float64) or not a.dtype.isnative:   # (float16, long double, byte-swapped)
-        with np.errstate(over="ignore", invalid="ignore"):
-            a = np.minimum(np.abs(a), big).astype(float)   # clamped at their own largest, then as doubles
-        big = np.finfo(float).max
+    big = _DOUBLE_MAX
+    if a.dtype != np.float64 or not a.dtype.isnative:     # (the tracker's own samples, native doubles, as they are)
+        if a.dtype.kind == "c":
+            a = np.abs(a)                                 # the modulus
+        if a.dtype.kind != "f":
+            a = a.astype(float)
+        big = float(np.finfo(a.dtype).max)
+        if a.dtype not in (np.float32, np.float64) or not a.dtype.isnative:   # (float16, long double, byte-swapped)
+            with np.errstate(over="ignore", invalid="ignore"):
+                a = np.minimum(np.abs(a), big).astype(float)   # clamped at their own largest, then as doubles
+            big = _DOUBLE_MAX
     out = np.empty(a.shape[:-1])
-    _strongest(np.ascontiguousarray(a).reshape(-1, a.shape[-1]), ~model.axial, np.sqrt(model.R), float(big),
+    _strongest(np.ascontiguousarray(a).reshape(-1, a.shape[-1]), ~model.axial, np.sqrt(model.R), big,
                out.reshape(-1))
     return out if out.ndim else out[()]
+
+
+_DOUBLE_MAX = float(np.finfo(np.float64).max)
 
 
 @njit(cache=True, error_model="numpy", nogil=True)

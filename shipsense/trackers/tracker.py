@@ -490,7 +490,9 @@ class Tracker:
             self._blank = Sample(np.repeat(mean[None], P, axis=0), np.repeat(cov[None], P, axis=0),
                                  np.full(P, NO_DATA, dtype=np.int8), np.full(P, np.inf), np.zeros(P, dtype=bool),
                                  np.zeros(P, dtype=np.int16), np.full(P, -1, dtype=np.int16))
-        return Sample(*(getattr(self._blank, f).copy() for f in Sample.__dataclass_fields__))
+        b = self._blank
+        return Sample(b.estimate.copy(), b.cov.copy(), b.status.copy(), b.gap_nats.copy(), b.ambiguous.copy(),
+                      b.hypotheses.copy(), b.selected.copy())
 
     def _step(self, runs, yi, dt, out):
         """Predict (time steps ``dt``) and update the banks of passages ``runs``; write their output."""
