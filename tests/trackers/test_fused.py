@@ -182,7 +182,8 @@ def test_a_units_step_is_its_predict_then_its_update_bit_for_bit(name, s0):
     mask[1, :3] = False
     cases = [(b, y[:, 1], model, None), (Belief(*b), y[:, 1], model, None), (b, y[:, 1], model, mask),
              (Belief(*b), y[:, 1], model.stepped(np.array([0.1, 0.25, 0.05])), None),
-             (Belief(*(a.reshape((3, 1) + a.shape[1:]) for a in b)), y[:, 1, None], model, None)]
+             (Belief(*(a.reshape((3, 1) + a.shape[1:]) for a in b)), y[:, 1, None], model, None),
+             (Belief(b.mean.tolist(), b.chol, True), y[:, 1], model, None)]     # a list mean, one health flag
     s2 = model_from_scenario("S2")
     sim = simulate("S2", runs=4, seed=2)
     truth = s2.to_internal(s2.state_from_truth(sim.truth))
@@ -190,7 +191,9 @@ def test_a_units_step_is_its_predict_then_its_update_bit_for_bit(name, s0):
     b2 = Belief.from_cov(truth[:, 0] + np.array([10.0, -10.0, 0.5, 0.5, 0, 0, 0]), P2)
     cases.append((b2, sim.measurements[:, 1] / s2.y_scale, s2, None))
     for belief, yk, mdl, mk in cases:
-        _equal_beliefs(unit.step(belief, yk, mdl, mk), unit.update(unit.predict(belief, mdl), yk, mdl, mk))
+        got, ref = unit.step(belief, yk, mdl, mk), unit.update(unit.predict(belief, mdl), yk, mdl, mk)
+        _equal_beliefs(got, ref)
+        assert got[0].ok.shape == ref[0].ok.shape
 
 
 def test_a_step_whose_update_fails_updates_the_compiled_prior_with_numpy(s0, monkeypatch):

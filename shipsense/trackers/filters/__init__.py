@@ -63,6 +63,8 @@ class FilterUnit:
                 return out
             if prior is not None:
                 return UPDATES[self.name](prior, y, model, mask, **self.options)
+            # (the compiled time update failed: numpy's, as predict would run after it)
+            return self.update(predict(belief, model, square_root=self.name == "srcdkf"), y, model, mask)
         return self.update(self.predict(belief, model), y, model, mask)
 
     def update(self, belief: Belief, y, model, mask=None):

@@ -806,7 +806,7 @@ def step(name, belief: Belief, y, model, spec, mask=None, **options):
     The covariance-form filters on a batch of one axis (``mean`` (B, n), ``y`` (B, m), no mask) with a
     transition and noise shared by the batch -- the bank's and the tracker's step -- take one short path;
     any other step is :func:`predict` then :func:`update`."""
-    mean, A, Q = belief.mean, model.A, model.Q
+    mean, A, Q = np.asarray(belief.mean, dtype=float), model.A, model.Q
     n, B = mean.shape[-1], mean.shape[0]
     y = np.asarray(y, dtype=float)
     consts = _constants(name, n, options)
@@ -821,12 +821,12 @@ def step(name, belief: Belief, y, model, spec, mask=None, **options):
     if not _split(_predict_kernel, _PREDICT_ROWS, _flat(mean, (B,), (n,)), _flat(src, (B,), (n, n)),
                   _per_element(A, (B,), n), _per_element(Q, (B,), n), _no_sqrt(n), False, x, P, L, ok):
         return None, None
-    health = prior_health(belief).copy()
     out = _run_update(consts, x, L, P, _flat(y, (B,), (model.m,)), _all_read(model.m), model, spec)
     if out is None:
-        return _BeliefWithCov.with_cov(x, L, health, P), None
+        return _BeliefWithCov.with_cov(x, L, _flag(prior_health(belief), (B,)), P), None
     mean_out, P_out, L_out, inn = out
-    return None, (_BeliefWithCov.with_cov(mean_out, L_out, health.copy(), P_out), Innovation(*inn))
+    return None, (_BeliefWithCov.with_cov(mean_out, L_out, _flag(prior_health(belief), (B,)), P_out),
+                  Innovation(*inn))
 
 
 def _run_update(consts, X, L, P, y, mask, model, spec):
@@ -853,10 +853,12 @@ def _run_update(consts, X, L, P, y, mask, model, spec):
 def _constants(name, n, options):
     """The update kernel's constants of filter ``name`` on ``n`` states with keyword ``options``: ``(code,
     spread, center, Wm, Wc, h, gamma, iterations, n_pu)`` (kept for the options' last few values)."""
+    items = tuple(sorted(options.items()))
     try:
-        return _constants_of(name, n, tuple(sorted(options.items())))
+        hash(items)
     except TypeError:    # an option value that is not hashable
-        return _constants_of.__wrapped__(name, n, tuple(sorted(options.items())))
+        return _constants_of.__wrapped__(name, n, items)
+    return _constants_of(name, n, items)
 
 
 @lru_cache(maxsize=64)
