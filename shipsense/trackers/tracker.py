@@ -77,11 +77,12 @@ from shipsense.trackers.bank import BankState
 from shipsense.trackers.batchfit import Huber, transitions
 from shipsense.trackers.consistency import quantile_table, window_test
 from shipsense.trackers.filters import get_filter
-from shipsense.trackers.filters._core import symmetrize
+from shipsense.trackers.filters._core import Belief, symmetrize
 from shipsense.trackers.initialiser import depth_prior, strongest_snr, window_fits
 from shipsense.trackers.restarts import due, refit_window
 from shipsense.trackers.seeding import seed_hypotheses
 from shipsense.trackers.selection import report
+from shipsense.trackers.tracker_step import TrackerStep
 
 STATUSES = ("no data", "initialising", "tracking", "restarted", "inconsistent")
 """Status names, indexed by the status codes of :class:`TrackResult`."""
@@ -298,6 +299,8 @@ class Tracker:
         self._grid = _grid(sc)
         self._prior = prior_belief(self.model, sc, self.bank_config)
         self._prior_info = np.diag(self.model.x_scale ** 2 / np.diag(self._prior[1]))   # internal units
+        self._compiled = TrackerStep.of(self.unit, self.filter_model, self._H)
+        self._R_used = np.ascontiguousarray(self.filter_model.R[None], dtype=float)
         self.reset(passages)
 
     labels = property(lambda self: self.model.labels, doc="State component names.")
@@ -495,10 +498,14 @@ class Tracker:
                       b.hypotheses.copy(), b.selected.copy())
 
     def _step(self, runs, yi, dt, out):
-        """Predict (time steps ``dt``) and update the banks of passages ``runs``; write their output."""
+        """Predict (time steps ``dt``) and update the banks of passages ``runs``; write their output (one
+        compiled call where it applies, :mod:`~shipsense.trackers.tracker_step`: the same numbers)."""
         H = self._H
         d, T = dt[runs], self.model.period
         regular = all(abs(step - T) <= 1e-9 * T for step in d.tolist())
+        if regular and self._compiled is not None and self._compiled.applies(runs) and self._compiled_step(
+                runs, yi, out):
+            return
         model = None if regular else self.filter_model.stepped(np.repeat(d, H))
         ysi = yi * self.model.y_scale
         inn = self.bank.step(ysi, predict=True, runs=runs, model=model)
@@ -511,6 +518,26 @@ class Tracker:
         failed = self._consistency(runs, yi, inn, sel) if test else runs[:0]
         self._report(runs, out)
         out.status[failed] = INCONSISTENT
+
+    def _compiled_step(self, runs, yi, out):
+        """:meth:`_step` of regularly sampled passages ``runs`` in one compiled call; False (nothing done) where
+        an element's update failed."""
+        o, h = self.options, self.huber
+        runs = np.asarray(runs, dtype=np.int64)
+        test = bool(o.consistency_window and o.method == "tracker")
+        consistency = (self._R_used, self.model.R,
+                       *((float(h.gamma), float(h.eps), float(h.scale)) if h is not None else (np.inf, 0.0, 1.0)),
+                       quantile_table(o.consistency_level, self.model.m), self.cons, self.cons_n, self.cons_tests,
+                       self.cons_fails, self.cons_now)
+        selection = (self.model.x_scale, o.method == "tracker", float(o.report_nats), float(o.report_distance_m),
+                     self.excess, out.estimate, out.cov, self.own, out.gap_nats, out.ambiguous, out.hypotheses,
+                     out.selected)
+        if not self._compiled(runs, yi, self.model.y_scale, self.bank, self.bank.cum, self.nis, test, consistency,
+                              selection, out.status, self.trusted, (TRACKING, INCONSISTENT)):
+            return False
+        self.bank.belief = Belief(*self.bank.belief)   # (as BankState.step leaves it)
+        self.bank.steps += 1
+        return True
 
     def _consistency(self, runs, yi, inn, sel):
         """The windowed innovation test (:mod:`~shipsense.trackers.consistency`) of passages ``runs`` with the

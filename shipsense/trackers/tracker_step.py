@@ -1,0 +1,200 @@
+"""The tracker's step of its running passages at one sample, as one compiled call.
+
+:meth:`Tracker._step <shipsense.trackers.tracker.Tracker._step>` predicts and updates the banks of the
+running passages (:meth:`BankState.step <shipsense.trackers.bank.BankState.step>`: the filter's compiled
+predict and update, :func:`shipsense.trackers.filters.fused.step`), moves their NIS windows, runs the
+windowed innovation test (:func:`~shipsense.trackers.consistency.window_test`) and writes their output
+(:func:`~shipsense.trackers.selection.report`).  Each of those is compiled already; between them, about
+thirty numpy calls a sample cost more than the arithmetic for one passage.  :func:`tracker_step` is the
+same sequence in one call, with the same kernels in the same order, so the numbers are the same bit for
+bit (tests/trackers/test_tracker_step.py; tracked passages compared with the step by step path).
+
+What stays in numpy: the hypotheses' covariances ``L L^T`` the time update starts from (numpy's matmul,
+whose sums a compiled loop does not reproduce to the last bit).  What is not taken here (the caller then
+runs the step by step path): irregular sampling (a transition per passage), a batch large enough for the
+filters' threads, a model without a compiled kernel, the SR-CDKF (its own time update), and a step in
+which an element fails numerically (nothing is written before both kernels succeed).
+"""
+
+from __future__ import annotations
+
+import math
+from functools import lru_cache
+from types import FunctionType
+
+import numpy as np
+from numba import njit
+
+from shipsense import numba_cache
+from shipsense.parallel import SPLIT_MIN
+from shipsense.trackers.consistency import window_test
+from shipsense.trackers.filters.fused import (
+    _UPDATE_KERNELS,
+    CDKF,
+    EKF,
+    HUBER,
+    PUEKF,
+    UKF,
+    _constants,
+    _no_sqrt,
+    _noise,
+    _per_element,
+    _predict_kernel,
+)
+from shipsense.trackers.measurement import kernel_of
+from shipsense.trackers.selection import report
+
+
+def _step_kernel_for(code):
+    """The compiled step of filter ``code``: the update kernel a global of its own copy (as fused's kernels
+    find their loops), so that each filter's step is compiled and cached apart."""
+
+    def kernel(runs, H, yi, ys_in, ys_bank, mean_all, chol_all, src, A, Q, sqQ, Rm, spec, spread, center, Wm, Wc,
+               h, gamma, iterations, n_pu, lo, hi, cum, nis_hist, test, R_used, R_declared, hub_gamma, hub_eps,
+               hub_scale, table, cons, cons_n, cons_tests, cons_fails, cons_now, xs, mixture, report_nats, far_m,
+               excess, estimate, cov, own, gap, ambiguous, hypotheses, selected, status, trusted, tracking,
+               inconsistent):
+        """One sample of passages ``runs`` (see the module); returns False, having written nothing, when an
+        element's time or measurement update failed."""
+        R = runs.shape[0]
+        n = mean_all.shape[1]
+        m = yi.shape[1]
+        B = R * H
+        X = np.empty((B, n))
+        Y = np.empty((B, m))
+        for p in range(R):
+            r = runs[p]
+            for k in range(H):
+                b = p * H + k
+                for a in range(n):
+                    X[b, a] = mean_all[r * H + k, a]
+                for j in range(m):
+                    Y[b, j] = (yi[r, j] * ys_in[j]) / ys_bank[j]
+        x, P, L = np.empty((B, n)), np.empty((B, n, n)), np.zeros((B, n, n))
+        ok = np.empty(B, np.bool_)
+        if not _PREDICT(X, src, A, Q, sqQ, False, x, P, L, ok):  # noqa: F821 - the copy's global
+            return False
+        mean_out, P_out, L_out = np.empty((B, n)), np.empty((B, n, n)), np.zeros((B, n, n))
+        eps, S = np.empty((B, m)), np.empty((B, m, m))
+        loglik, nis, cnt = np.empty(B), np.empty(B), np.empty(B, np.int64)
+        mask = np.ones((1, m), np.bool_)
+        if not _UPDATE(x, L, P, Y, mask, Rm, spec, spread, center, Wm, Wc, h, gamma, iterations,  # noqa: F821
+                       n_pu, mean_out, P_out, L_out, eps, S, loglik, nis, cnt, ok):
+            return False
+        if lo.size > 0:     # the means into the state bounds, as np.clip (kept as they are when none moves)
+            clipped = np.empty((B, n))
+            same = True
+            for b in range(B):
+                for a in range(n):
+                    v = mean_out[b, a]
+                    t = lo[a] if v < lo[a] else v        # (np.clip's order: a NaN, or a -0.0 at 0, kept)
+                    t = hi[a] if t > hi[a] else t
+                    clipped[b, a] = t
+                    same = same and t == v
+            if not same:
+                mean_out = clipped
+        sel = np.empty(R, np.int64)
+        cum_runs = np.empty((R, H))
+        for p in range(R):
+            r = runs[p]
+            for k in range(H):
+                b = p * H + k
+                row = r * H + k
+                for a in range(n):
+                    mean_all[row, a] = mean_out[b, a]
+                    for c in range(n):
+                        chol_all[row, a, c] = L_out[b, a, c]
+                cum[r, k] += loglik[b]
+                cum_runs[p, k] = cum[r, k]
+            best, top = 0, cum_runs[p, 0]        # np.argmax: the first maximum, or the first NaN
+            for k in range(1, H):
+                if math.isnan(top):
+                    break
+                c = cum_runs[p, k]
+                if math.isnan(c) or c > top:
+                    best, top = k, c
+            sel[p] = best
+            pick = p * H + best
+            N = nis_hist.shape[1]
+            for i in range(N - 1):
+                nis_hist[r, i] = nis_hist[r, i + 1]
+            nis_hist[r, N - 1] = nis[pick] / max(cnt[pick], 1) if cnt[pick] > 0 else np.nan
+        failed = np.zeros(R, np.bool_)
+        if test:
+            present = np.empty((R, m), np.bool_)
+            for p in range(R):
+                for j in range(m):
+                    present[p, j] = math.isfinite(yi[runs[p], j])
+            window_test(runs, sel, H, eps, S, R_used, R_declared, present, hub_gamma, hub_eps, hub_scale, table,
+                        cons, cons_n, cons_tests, cons_fails, cons_now, failed)
+        report(mean_all, chol_all, runs, H, xs, cum_runs, mixture, report_nats, far_m, excess, estimate, cov, own,
+               gap, ambiguous, hypotheses, selected)
+        for p in range(R):
+            status[runs[p]] = tracking if trusted[runs[p]] else inconsistent
+        for p in range(R):
+            if failed[p]:
+                status[runs[p]] = inconsistent
+        return True
+
+    kernel.__qualname__ = f"_tracker_step_{code}"
+    kernel = FunctionType(kernel.__code__, {**globals(), "_PREDICT": _predict_kernel, "_UPDATE": _UPDATE_KERNELS[code]},
+                          kernel.__name__, kernel.__defaults__, kernel.__closure__)
+    kernel.__qualname__ = f"_tracker_step_{code}"
+    return njit(cache=True, error_model="numpy", nogil=True)(kernel)
+
+
+_STEP_KERNELS = {code: _step_kernel_for(code) for code in (UKF, CDKF, HUBER, EKF, PUEKF)}
+"""Each covariance-form filter's compiled step, by its code (compiled at its first call)."""
+
+
+class TrackerStep:
+    """The compiled step of a tracker's bank (``unit`` on ``model``, ``H`` hypotheses a passage), or None
+    from :meth:`of` where it does not apply; its arguments that do not change between samples kept."""
+
+    @classmethod
+    def of(cls, unit, model, H):
+        spec = kernel_of(model)
+        if spec is None or unit.name == "srcdkf" or np.ndim(model.A) != 2 or np.ndim(model.Q) != 2:
+            return None
+        return cls(unit, model, H, spec)
+
+    def __init__(self, unit, model, H, spec):
+        n = model.n
+        consts = _constants(unit.name, n, unit.options)
+        self.kernel = _STEP_KERNELS[consts[0]]
+        self.H = H
+        bounds = getattr(model, "state_bounds", None)
+        lo, hi = (np.empty(0), np.empty(0)) if bounds is None else (np.asarray(b, dtype=float) for b in bounds)
+        self.fixed = (_per_element(model.A, (1,), n), _per_element(model.Q, (1,), n), _no_sqrt(n), _noise(model),
+                      spec, *consts[1:])
+        self.bounds = (np.ascontiguousarray(lo), np.ascontiguousarray(hi))
+        self.ys_bank = np.ascontiguousarray(model.y_scale, dtype=float)
+
+    def applies(self, runs):
+        """Whether a step of passages ``runs`` is taken here (the filters' threads start at SPLIT_MIN rows)."""
+        return runs.size * self.H < SPLIT_MIN
+
+    def __call__(self, runs, yi, ys_in, bank, cum, nis_hist, test, consistency, selection, status, trusted, codes):
+        """Step passages ``runs`` (int64) with samples ``yi`` (P, m) (internal units of the tracker's model,
+        whose scales are ``ys_in``); ``consistency`` and ``selection`` the arguments of window_test and
+        report after the innovations and before the outputs; True when done, False to take the step by
+        step path (nothing written)."""
+        H = self.H
+        if len(bank.idx) != bank.R * H:
+            return False                    # (a pruned bank: BankState.step says why)
+        rows = (runs[:, None] * H + _arange(H)).ravel()
+        C = bank.belief.chol[rows]
+        src = C @ np.swapaxes(C, -1, -2)
+        done = self.kernel(runs, H, yi, ys_in, self.ys_bank, bank.belief.mean, bank.belief.chol, src, *self.fixed,
+                           *self.bounds, cum, nis_hist, test, *consistency, *selection, status, trusted, *codes)
+        return done
+
+
+@lru_cache(maxsize=16)
+def _arange(H):
+    a = np.arange(H)
+    a.flags.writeable = False
+    return a
+
+
+numba_cache.key_on_sources(globals())   # the caches follow the files these kernels are compiled from

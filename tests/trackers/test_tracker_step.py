@@ -1,0 +1,110 @@
+"""The tracker's compiled step (shipsense/trackers/tracker_step.py) gives the step by step path's numbers to
+the bit, and leaves everything as it was when it does not apply or an element fails."""
+
+import numpy as np
+import pytest
+
+from shipsense import simulate
+from shipsense.trackers.tracker import Tracker
+
+FIELDS = ("estimates", "covs", "status", "gap_nats", "ambiguous", "hypotheses")
+
+
+def _track(scenario, runs, seed, compiled, samples=None, **options):
+    sim = simulate(scenario, runs=runs, seed=seed)
+    trk = Tracker(scenario, passages=runs, **options)
+    used = []
+    if compiled and trk._compiled is not None:
+        step = trk._compiled
+
+        def counting(*args):
+            done = step(*args)
+            used.append(done)
+            return done
+
+        trk._compiled = type("Counting", (), {"applies": step.applies, "__call__": staticmethod(counting)})()
+    else:
+        trk._compiled = None
+    K = samples or sim.measurements.shape[1]
+    res = trk.track(sim.times[..., :K], sim.measurements[:, :K])
+    return res, trk, used
+
+
+@pytest.mark.parametrize("scenario, runs, options", [
+    ("S2", 6, {}),                                  # magnetometers and a bearing, the environments' model
+    ("S2-field-trial", 4, {}),                      # robust: the Huber UKF; dropouts
+    ("S1-P1", 4, {}),                               # electrodes: the state bounds (depth, p >= 0)
+    ("S2", 3, {"method": "bank", "unit": "cdkf"}),  # the studies' bank (12 hypotheses, its own output), a CDKF
+    ("S0", 3, {"unit": "ekf"}),                     # the other filters' kernels
+    ("S0", 3, {"unit": "puekf"}),
+    ("S2", 3, {"unit": "ckf"}),
+])
+def test_tracked_passages_equal_the_step_by_step_path_bit_for_bit(scenario, runs, options):
+    fast, trk, used = _track(scenario, runs, 7, True, **options)
+    slow, _, _ = _track(scenario, runs, 7, False, **options)
+    assert used and all(used)                     # the compiled step ran (and was not refused)
+    for f in FIELDS:
+        np.testing.assert_array_equal(getattr(fast, f), getattr(slow, f), err_msg=f)
+    assert [(g.passage, g.start_s, g.end_s) for g in fast.gaps] == [(g.passage, g.start_s, g.end_s)
+                                                                     for g in slow.gaps]
+
+
+def _running_pair(scenario, runs, seed):
+    """Two trackers of the same passages, the second without the compiled step, fed until every passage
+    runs; returns them, the simulation and the next sample."""
+    sim = simulate(scenario, runs=runs, seed=seed)
+    pair = [Tracker(scenario, passages=runs) for _ in range(2)]
+    pair[1]._compiled = None
+    k = 0
+    while not (pair[0].phase == 2).all():                          # (2: _RUNNING)
+        for trk in pair:
+            trk.update(sim.times[k], sim.measurements[:, k])
+        k += 1
+    return pair, sim, k
+
+
+def _assert_same_sample(a, b):
+    for f in ("estimate", "cov", "status", "gap_nats", "ambiguous", "hypotheses", "selected"):
+        np.testing.assert_array_equal(getattr(a, f), getattr(b, f), err_msg=f)
+
+
+def test_means_out_of_the_state_bounds_are_clipped_as_numpy_clips_them():
+    """Electrodes: hypotheses with the keel dipole p far below its bound 0 and the depth above the surface
+    are clipped back in the kernel as np.clip does in BankState.step."""
+    pair, sim, k = _running_pair("S1-P1", 2, 3)
+    lo, hi = pair[0].filter_model.state_bounds
+    p, z = pair[0].model.labels.index("p"), pair[0].model.labels.index("z")
+    for trk in pair:
+        trk.bank.belief.mean[::2, p] = -50.0 / trk.model.x_scale[p]
+        trk.bank.belief.mean[1::3, z] = 3.0 / trk.model.x_scale[z]
+    a, b = (trk.update(sim.times[k], sim.measurements[:, k]) for trk in pair)
+    _assert_same_sample(a, b)
+    mean = pair[0].bank.belief.mean
+    assert (mean[:, p] == lo[p]).any() and (mean[:, z] == hi[z]).any()          # clipped, not just moved
+    np.testing.assert_array_equal(mean, pair[1].bank.belief.mean)
+
+
+def test_a_failed_element_leaves_the_state_untouched_and_the_numpy_path_takes_the_step():
+    pair, sim, k = _running_pair("S2", 2, 5)
+    for trk in pair:
+        trk.bank.belief.chol[0] = np.nan                           # one hypothesis of passage 0 broken
+    trk = pair[0]
+    names = ("nis", "cons", "cons_n", "cons_tests", "cons_fails", "cons_now", "excess", "own", "trusted")
+    before = {name: np.copy(getattr(trk, name)) for name in names}
+    bank = [a.copy() for a in (trk.bank.belief.mean, trk.bank.belief.chol, trk.bank.cum)]
+    out = trk._prior_sample()
+    blank = [np.copy(getattr(out, f)) for f in ("estimate", "cov", "status")]
+    assert not trk._compiled_step(np.arange(2), sim.measurements[:, k] / trk.model.y_scale, out)
+    for name in names:
+        np.testing.assert_array_equal(getattr(trk, name), before[name], err_msg=name)
+    for now, was in zip((trk.bank.belief.mean, trk.bank.belief.chol, trk.bank.cum, out.estimate, out.cov,
+                         out.status), bank + blank):
+        np.testing.assert_array_equal(now, was)
+    _assert_same_sample(*(t.update(sim.times[k], sim.measurements[:, k]) for t in pair))
+
+
+def test_a_batch_for_the_filters_threads_takes_the_step_by_step_path():
+    trk = Tracker("S2", passages=2)
+    H = trk._H
+    assert trk._compiled.applies(np.arange(2))
+    assert not trk._compiled.applies(np.arange(-(-512 // H)))
