@@ -30,21 +30,22 @@ PLOT_POINTS = 2000
 """Samples kept for the picture of a long passage (evenly spaced, the last included)."""
 
 
-FIRST_USE = ("compiling the numerical kernels on their first use on this machine (about half a minute on two "
+FIRST_USE = ("compiling the numerical kernels on their first use on this machine (under a minute on two "
              "cores; cached for later runs)")
 
 
 def first_use_notice(filter_name=None):
     """:data:`FIRST_USE` if the tracker's compiled kernels (filter ``filter_name``'s update, default the
-    tracker's UKF, the predict, measurement kernel and least-squares loop) are not yet compiled on disk for the
-    current sources, else None."""
+    tracker's UKF, the predict, measurement kernel, least-squares loop and the tracker's step) are not yet
+    compiled on disk for the current sources, else None."""
     from shipsense import numba_cache
-    from shipsense.trackers import lm_kernel, measurement
+    from shipsense.trackers import lm_kernel, measurement, tracker_step
     from shipsense.trackers.filters import fused
 
     code = fused.filter_code(filter_name or "ukf")
+    step = (tracker_step._STEP_KERNELS[code],) if code in tracker_step._STEP_KERNELS else ()
     ready = numba_cache.cached(fused._UPDATE_KERNELS[code], fused._UPDATE_LOOPS[code], fused._predict_kernel,
-                               measurement._batch_kernel, lm_kernel._lm_kernel)
+                               measurement._batch_kernel, lm_kernel._lm_kernel, *step)
     return None if ready else FIRST_USE
 
 
