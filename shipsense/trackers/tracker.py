@@ -610,6 +610,8 @@ class Tracker:
     def _initialise(self, starting, snr, out, defer=False):
         """Detection and, once a passage's window is complete, its global fits: the bank starts from them
         (with ``defer``, the passage is left pending for :meth:`fit_pending`)."""
+        if starting.size == 0:
+            return
         o = self.options
         detect = starting[(self.k0[starting] < 0) & (snr[starting] > o.snr_start)]
         self.k0[detect] = self.n[detect]
