@@ -380,10 +380,10 @@ class Tracker:
         yet: it is left pending (:meth:`pending`, still initialising here) and takes no further samples
         until :meth:`fit_pending` fits every pending passage in one batch, as this call would have."""
         act = np.arange(self.P) if passages is None else np.asarray(passages, dtype=int)
-        waiting = act[self.phase[act] == _PENDING]
-        if waiting.size:
-            raise ValueError(f"passage {int(waiting[0])} has its window fits deferred: call fit_pending() before "
-                             f"giving it another sample")
+        waiting = self.phase[act] == _PENDING
+        if waiting.any():
+            raise ValueError(f"passage {int(act[waiting][0])} has its window fits deferred: call fit_pending() "
+                             f"before giving it another sample")
         t = np.asarray(t, dtype=float)
         if t.shape != act.shape:
             t = np.broadcast_to(t, act.shape)
@@ -392,15 +392,18 @@ class Tracker:
             raise ValueError(f"y must be (passages, channels) = ({act.size}, {self.model.m}), got {y.shape}")
         if not np.isfinite(t).all():
             raise ValueError("times must be finite numbers")
-        back = np.isfinite(self.last_t[act]) & ~(t > self.last_t[act])
-        if back.any():
-            p = int(act[np.argmax(back)])
-            raise ValueError(f"time must increase: passage {p} goes from {self.last_t[p]:.9g} s to "
-                             f"{t[np.argmax(back)]:.9g} s")
+        last = self.last_t[act]
+        later = t > last
+        if not later.all():                                        # (NaN: a passage's first sample)
+            back = np.isfinite(last) & ~later
+            if back.any():
+                p = int(act[np.argmax(back)])
+                raise ValueError(f"time must increase: passage {p} goes from {self.last_t[p]:.9g} s to "
+                                 f"{t[np.argmax(back)]:.9g} s")
         yi = np.full((self.P, self.model.m), np.nan)
         yi[act] = ya = y / self.model.y_scale
         dt = np.full(self.P, np.nan)
-        dt[act] = step = t - self.last_t[act]
+        dt[act] = step = t - last
         if (step > self.options.gap_limit_s).any():
             for p in act[step > self.options.gap_limit_s]:
                 self.gaps.append(Gap(int(p), float(self.last_t[p]), float(t[act == p][0])))
@@ -412,9 +415,10 @@ class Tracker:
         field = np.zeros(self.P, dtype=bool)
         field[act] = np.isfinite(ya[:, self._field_channels]).any(axis=1)
         self.phase[(self.phase == _WAITING) & field] = _STARTING
-        starting = act[self.phase[act] == _STARTING]
+        phase = self.phase[act]
+        starting = act[phase == _STARTING]
         out.status[starting] = INITIALISING
-        running = act[self.phase[act] == _RUNNING]
+        running = act[phase == _RUNNING]
         if running.size:
             self._step(running, yi, dt, out)
         if self.options.method == "bank":
