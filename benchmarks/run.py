@@ -1,7 +1,7 @@
 """The whole performance picture in one run: filter steps against FilterPy, environments against CartPole, and
 the studies' wall time and peak memory.
 
-Run:  PYTHONPATH=. python benchmarks/run.py [--steps 20] [--env-steps 400] [--studies S0 [S1 wide ...]]
+Run:  PYTHONPATH=. python benchmarks/run.py [--steps 20] [--env-steps 2000] [--studies S0 [S1 wide ...]]
                                              [--skip-filters] [--skip-envs]
 
 1. Filters: microseconds per filter-step (one predict + update of one hypothesis) on the S0 model for every
@@ -9,7 +9,11 @@ Run:  PYTHONPATH=. python benchmarks/run.py [--steps 20] [--env-steps 400] [--st
    thread (``SHIPSENSE_THREADS=1``; a batch of 512 or more is otherwise split across the CPUs); in brackets
    the speed-up over FilterPy's ``UnscentedKalmanFilter`` looped per filter, timed in the same process.
 2. Environments: steps per second of Passage-v0 (the tracker as observer) and Passage-v1, single and native
-   vector (64 envs), autoresets included, as a fraction of CartPole-v1 timed in the same process.
+   vector (64 envs), autoresets included, as a fraction of CartPole-v1 timed in the same process.  A Passage
+   episode's cost depends on its passage (how often the tracker refits), so a single env's timed runs are
+   ``--env-steps`` 2,000 steps (25 episodes of S2) each: runs of 400 (5 episodes) read 3,427-3,469 steps/s
+   where runs of 2,000 read 4,181-4,292 for the same code (2026-11-26; the first 5 episodes of seed 0
+   refit three times as often as the next 5).
 3. Studies: ``shipsense reproduce NAME`` for each of ``--studies`` (default S0), each in a fresh process:
    wall seconds, CPU seconds and peak resident memory.
 
@@ -118,7 +122,7 @@ def study_table(names):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=20, help="filter steps per timed run")
-    ap.add_argument("--env-steps", type=int, default=400, help="single-environment steps per timed run")
+    ap.add_argument("--env-steps", type=int, default=2000, help="single-environment steps per timed run")
     ap.add_argument("--studies", nargs="*", default=["S0"], help="reproduce these (S0, S1, S2, wide); none: skip")
     ap.add_argument("--skip-filters", action="store_true")
     ap.add_argument("--skip-envs", action="store_true")
