@@ -164,6 +164,9 @@ def fit_passages(model, y, theta_init, steps, stride=1, iterations=40, return_in
     iteration, equal to rounding (tested).
     """
     B = len(theta_init)
+    if B == 0:   # no fits (a refit whose every start is NaN): empty results, as a batch of them would give
+        empty = (np.zeros((0, model.n)), np.zeros(0))
+        return empty + (np.zeros((0, model.n, model.n)),) if return_information else empty
     spec = kernel_of(model)
     compiled = spec is not None and spec[0] == FIELD
     rows = max(1, FIT_CHUNK_BYTES // (8 * model.n * model.m * max(1, np.shape(y)[-2])))

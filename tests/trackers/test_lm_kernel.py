@@ -133,3 +133,19 @@ def test_the_constant_velocity_path_is_the_dense_products_bit_for_bit(monkeypatc
         bad[1, 7, i, j] = v
         assert not lm_kernel._constant_velocity(bad), (i, j)
     assert not lm_kernel._constant_velocity(np.eye(3)[None, None])
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_no_fits_give_empty_results_and_a_refit_from_no_finite_start_fails_its_test(monkeypatch, compiled):
+    """No fits at all (a batch of 0, as a refit of passages whose every start is NaN asks for) give empty
+    states, costs and information, on both loops; the refit then reports no fit (chi-square inf)."""
+    from shipsense.trackers.restarts import refit_window
+
+    model = model_from_scenario("S2")
+    if not compiled:
+        monkeypatch.setattr(batchfit, "kernel_of", lambda m: None)
+    theta, cost, info = fit_passages(model, np.zeros((0, 10, model.m)), np.zeros((0, model.n)), 10,
+                                     return_information=True)
+    assert theta.shape == (0, model.n) and cost.shape == (0,) and info.shape == (0, model.n, model.n)
+    fits = refit_window(model, np.ones((2, 10, model.m)), np.full((2, 3, model.n), np.nan), keep=2)
+    assert np.isinf(fits.chi2).all() and not fits.fit_ok.any()
