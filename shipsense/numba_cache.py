@@ -34,7 +34,7 @@ DEPENDS = {
     "trackers/consistency.py": (),
     "trackers/restarts.py": ("trackers/batchfit.py", "trackers/initialiser.py"),
     "trackers/tracker_step.py": ("parallel.py", "trackers/consistency.py", "trackers/filters/fused.py",
-                                 "trackers/measurement.py", "trackers/selection.py"),
+                                 "trackers/initialiser.py", "trackers/measurement.py", "trackers/selection.py"),
 }
 """Each file with compiled kernels (relative to the package) and the package modules it imports at module
 level (tests/test_numba_cache.py checks this against the sources)."""

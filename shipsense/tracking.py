@@ -43,7 +43,8 @@ def first_use_notice(filter_name=None):
     from shipsense.trackers.filters import fused
 
     code = fused.filter_code(filter_name or "ukf")
-    step = (tracker_step._STEP_KERNELS[code],) if code in tracker_step._STEP_KERNELS else ()
+    step = (tracker_step._prepare,) + ((tracker_step._STEP_KERNELS[code],) if code in tracker_step._STEP_KERNELS
+                                       else ())
     ready = numba_cache.cached(fused._UPDATE_KERNELS[code], fused._UPDATE_LOOPS[code], fused._predict_kernel,
                                measurement._batch_kernel, lm_kernel._lm_kernel, *step)
     return None if ready else FIRST_USE

@@ -78,16 +78,17 @@ from shipsense.trackers.batchfit import Huber, transitions
 from shipsense.trackers.consistency import quantile_table, window_test
 from shipsense.trackers.filters import get_filter
 from shipsense.trackers.filters._core import Belief, symmetrize
-from shipsense.trackers.initialiser import depth_prior, strongest_snr, window_fits
+from shipsense.trackers.initialiser import depth_prior, window_fits
 from shipsense.trackers.restarts import due, refit_window
 from shipsense.trackers.seeding import seed_hypotheses
 from shipsense.trackers.selection import report
-from shipsense.trackers.tracker_step import TrackerStep
+from shipsense.trackers.tracker_step import TrackerStep, _prepare
 
 STATUSES = ("no data", "initialising", "tracking", "restarted", "inconsistent")
 """Status names, indexed by the status codes of :class:`TrackResult`."""
 NO_DATA, INITIALISING, TRACKING, RESTARTED, INCONSISTENT = range(5)
 _WAITING, _STARTING, _RUNNING, _PENDING = 0, 1, 2, 3   # phases of a passage (_PENDING: its window fits deferred)
+_PHASES = (_WAITING, _STARTING, _RUNNING, _PENDING)
 BANK_INFLATION_MAX = 100.0   # largest chi-square inflation a failed fit's bank starts from (the rest is reported)
 
 
@@ -295,7 +296,8 @@ class Tracker:
         self.filter_model = replace(self.model, R=self.model.R * kappa)
         self.kappa = kappa
         self.window = max(4, int(round(opts.window_s / sc.period)))
-        self._field_channels = np.flatnonzero(~self.model.axial)
+        self._snr_field = np.ascontiguousarray(~self.model.axial)                  # (update's SNR: strongest_snr)
+        self._snr_std = np.ascontiguousarray(np.sqrt(self.model.R), dtype=float)
         self._grid = _grid(sc)
         self._prior = prior_belief(self.model, sc, self.bank_config)
         self._prior_info = np.diag(self.model.x_scale ** 2 / np.diag(self._prior[1]))   # internal units
@@ -379,46 +381,35 @@ class Tracker:
         With ``defer_fits``, a passage whose initialisation window completes at this sample is not fitted
         yet: it is left pending (:meth:`pending`, still initialising here) and takes no further samples
         until :meth:`fit_pending` fits every pending passage in one batch, as this call would have."""
-        act = np.arange(self.P) if passages is None else np.asarray(passages, dtype=int)
-        waiting = self.phase[act] == _PENDING
-        if waiting.any():
-            raise ValueError(f"passage {int(act[waiting][0])} has its window fits deferred: call fit_pending() "
-                             f"before giving it another sample")
+        act = np.arange(self.P) if passages is None else np.asarray(passages, dtype=np.int64)
         t = np.asarray(t, dtype=float)
         if t.shape != act.shape:
             t = np.broadcast_to(t, act.shape)
         y = np.asarray(y, dtype=float)
         if y.shape != (act.size, self.model.m):
             raise ValueError(f"y must be (passages, channels) = ({act.size}, {self.model.m}), got {y.shape}")
-        if not np.isfinite(t).all():
+        code, i, yi, dt, snr, starting, running, gap = _prepare(
+            act, np.ascontiguousarray(t), np.ascontiguousarray(y), self.model.y_scale, self.phase, self.last_t,
+            self.n, self.y_hist, self.t_hist, self.cons_now, self._snr_field, self._snr_std,
+            float(self.options.gap_limit_s), _PHASES)
+        if code == 4:
+            raise IndexError(f"index {int(act[i])} is out of bounds for {self.P} passages")
+        if code == 1:
+            raise ValueError(f"passage {int(act[i])} has its window fits deferred: call fit_pending() before "
+                             f"giving it another sample")
+        if code == 2:
             raise ValueError("times must be finite numbers")
-        last = self.last_t[act]
-        later = t > last
-        if not later.all():                                        # (NaN: a passage's first sample)
-            back = np.isfinite(last) & ~later
-            if back.any():
-                p = int(act[np.argmax(back)])
-                raise ValueError(f"time must increase: passage {p} goes from {self.last_t[p]:.9g} s to "
-                                 f"{t[np.argmax(back)]:.9g} s")
-        yi = np.full((self.P, self.model.m), np.nan)
-        yi[act] = ya = y / self.model.y_scale
-        dt = np.full(self.P, np.nan)
-        dt[act] = step = t - last
-        if (step > self.options.gap_limit_s).any():
+        if code == 3:
+            p = int(act[i])
+            raise ValueError(f"time must increase: passage {p} goes from {self.last_t[p]:.9g} s to {t[i]:.9g} s")
+        if gap:
+            step = dt[act]
             for p in act[step > self.options.gap_limit_s]:
                 self.gaps.append(Gap(int(p), float(self.last_t[p]), float(t[act == p][0])))
-        slot = self.n[act] % self.y_hist.shape[1]
-        self.y_hist[act, slot], self.t_hist[act, slot] = ya, t
-        snr = self._snr(yi, act)
+        if self.options.robust:
+            snr = self._robust_snr(snr, yi, act)
         out = self._prior_sample()
-        self.cons_now[act] = False
-        field = np.zeros(self.P, dtype=bool)
-        field[act] = np.isfinite(ya[:, self._field_channels]).any(axis=1)
-        self.phase[(self.phase == _WAITING) & field] = _STARTING
-        phase = self.phase[act]
-        starting = act[phase == _STARTING]
         out.status[starting] = INITIALISING
-        running = act[phase == _RUNNING]
         if running.size:
             self._step(running, yi, dt, out)
         if self.options.method == "bank":
@@ -474,13 +465,10 @@ class Tracker:
                            list(self.gaps))
 
     # -- parts --------------------------------------------------------------------------------------------------
-    def _snr(self, yi, act):
-        """The strongest field channel's SNR (P,) of the passages ``act`` (0 elsewhere); with ``robust``, the
-        median of their last three samples (an outlier alone neither starts a window nor moves the peak)."""
-        snr = np.zeros(self.P)
-        snr[act] = strongest_snr(self.model, yi[act, None])[:, 0]
-        if not self.options.robust:
-            return snr
+    def _robust_snr(self, snr, yi, act):
+        """The SNR (P,) of the passages ``act`` with ``robust``: the median of the strongest field channel's
+        SNR ``snr`` over their last three samples (an outlier alone neither starts a window nor moves the
+        peak)."""
         ring = np.roll(self.snr[act], -1, axis=1)
         ring[:, -1] = np.where(np.isfinite(yi[act]).any(axis=1), snr[act], np.nan)
         self.snr[act] = ring

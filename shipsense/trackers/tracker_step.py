@@ -1,4 +1,5 @@
-"""The tracker's step of its running passages at one sample, as one compiled call.
+"""The tracker's handling of a sample as two compiled calls: the sample's preparation (:func:`_prepare`:
+the checks, the histories, the SNR, the passages' phases) and the step of its running passages.
 
 :meth:`Tracker._step <shipsense.trackers.tracker.Tracker._step>` predicts and updates the banks of the
 running passages (:meth:`BankState.step <shipsense.trackers.bank.BankState.step>`: the filter's compiled
@@ -41,6 +42,7 @@ from shipsense.trackers.filters.fused import (
     _per_element,
     _predict_kernel,
 )
+from shipsense.trackers.initialiser import _DOUBLE_MAX, _strongest
 from shipsense.trackers.measurement import kernel_of
 from shipsense.trackers.selection import report
 
@@ -141,6 +143,88 @@ def _step_kernel_for(code):
                           kernel.__name__, kernel.__defaults__, kernel.__closure__)
     kernel.__qualname__ = f"_tracker_step_{code}"
     return njit(cache=True, error_model="numpy", nogil=True)(kernel)
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def _prepare(act, t, y, ys, phase, last_t, n, y_hist, t_hist, cons_now, field, std, gap_limit, phases):
+    """:meth:`Tracker.update`'s handling of a sample before the passages' steps, in one pass.  First the checks:
+    a code and the index ``i`` into ``act`` it is about (1: passage ``act[i]`` pending, 2: a time not finite,
+    3: passage ``act[i]``'s time not later than its last, 4: ``act[i]`` not a passage), nothing written then;
+    else (0) the sample in internal units ``yi`` (P, m), the time steps ``dt`` (P,) (NaN for the passages not
+    in ``act``), the histories written, the strongest field channel's SNR (P,) (as
+    :func:`~shipsense.trackers.initialiser.strongest_snr`), the passages with a field value started, the
+    passages of ``act`` starting and running, and whether a time step exceeds ``gap_limit``.  ``phases``: the
+    codes ``(waiting, starting, running, pending)``."""
+    waiting, starting, running, pending = phases
+    P, m = phase.shape[0], y.shape[1]
+    A = act.shape[0]
+    code, at = 0, 0
+    for i in range(A):
+        if act[i] < -P or act[i] >= P:
+            code, at = 4, i
+            break
+    for i in range(A if code == 0 else 0):
+        if phase[act[i]] == pending:
+            code, at = 1, i
+            break
+    for i in range(A if code == 0 else 0):
+        if not math.isfinite(t[i]):
+            code, at = 2, i
+            break
+    for i in range(A if code == 0 else 0):
+        last = last_t[act[i]]
+        if math.isfinite(last) and not t[i] > last:
+            code, at = 3, i
+            break
+    if code != 0:
+        return code, at, np.empty((0, m)), np.empty(0), np.empty(0), np.empty(0, np.int64), np.empty(0, np.int64), False
+    yi = np.full((P, m), np.nan)
+    dt = np.full(P, np.nan)
+    gap = False
+    ya = np.empty((A, m))
+    for i in range(A):
+        r = act[i]
+        for j in range(m):
+            ya[i, j] = y[i, j] / ys[j]
+            yi[r, j] = ya[i, j]
+        step = t[i] - last_t[r]
+        dt[r] = step
+        gap = gap or step > gap_limit
+    K = y_hist.shape[1]
+    for i in range(A):
+        r = act[i]
+        slot = n[r] % K
+        for j in range(m):
+            y_hist[r, slot, j] = ya[i, j]
+        t_hist[r, slot] = t[i]
+    strongest = np.empty(A)
+    _strongest(ya, field, std, _DOUBLE_MAX, strongest)
+    snr = np.zeros(P)
+    for i in range(A):
+        snr[act[i]] = strongest[i]
+        cons_now[act[i]] = False
+    seen = np.zeros(P, np.bool_)
+    for i in range(A):
+        for j in range(m):
+            if field[j] and math.isfinite(ya[i, j]):
+                seen[act[i]] = True
+    for r in range(P):
+        if phase[r] == waiting and seen[r]:
+            phase[r] = starting
+    count_s, count_r = 0, 0
+    for i in range(A):
+        count_s += phase[act[i]] == starting
+        count_r += phase[act[i]] == running
+    starts, runs = np.empty(count_s, np.int64), np.empty(count_r, np.int64)
+    count_s, count_r = 0, 0
+    for i in range(A):
+        if phase[act[i]] == starting:
+            starts[count_s] = act[i]
+            count_s += 1
+        elif phase[act[i]] == running:
+            runs[count_r] = act[i]
+            count_r += 1
+    return 0, 0, yi, dt, snr, starts, runs, gap
 
 
 _STEP_KERNELS = {code: _step_kernel_for(code) for code in (UKF, CDKF, HUBER, EKF, PUEKF)}

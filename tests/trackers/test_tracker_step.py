@@ -108,3 +108,33 @@ def test_a_batch_for_the_filters_threads_takes_the_step_by_step_path():
     H = trk._H
     assert trk._compiled.applies(np.arange(2))
     assert not trk._compiled.applies(np.arange(-(-512 // H)))
+
+
+def test_a_refused_sample_writes_nothing():
+    """update's checks (compiled with the sample's handling, tracker_step._prepare) refuse a passage out of
+    range, a pending passage, a time that is not finite or not later, before anything is written."""
+    sim = simulate("S2", runs=2, seed=1)
+    names = ("phase", "n", "last_t", "y_hist", "t_hist", "cons_now", "k0", "peak", "snr")
+    pending = Tracker("S2", passages=2)
+    k = 0
+    while not pending.pending().any():
+        pending.update(sim.times[k], sim.measurements[:, k], defer_fits=True)
+        k += 1
+    first = int(np.flatnonzero(pending.pending())[0])
+    fresh = Tracker("S2", passages=2)
+    for j in range(3):
+        fresh.update(sim.times[j], sim.measurements[:, j])
+    t, y = sim.times[3], sim.measurements[:, 3]
+    cases = [(pending, (sim.times[k], sim.measurements[:, k]), {}, ValueError,
+              f"passage {first} has its window fits deferred"),
+             (fresh, (t, y[:1]), {"passages": [5]}, IndexError, "out of bounds"),
+             (fresh, (np.nan, y[:1]), {"passages": [1]}, ValueError, "times must be finite"),
+             (fresh, (sim.times[2], y), {}, ValueError, "time must increase: passage 0")]
+    for trk, args, kwargs, error, message in cases:
+        before = {name: np.copy(getattr(trk, name)) for name in names}
+        with pytest.raises(error, match=message):
+            trk.update(*args, **kwargs)
+        for name in names:
+            np.testing.assert_array_equal(getattr(trk, name), before[name], err_msg=name)
+    assert fresh.update(t, y[1:], passages=[-1]).status.shape == (1,)      # a negative index, as numpy's
+    assert fresh.n.tolist() == [3, 4]
