@@ -375,13 +375,15 @@ class Tracker:
     # -- one sample ---------------------------------------------------------------------------------------------
     def update(self, t, y, passages=None, defer_fits=False) -> Sample:
         """Process one sample: times ``t`` (P,) s and measurements ``y`` (P, m) SI of every passage (NaN =
-        missing: a dropout, or a sensor not read), or of the passages ``passages`` (indices) only, the others
-        left as they are.  Returns the :class:`Sample` of those passages at this time.
+        missing: a dropout, or a sensor not read), or of the passages ``passages`` (distinct indices) only, the
+        others left as they are.  Returns the :class:`Sample` of those passages at this time.
 
         With ``defer_fits``, a passage whose initialisation window completes at this sample is not fitted
         yet: it is left pending (:meth:`pending`, still initialising here) and takes no further samples
         until :meth:`fit_pending` fits every pending passage in one batch, as this call would have."""
         act = np.arange(self.P) if passages is None else np.asarray(passages, dtype=np.int64)
+        if act.ndim != 1:
+            raise ValueError(f"passages must be a sequence of passage indices, got an array of shape {act.shape}")
         t = np.asarray(t, dtype=float)
         if t.shape != act.shape:
             t = np.broadcast_to(t, act.shape)
@@ -394,6 +396,8 @@ class Tracker:
             float(self.options.gap_limit_s), _PHASES)
         if code == 4:
             raise IndexError(f"index {int(act[i])} is out of bounds for {self.P} passages")
+        if code == 5:
+            raise ValueError(f"passage {int(act[i])} is given twice: one sample per passage")
         if code == 1:
             raise ValueError(f"passage {int(act[i])} has its window fits deferred: call fit_pending() before "
                              f"giving it another sample")

@@ -149,7 +149,8 @@ def _step_kernel_for(code):
 def _prepare(act, t, y, ys, phase, last_t, n, y_hist, t_hist, cons_now, field, std, gap_limit, phases):
     """:meth:`Tracker.update`'s handling of a sample before the passages' steps, in one pass.  First the checks:
     a code and the index ``i`` into ``act`` it is about (1: passage ``act[i]`` pending, 2: a time not finite,
-    3: passage ``act[i]``'s time not later than its last, 4: ``act[i]`` not a passage), nothing written then;
+    3: passage ``act[i]``'s time not later than its last, 4: ``act[i]`` not a passage, 5: ``act[i]`` given
+    before in ``act``), nothing written then;
     else (0) the sample in internal units ``yi`` (P, m), the time steps ``dt`` (P,) (NaN for the passages not
     in ``act``), the histories written, the strongest field channel's SNR (P,) (as
     :func:`~shipsense.trackers.initialiser.strongest_snr`), the passages with a field value started, the
@@ -159,10 +160,16 @@ def _prepare(act, t, y, ys, phase, last_t, n, y_hist, t_hist, cons_now, field, s
     P, m = phase.shape[0], y.shape[1]
     A = act.shape[0]
     code, at = 0, 0
+    given = np.zeros(P, np.bool_)
     for i in range(A):
         if act[i] < -P or act[i] >= P:
             code, at = 4, i
             break
+        r = act[i] % P
+        if given[r]:
+            code, at = 5, i
+            break
+        given[r] = True
     for i in range(A if code == 0 else 0):
         if phase[act[i]] == pending:
             code, at = 1, i

@@ -112,7 +112,8 @@ def test_a_batch_for_the_filters_threads_takes_the_step_by_step_path():
 
 def test_a_refused_sample_writes_nothing():
     """update's checks (compiled with the sample's handling, tracker_step._prepare) refuse a passage out of
-    range, a pending passage, a time that is not finite or not later, before anything is written."""
+    range or given twice, a pending passage, a time that is not finite or not later, and passages that are
+    not a sequence of indices, before anything is written."""
     sim = simulate("S2", runs=2, seed=1)
     names = ("phase", "n", "last_t", "y_hist", "t_hist", "cons_now", "k0", "peak", "snr")
     pending = Tracker("S2", passages=2)
@@ -129,7 +130,10 @@ def test_a_refused_sample_writes_nothing():
               f"passage {first} has its window fits deferred"),
              (fresh, (t, y[:1]), {"passages": [5]}, IndexError, "out of bounds"),
              (fresh, (np.nan, y[:1]), {"passages": [1]}, ValueError, "times must be finite"),
-             (fresh, (sim.times[2], y), {}, ValueError, "time must increase: passage 0")]
+             (fresh, (sim.times[2], y), {}, ValueError, "time must increase: passage 0"),
+             (fresh, (t, y), {"passages": [1, -1]}, ValueError, "passage -1 is given twice"),
+             (fresh, (t, y[:1]), {"passages": 1}, ValueError, "passages must be a sequence"),
+             (fresh, (t, y), {"passages": [[0, 1]]}, ValueError, "passages must be a sequence")]
     for trk, args, kwargs, error, message in cases:
         before = {name: np.copy(getattr(trk, name)) for name in names}
         with pytest.raises(error, match=message):
