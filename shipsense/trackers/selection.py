@@ -20,6 +20,20 @@ def mixture_mse(weights, means, covs, about):
     return np.sum(np.where(w > 0, w * (covs + e[..., :, None] * e[..., None, :]), 0.0), axis=1)
 
 
+@njit(cache=True, error_model="numpy", inline="always")
+def first_max(row):
+    """``np.argmax`` of a row: the index of its first maximum, or of its first NaN."""
+    sel = 0
+    top = row[0]
+    for h in range(1, row.shape[0]):
+        if math.isnan(top):
+            break
+        c = row[h]
+        if math.isnan(c) or c > top:
+            sel, top = h, c
+    return sel
+
+
 @njit(cache=True, error_model="numpy", nogil=True)
 def report(mean, chol, runs, H, xs, cum, mixture, report_nats, far_m, excess, estimate, cov, own, gap, ambiguous,
            hypotheses, selected):
@@ -54,14 +68,8 @@ def report(mean, chol, runs, H, xs, cum, mixture, report_nats, far_m, excess, es
                     for k in range(n):
                         t += chol[row, a, k] * chol[row, b, k]
                     covs[h, a, b] = t * (xs[a] * xs[b])
-        sel = 0
-        top = cum[p, 0]
-        for h in range(1, H):                     # np.argmax: the first maximum, or the first NaN
-            if math.isnan(top):
-                break
-            c = cum[p, h]
-            if math.isnan(c) or c > top:
-                sel, top = h, c
+        sel = first_max(cum[p])
+        top = cum[p, sel]
         for a in range(n):
             estimate[r, a] = means[sel, a]
         if mixture:

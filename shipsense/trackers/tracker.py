@@ -499,10 +499,10 @@ class Tracker:
         H = self._H
         d, T = dt[runs], self.model.period
         regular = all(abs(step - T) <= 1e-9 * T for step in d.tolist())
-        if regular and self._compiled is not None and self._compiled.applies(runs) and self._compiled_step(
-                runs, yi, out):
-            return
         model = None if regular else self.filter_model.stepped(np.repeat(d, H))
+        if self._compiled is not None and self._compiled.applies(runs) and self._compiled_step(runs, yi, out,
+                                                                                                model):
+            return
         ysi = yi * self.model.y_scale
         inn = self.bank.step(ysi, predict=True, runs=runs, model=model)
         sel = np.argmax(self.bank.cum[runs], axis=1)              # (the bank's selected(), of these runs)
@@ -515,9 +515,9 @@ class Tracker:
         self._report(runs, out)
         out.status[failed] = INCONSISTENT
 
-    def _compiled_step(self, runs, yi, out):
-        """:meth:`_step` of regularly sampled passages ``runs`` in one compiled call; False (nothing done) where
-        an element's update failed."""
+    def _compiled_step(self, runs, yi, out, stepped=None):
+        """:meth:`_step` of passages ``runs`` in one compiled call (``stepped``: the filter model with their
+        transitions, irregular sampling); False (nothing done) where an element's update failed."""
         o, h = self.options, self.huber
         runs = np.asarray(runs, dtype=np.int64)
         test = bool(o.consistency_window and o.method == "tracker")
@@ -528,8 +528,8 @@ class Tracker:
         selection = (self.model.x_scale, o.method == "tracker", float(o.report_nats), float(o.report_distance_m),
                      self.excess, out.estimate, out.cov, self.own, out.gap_nats, out.ambiguous, out.hypotheses,
                      out.selected)
-        if not self._compiled(runs, yi, self.model.y_scale, self.bank, self.bank.cum, self.nis, test, consistency,
-                              selection, out.status, self.trusted, (TRACKING, INCONSISTENT)):
+        if not self._compiled(runs, yi, self.model.y_scale, self.bank, self.nis, test, consistency, selection,
+                              out.status, self.trusted, (TRACKING, INCONSISTENT), stepped):
             return False
         self.bank.belief = Belief(*self.bank.belief)   # (as BankState.step leaves it)
         self.bank.steps += 1

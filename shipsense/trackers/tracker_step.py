@@ -6,21 +6,21 @@ running passages (:meth:`BankState.step <shipsense.trackers.bank.BankState.step>
 predict and update, :func:`shipsense.trackers.filters.fused.step`), moves their NIS windows, runs the
 windowed innovation test (:func:`~shipsense.trackers.consistency.window_test`) and writes their output
 (:func:`~shipsense.trackers.selection.report`).  Each of those is compiled already; between them, about
-thirty numpy calls a sample cost more than the arithmetic for one passage.  :func:`tracker_step` is the
+thirty numpy calls a sample cost more than the arithmetic for one passage.  :class:`TrackerStep` is the
 same sequence in one call, with the same kernels in the same order, so the numbers are the same bit for
-bit (tests/trackers/test_tracker_step.py; tracked passages compared with the step by step path).
+bit (tests/trackers/test_tracker_step.py; tracked passages compared with the step by step path), with
+the bank's own transition or, for irregular sampling, one per passage (the model's ``stepped``).
 
 What stays in numpy: the hypotheses' covariances ``L L^T`` the time update starts from (numpy's matmul,
 whose sums a compiled loop does not reproduce to the last bit).  What is not taken here (the caller then
-runs the step by step path): irregular sampling (a transition per passage), a batch large enough for the
-filters' threads, a model without a compiled kernel, the SR-CDKF (its own time update), and a step in
-which an element fails numerically (nothing is written before both kernels succeed).
+runs the step by step path): a batch large enough for the filters' threads, a model without a compiled
+kernel, the SR-CDKF (its own time update), and a step in which an element fails numerically (nothing is
+written before both kernels succeed).
 """
 
 from __future__ import annotations
 
 import math
-from functools import lru_cache
 from types import FunctionType
 
 import numpy as np
@@ -44,7 +44,7 @@ from shipsense.trackers.filters.fused import (
 )
 from shipsense.trackers.initialiser import _DOUBLE_MAX, _strongest
 from shipsense.trackers.measurement import kernel_of
-from shipsense.trackers.selection import report
+from shipsense.trackers.selection import first_max, report
 
 
 def _step_kernel_for(code):
@@ -108,15 +108,8 @@ def _step_kernel_for(code):
                         chol_all[row, a, c] = L_out[b, a, c]
                 cum[r, k] += loglik[b]
                 cum_runs[p, k] = cum[r, k]
-            best, top = 0, cum_runs[p, 0]        # np.argmax: the first maximum, or the first NaN
-            for k in range(1, H):
-                if math.isnan(top):
-                    break
-                c = cum_runs[p, k]
-                if math.isnan(c) or c > top:
-                    best, top = k, c
-            sel[p] = best
-            pick = p * H + best
+            sel[p] = first_max(cum_runs[p])
+            pick = p * H + sel[p]
             N = nis_hist.shape[1]
             for i in range(N - 1):
                 nis_hist[r, i] = nis_hist[r, i + 1]
@@ -265,27 +258,24 @@ class TrackerStep:
         """Whether a step of passages ``runs`` is taken here (the filters' threads start at SPLIT_MIN rows)."""
         return runs.size * self.H < SPLIT_MIN
 
-    def __call__(self, runs, yi, ys_in, bank, cum, nis_hist, test, consistency, selection, status, trusted, codes):
+    def __call__(self, runs, yi, ys_in, bank, nis_hist, test, consistency, selection, status, trusted, codes,
+                 stepped=None):
         """Step passages ``runs`` (int64) with samples ``yi`` (P, m) (internal units of the tracker's model,
-        whose scales are ``ys_in``); ``consistency`` and ``selection`` the arguments of window_test and
-        report after the innovations and before the outputs; True when done, False to take the step by
-        step path (nothing written)."""
+        whose scales are ``ys_in``) and the bank's transition, or ``stepped``'s (a model with one per hypothesis,
+        irregular sampling); ``consistency`` and ``selection`` the arguments of window_test and report after
+        the innovations and before the outputs; True when done, False to take the step by step path
+        (nothing written)."""
         H = self.H
         if len(bank.idx) != bank.R * H:
             return False                    # (a pruned bank: BankState.step says why)
-        rows = (runs[:, None] * H + _arange(H)).ravel()
+        rows = (runs[:, None] * H + np.arange(H)).ravel()
         C = bank.belief.chol[rows]
         src = C @ np.swapaxes(C, -1, -2)
-        done = self.kernel(runs, H, yi, ys_in, self.ys_bank, bank.belief.mean, bank.belief.chol, src, *self.fixed,
-                           *self.bounds, cum, nis_hist, test, *consistency, *selection, status, trusted, *codes)
-        return done
-
-
-@lru_cache(maxsize=16)
-def _arange(H):
-    a = np.arange(H)
-    a.flags.writeable = False
-    return a
+        A, Q = self.fixed[:2] if stepped is None else (_per_element(a, (rows.size,), bank.model.n)
+                                                       for a in (stepped.A, stepped.Q))
+        return self.kernel(runs, H, yi, ys_in, self.ys_bank, bank.belief.mean, bank.belief.chol, src, A, Q,
+                           *self.fixed[2:], *self.bounds, bank.cum, nis_hist, test, *consistency, *selection, status,
+                           trusted, *codes)
 
 
 numba_cache.key_on_sources(globals())   # the caches follow the files these kernels are compiled from

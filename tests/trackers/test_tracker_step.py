@@ -10,8 +10,11 @@ from shipsense.trackers.tracker import Tracker
 FIELDS = ("estimates", "covs", "status", "gap_nats", "ambiguous", "hypotheses")
 
 
-def _track(scenario, runs, seed, compiled, samples=None, **options):
+def _track(scenario, runs, seed, compiled, samples=None, jitter=0.0, **options):
     sim = simulate(scenario, runs=runs, seed=seed)
+    times = np.broadcast_to(sim.times, sim.measurements.shape[:2])
+    if jitter:                                    # irregular sampling: a transition per passage and sample
+        times = times + np.random.default_rng(seed).uniform(-jitter, jitter, times.shape) * (times[0, 1] - times[0, 0])
     trk = Tracker(scenario, passages=runs, **options)
     used = []
     if compiled and trk._compiled is not None:
@@ -26,7 +29,7 @@ def _track(scenario, runs, seed, compiled, samples=None, **options):
     else:
         trk._compiled = None
     K = samples or sim.measurements.shape[1]
-    res = trk.track(sim.times[..., :K], sim.measurements[:, :K])
+    res = trk.track(times[:, :K], sim.measurements[:, :K])
     return res, trk, used
 
 
@@ -38,6 +41,7 @@ def _track(scenario, runs, seed, compiled, samples=None, **options):
     ("S0", 3, {"unit": "ekf"}),                     # the other filters' kernels
     ("S0", 3, {"unit": "puekf"}),
     ("S2", 3, {"unit": "ckf"}),
+    ("S2", 4, {"jitter": 0.2}),                     # irregular sampling (the model's stepped transitions)
 ])
 def test_tracked_passages_equal_the_step_by_step_path_bit_for_bit(scenario, runs, options):
     fast, trk, used = _track(scenario, runs, 7, True, **options)
