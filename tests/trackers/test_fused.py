@@ -164,56 +164,6 @@ def test_an_element_that_fails_runs_the_numpy_step_and_is_flagged(s0):
     np.testing.assert_array_equal(new.mean, ref.mean)
 
 
-def _equal_beliefs(a, b):
-    (new_a, inn_a), (new_b, inn_b) = a, b
-    for x, y in zip((new_a.mean, new_a.cov, new_a.ok, *inn_a[:5]), (new_b.mean, new_b.cov, new_b.ok, *inn_b[:5])):
-        np.testing.assert_array_equal(x, y)
-
-
-@pytest.mark.parametrize("name", FILTER_NAMES)
-def test_a_units_step_is_its_predict_then_its_update_bit_for_bit(name, s0):
-    """FilterUnit.step (one compiled call on a flat batch with the model's own transition) gives the numbers
-    of predict then update: on S0 and S2, a batch of one axis (the short path), of two axes, with a mask and
-    with per-element transitions (the general path)."""
-    model, y, x0, P0 = s0
-    unit = get_filter(name, **OPTIONS.get(name, {}))
-    b = unit.update(Belief.from_cov(x0, P0), y[:, 0], model)[0]       # a posterior, as the bank steps from
-    mask = np.ones(y[:, 1].shape, dtype=bool)
-    mask[1, :3] = False
-    cases = [(b, y[:, 1], model, None), (Belief(*b), y[:, 1], model, None), (b, y[:, 1], model, mask),
-             (Belief(*b), y[:, 1], model.stepped(np.array([0.1, 0.25, 0.05])), None),
-             (Belief(*(a.reshape((3, 1) + a.shape[1:]) for a in b)), y[:, 1, None], model, None),
-             (Belief(b.mean.tolist(), b.chol, True), y[:, 1], model, None)]     # a list mean, one health flag
-    s2 = model_from_scenario("S2")
-    sim = simulate("S2", runs=4, seed=2)
-    truth = s2.to_internal(s2.state_from_truth(sim.truth))
-    P2 = np.diag([400.0, 400.0, 4.0, 4.0] + [(0.5 * np.abs(truth[0, 0, 4:]).max()) ** 2] * 3)
-    b2 = Belief.from_cov(truth[:, 0] + np.array([10.0, -10.0, 0.5, 0.5, 0, 0, 0]), P2)
-    cases.append((b2, sim.measurements[:, 1] / s2.y_scale, s2, None))
-    for belief, yk, mdl, mk in cases:
-        got, ref = unit.step(belief, yk, mdl, mk), unit.update(unit.predict(belief, mdl), yk, mdl, mk)
-        _equal_beliefs(got, ref)
-        assert got[0].ok.shape == ref[0].ok.shape
-
-
-def test_a_step_whose_update_fails_updates_the_compiled_prior_with_numpy(s0, monkeypatch):
-    """An element whose compiled update fails (made to here): the update reruns on the numpy path from the
-    compiled prior, as predict then update do; a failed compiled predict falls back as predict does."""
-    model, y, x0, P0 = s0
-    unit = get_filter("ukf")
-    b = Belief.from_cov(x0, P0)
-    monkeypatch.setattr(fused, "_run_update", lambda *a: None)
-    prior, out = fused.step("ukf", b, y[:, 1], model, kernel_of(model))
-    assert out is None
-    ref_prior = fused.predict(b, model)
-    np.testing.assert_array_equal(prior.mean, ref_prior.mean)
-    np.testing.assert_array_equal(prior.cov, ref_prior.cov)
-    _equal_beliefs(unit.step(b, y[:, 1], model), UPDATES["ukf"](ref_prior, y[:, 1], model, None))
-    monkeypatch.setattr(fused, "_split", lambda *a: False)            # every compiled step fails
-    assert fused.step("ukf", b, y[:, 1], model, kernel_of(model)) == (None, None)
-    _equal_beliefs(unit.step(b, y[:, 1], model), UPDATES["ukf"](predict(b, model), y[:, 1], model, None))
-
-
 @pytest.mark.parametrize("name", FILTER_NAMES)
 def test_compiled_steps_equal_the_numpy_steps_with_bearings(name):
     """S2: two vector magnetometers and a seismic bearing (axial: averaged and differenced modulo pi)."""

@@ -54,17 +54,8 @@ class FilterUnit:
         return predict(belief, model, square_root=square_root)
 
     def step(self, belief: Belief, y, model, mask=None):
-        """Time update then measurement update; returns ``(belief, innovation)``: the numbers of
-        :meth:`predict` then :meth:`update`, in one compiled call for models with a compiled kernel."""
-        spec = kernel_of(model)
-        if spec is not None:
-            prior, out = fused.step(self.name, belief, y, model, spec, mask, **self.options)
-            if out is not None:
-                return out
-            if prior is not None:
-                return UPDATES[self.name](prior, y, model, mask, **self.options)
-            # (the compiled time update failed: numpy's, as predict would run after it)
-            return self.update(predict(belief, model, square_root=self.name == "srcdkf"), y, model, mask)
+        """Time update then measurement update (:meth:`predict` then :meth:`update`); returns ``(belief,
+        innovation)``."""
         return self.update(self.predict(belief, model), y, model, mask)
 
     def update(self, belief: Belief, y, model, mask=None):

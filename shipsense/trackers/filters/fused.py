@@ -797,38 +797,6 @@ def update(name, belief: Belief, y, model, spec, mask=None, **options):
     return _BeliefWithCov.with_cov(mean_out, _shaped(L_out, batch), _flag(prior_health(belief), batch), P_out), inn
 
 
-def step(name, belief: Belief, y, model, spec, mask=None, **options):
-    """The compiled time update then measurement update of filter ``name``: the numbers of :func:`predict` then
-    :func:`update`, without preparing the arguments twice.  Returns ``(prior, (belief, innovation))``; the
-    second is None when the update failed (``prior`` is then the compiled prior, for the numpy update), both
-    are None when the time update failed.
-
-    The covariance-form filters on a batch of one axis (``mean`` (B, n), ``y`` (B, m), no mask) with a
-    transition and noise shared by the batch -- the bank's and the tracker's step -- take one short path;
-    any other step is :func:`predict` then :func:`update`."""
-    mean, A, Q = np.asarray(belief.mean, dtype=float), model.A, model.Q
-    n, B = mean.shape[-1], mean.shape[0]
-    y = np.asarray(y, dtype=float)
-    consts = _constants(name, n, options)
-    if not (mean.ndim == 2 and np.ndim(A) == 2 and np.ndim(Q) == 2 and y.shape == (B, model.m) and mask is None
-            and consts[0] != SRCDKF):
-        prior = predict(belief, model, consts[0] == SRCDKF)
-        return (None, None) if prior is None else (prior, update(name, prior, y, model, spec, mask, **options))
-    cached = getattr(belief, "_cov", None)
-    src = cached if cached is not None else belief.chol @ np.swapaxes(belief.chol, -1, -2)
-    x, P, L = np.empty((B, n)), np.empty((B, n, n)), np.zeros((B, n, n))
-    ok = np.empty(B, dtype=bool)
-    if not _split(_predict_kernel, _PREDICT_ROWS, _flat(mean, (B,), (n,)), _flat(src, (B,), (n, n)),
-                  _per_element(A, (B,), n), _per_element(Q, (B,), n), _no_sqrt(n), False, x, P, L, ok):
-        return None, None
-    out = _run_update(consts, x, L, P, _flat(y, (B,), (model.m,)), _all_read(model.m), model, spec)
-    if out is None:
-        return _BeliefWithCov.with_cov(x, L, _flag(prior_health(belief), (B,)), P), None
-    mean_out, P_out, L_out, inn = out
-    return None, (_BeliefWithCov.with_cov(mean_out, L_out, _flag(prior_health(belief), (B,)), P_out),
-                  Innovation(*inn))
-
-
 def _run_update(consts, X, L, P, y, mask, model, spec):
     """The update kernel of ``consts`` (:func:`_constants`) on flat (B, ...) arguments: ``(mean, P, L,
     (eps, S, loglik, nis, m))`` (B, ...), or None if an element failed."""
