@@ -157,7 +157,8 @@ def fit_passages(model, y, theta_init, steps, stride=1, iterations=40, return_in
     at the solution: the inverse of the batch-fit covariance).  Stops after
     ``iterations``; a fit stops earlier once it stalled three times in a row
     (an accepted step gaining less than the relative ``tol``, or a rejected
-    step at a damping of 1e6 or more).  A model with a compiled measurement
+    step at a damping of 1e6 or more or whose linearised model predicted a
+    gain below ``tol``).  A model with a compiled measurement
     kernel (every field model but the series HED path) runs each fit's
     iterations in one compiled loop (:mod:`~shipsense.trackers.lm_kernel`),
     the others the batched numpy loop (:func:`_levenberg_marquardt`): the same
@@ -197,10 +198,15 @@ def fit_passages(model, y, theta_init, steps, stride=1, iterations=40, return_in
 
         mu, root = (np.zeros((1, model.n)), np.empty(0)) if prior is None else (
             np.atleast_2d(np.asarray(prior[0], dtype=float)), np.sqrt(np.asarray(prior[1], dtype=float)))
-        theta, cost = lm_fits(spec, theta, Ak, y, 1.0 / np.sqrt(model.R), mu, root,
-                              np.inf if gamma is None else gamma, None if lo is None else (lo, hi), iterations, tol)
+        # a least-squares fit's information is the loop's last normal matrix (a Huber fit's wants the Jacobian)
+        info = np.empty((B, model.n, model.n)) if return_information and gamma is None else None
+        theta, cost, _ = lm_fits(spec, theta, Ak, y, 1.0 / np.sqrt(model.R), mu, root,
+                                 np.inf if gamma is None else gamma, None if lo is None else (lo, hi), iterations,
+                                 tol, info)
         if not return_information:
             return theta, cost
+        if info is not None:
+            return theta, cost, info
         info = []
         for start in range(0, B, rows):   # the information's Jacobians in chunks of rows
             part = slice(start, start + rows)
@@ -333,8 +339,10 @@ def _levenberg_marquardt(problem, theta, iterations, tol, lo, hi):
     """Damped Gauss-Newton steps of every fit of ``problem`` from ``theta`` (B, n), projected on ``[lo, hi]``.
 
     A fit that stalled three times in a row (an accepted step gaining less than ``tol`` relative, or a
-    rejected one at a damping of 1e6 or more) is done: only the others are stepped, so the late iterations
-    of a few slow fits do not cost a full batch.  Returns the states, costs, residuals, propagated states and
+    rejected one at a damping of 1e6 or more or whose linearised model promised less than ``tol`` relative:
+    MINPACK's ``ftol`` test, a fit at its minimum to rounding, where a step is as often rejected as accepted)
+    is done: only the others are stepped, so the late iterations of a few slow fits do not cost a full
+    batch.  Returns the states, costs, residuals, propagated states and
     (a fused model) Jacobians at the solution.
     """
     B, n = theta.shape
@@ -361,6 +369,8 @@ def _levenberg_marquardt(problem, theta, iterations, tol, lo, hi):
         trial = theta[a] + step
         if lo is not None:   # projected steps: the fit stays physical (e.g. the source in the water)
             trial = np.clip(trial, lo, hi)
+        d = trial - theta[a]                                # the linearised model's gain -(2 g.d + d^T N d)
+        pred = -np.einsum("bp,bp->b", d, 2.0 * g + np.einsum("bpq,bq->bp", JtJ, d))
         r_t, X_t, H_t = problem.residual(trial, a)
         cost_t = problem.cost(r_t)
         better = np.isfinite(cost_t) & (cost_t < cost[a])
@@ -373,7 +383,7 @@ def _levenberg_marquardt(problem, theta, iterations, tol, lo, hi):
             Hs[ok] = H_t[better]
         cost[ok] = cost_t[better]
         lam[a] = np.clip(np.where(better, lam[a] / 3.0, lam[a] * 5.0), 1e-9, 1e9)
-        stalled = np.where(better, gain < tol, lam[a] >= 1e6)
+        stalled = np.where(better, gain < tol, (lam[a] >= 1e6) | (pred <= tol * np.maximum(cost[a], 1e-300)))
         stall[a] = np.where(stalled, stall[a] + 1, 0)
     return theta, cost, r, X, Hs
 

@@ -25,40 +25,46 @@ from shipsense.trackers.compiled_linalg import solve_in_place
 from shipsense.trackers.measurement import _h_jac, _loop_jit, _wrap
 
 
-def lm_fits(spec, theta, Ak, y, w, mu, root, gamma, bounds, iterations, tol):
+def lm_fits(spec, theta, Ak, y, w, mu, root, gamma, bounds, iterations, tol, information=None):
     """Fit every row of ``theta`` (B, n) (modified in place; returned with the costs (B,)).
 
     ``Ak`` (B or 1, K, n, n) transitions to the fitted samples, ``y`` (B or 1, K, m) internal units (NaN =
     missing), ``w`` (m,) whitening, ``mu`` (B or 1, n) and ``root`` (n,) the prior's mean and square-root
     information (``root`` empty: no prior), ``gamma`` the Huber threshold (``inf``: least squares),
-    ``bounds`` ``(lo, hi)`` (n,) or None.
+    ``bounds`` ``(lo, hi)`` (n,) or None.  Also returns each fit's number of cost evaluations (B,) (its start
+    and one per step tried).  ``information`` (B, n, n), optional, receives each fit's normal matrix ``J^T W J``
+    at its solution (with the prior's ``root^2``; ``W`` the Huber weights): the Gauss-Newton information of a
+    least-squares fit.
     """
     B, n = theta.shape
     present = np.isfinite(y)
     y0 = np.where(present, y, 0.0)
     lo, hi = (np.empty(0), np.empty(0)) if bounds is None else (np.asarray(b, dtype=float) for b in bounds)
     cost = np.empty(B)
+    evaluations = np.zeros(B, dtype=np.int64)
     Ak = np.ascontiguousarray(Ak, dtype=float)
     args = (spec, theta, Ak, y0, present, np.ascontiguousarray(w, dtype=float),
             np.ascontiguousarray(mu, dtype=float), np.ascontiguousarray(root, dtype=float), float(gamma), lo, hi,
-            int(iterations), float(tol), _constant_velocity(Ak), cost)
+            int(iterations), float(tol), _constant_velocity(Ak), cost, evaluations,
+            np.empty((0, n, n)) if information is None else information)
     in_chunks(lambda b_lo, b_hi: _lm_kernel(*args, b_lo, b_hi), B, split_min=16)
-    return theta, cost
+    return theta, cost, evaluations
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
-def _lm_kernel(spec, theta, Ak, y, present, w, mu, root, gamma, lo, hi, iterations, tol, cv, cost, b_lo, b_hi):
+def _lm_kernel(spec, theta, Ak, y, present, w, mu, root, gamma, lo, hi, iterations, tol, cv, cost, evaluations, info,
+               b_lo, b_hi):
     """:func:`lm_fits` of rows ``b_lo:b_hi`` (allocates the scratch; the loop is :func:`_lm_loop`)."""
     n, m = theta.shape[1], y.shape[2]
-    _lm_loop(spec, theta, Ak, y, present, w, mu, root, gamma, lo, hi, iterations, tol, cv, cost, b_lo, b_hi,
-             np.empty((6, n)), np.empty((4, n, n)), np.empty(m), np.empty((m, n)), np.empty(3), np.empty(3),
+    _lm_loop(spec, theta, Ak, y, present, w, mu, root, gamma, lo, hi, iterations, tol, cv, cost, evaluations, info,
+             b_lo, b_hi, np.empty((6, n)), np.empty((4, n, n)), np.empty(m), np.empty((m, n)), np.empty(3), np.empty(3),
              np.empty(3), np.empty((3, 3)), np.empty((3, 3)))
     return True
 
 
 @_loop_jit
-def _lm_loop(spec, theta, Ak, y, present, w, mu, root, gamma, lo, hi, iterations, tol, cv, cost, b_lo, b_hi,
-             vec, mat, yhat, H, r3, m3, Bf, dBq, dBm):
+def _lm_loop(spec, theta, Ak, y, present, w, mu, root, gamma, lo, hi, iterations, tol, cv, cost, evaluations, info,
+             b_lo, b_hi, vec, mat, yhat, H, r3, m3, Bf, dBq, dBm):
     n = theta.shape[1]
     th, tt, g, gt, x, row = vec[0], vec[1], vec[2], vec[3], vec[4], vec[5]
     N, Nt, M = mat[0], mat[1], mat[2]
@@ -68,6 +74,7 @@ def _lm_loop(spec, theta, Ak, y, present, w, mu, root, gamma, lo, hi, iterations
             tt[a] = th[a]
         c = 0.0
         lam = 1e-2
+        pred = 0.0
         stall = 0
         for it in range(iterations + 1):           # 0: the start's cost and normal equations; then the steps
             if it > 0:
@@ -83,9 +90,17 @@ def _lm_loop(spec, theta, Ak, y, present, w, mu, root, gamma, lo, hi, iterations
                     tt[a] += th[a]
                     if lo.size > 0:
                         tt[a] = min(max(tt[a], lo[a]), hi[a])
+                pred = 0.0                           # the linearised model's gain -(2 g.d + d^T N d), d = tt - th
+                for p in range(n):
+                    dp = tt[p] - th[p]
+                    acc = 2.0 * g[p]
+                    for q in range(n):
+                        acc += N[p, q] * (tt[q] - th[q])
+                    pred -= dp * acc
             # (one call site: the measurement kernel it inlines is compiled once)
             ct = _normal(spec, tt, b, Ak, y, present, w, mu, root, gamma, cv, Nt, gt, x, row, yhat, H, r3, m3, Bf,
                          dBq, dBm)
+            evaluations[b] += 1
             if it == 0:
                 c = ct
                 for p in range(n):
@@ -103,10 +118,13 @@ def _lm_loop(spec, theta, Ak, y, present, w, mu, root, gamma, lo, hi, iterations
                     for q in range(n):
                         N[p, q] = Nt[p, q]
             lam = min(max(lam / 3.0 if better else lam * 5.0, 1e-9), 1e9)
-            stalled = gain < tol if better else lam >= 1e6
+            stalled = gain < tol if better else (lam >= 1e6 or pred <= tol * max(c, 1e-300))
             stall = stall + 1 if stalled else 0
         for a in range(n):
             theta[b, a] = th[a]
+            if info.shape[0] > 0:
+                for q in range(n):
+                    info[b, a, q] = N[a, q]
         cost[b] = c
 
 

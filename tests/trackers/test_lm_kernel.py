@@ -149,3 +149,31 @@ def test_no_fits_give_empty_results_and_a_refit_from_no_finite_start_fails_its_t
     assert theta.shape == (0, model.n) and cost.shape == (0,) and info.shape == (0, model.n, model.n)
     fits = refit_window(model, np.ones((2, 10, model.m)), np.full((2, 3, model.n), np.nan), keep=2)
     assert np.isinf(fits.chi2).all() and not fits.fit_ok.any()
+
+
+@pytest.mark.parametrize("name, huber", [("S2", None), ("S2", 1.345), ("S1-P2", None)])
+def test_a_fit_at_its_minimum_stops_at_once(monkeypatch, name, huber):
+    """Restarted at its own solution, a fit is done after three steps (its start and three evaluations): at a
+    minimum a step is rejected as often as accepted, by rounding, and a rejected step whose linearised model
+    promised less than ``tol`` counts as stalled (MINPACK's ftol test).  Before, the rejections climbed the
+    damping from 1e-2 to 1e6 first (a dozen evaluations, 30 % of the environments' fits at the cap of 40).
+    In both loops; the numpy loop's evaluations counted through its problem."""
+    from shipsense.trackers import lm_kernel
+    from shipsense.trackers.measurement import kernel_of
+
+    model, y, _, theta0 = _problem(name, 5, 3, 24)
+    prior = depth_prior(model, 1.0)
+    first, _ = fit_passages(model, y, theta0, y.shape[1], prior=prior, huber=huber)
+    Ak = batchfit.powers(model.A, y.shape[1])[None]
+    mu, root = (np.zeros((1, model.n)), np.empty(0)) if prior is None else (np.atleast_2d(prior[0]), np.sqrt(prior[1]))
+    gamma = np.inf if huber is None else huber
+    _, _, evaluations = lm_kernel.lm_fits(kernel_of(model), first.copy(), Ak, y, 1.0 / np.sqrt(model.R), mu, root,
+                                          gamma, getattr(model, "state_bounds", None), 40, 1e-9)
+    assert np.all(evaluations <= 4), evaluations
+    count = []
+    residual = batchfit._Passages.residual
+    monkeypatch.setattr(batchfit._Passages, "residual", lambda self, th, idx: count.append(len(th)) or
+                        residual(self, th, idx))
+    monkeypatch.setattr(batchfit, "kernel_of", lambda model: None)
+    fit_passages(model, y, first.copy(), y.shape[1], prior=prior, huber=huber)
+    assert sum(count) <= 4 * len(first), count
