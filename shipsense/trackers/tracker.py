@@ -78,7 +78,7 @@ from shipsense.trackers.batchfit import Huber, transitions
 from shipsense.trackers.consistency import quantile_table, window_test
 from shipsense.trackers.filters import get_filter
 from shipsense.trackers.filters._core import Belief, symmetrize
-from shipsense.trackers.initialiser import depth_prior, window_fits
+from shipsense.trackers.initialiser import depth_prior, grid_stride_for, window_fits
 from shipsense.trackers.restarts import due, refit_window
 from shipsense.trackers.seeding import seed_hypotheses
 from shipsense.trackers.selection import report
@@ -647,6 +647,7 @@ class Tracker:
         o = self.options
         regular = np.allclose(taus, np.arange(taus.shape[1]) * self.model.period, rtol=0, atol=1e-9)
         return window_fits(self.model, yw, **self._grid, taus=None if regular else taus, keep=o.keep_init,
+                           grid_stride=grid_stride_for(yw.shape[1], nominal=self.window),
                            distinct_m=o.distinct_m, z_std=o.z_std, refine=o.refine, gof=o.gof,
                            explore_samples=o.explore_samples, huber=self.huber)
 

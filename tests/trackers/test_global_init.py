@@ -348,7 +348,8 @@ def test_distinct_rows_of_a_grid_walks_as_deep_as_its_picks_need():
 
 def test_the_grid_fit_equals_a_least_squares_solve_per_candidate(monkeypatch):
     """Bearings (wrapped residuals against non-zero offsets), missing samples (a few: the window's normal
-    matrix less theirs; most: the present ones'; none) and the clamp, candidate by candidate against numpy's
+    matrix less theirs; most: the present ones'; none: the Gram matrix's ridge inverses) and the clamp,
+    candidate by candidate against numpy's
     solve of the masked normal equations; passages in chunks, alone, and candidates on one thread give the
     same numbers."""
     from shipsense.trackers import initialiser
@@ -375,6 +376,7 @@ def test_the_grid_fit_equals_a_least_squares_solve_per_candidate(monkeypatch):
     monkeypatch.setenv("SHIPSENSE_THREADS", "1")
     np.testing.assert_array_equal(grid_fit(model, yw, Gw, off, A, True)[0], chi2)
     np.testing.assert_array_equal(grid_fit(model, yw[1:2], Gw, off, A, True)[0], chi2[1:2])   # alone
+    assert np.isfinite(yw[2]).all()
     for r in range(R):
         present = np.isfinite(yw[r])
         for c in range(0, C, 7):
@@ -390,6 +392,28 @@ def test_the_grid_fit_equals_a_least_squares_solve_per_candidate(monkeypatch):
     with pytest.raises(ValueError, match="grid terms of 6 field and 1 bearing channels for 600 candidates do not "
                                          "fit this model \\(3 and 0\\)"):
         grid_fit(model_from_scenario("S0"), yw[..., :3], Gw, off, A, True)          # another model's terms
+
+
+def test_grid_terms_keep_their_gram_matrices_inverses():
+    """grid_terms' Gram matrices cannot be made writeable and carry their ridge inverses: grid_fit with them
+    gives what it gives with a copy (whose inverses it computes per call), bit for bit, on windows with every
+    sample present and with some missing."""
+    from shipsense.trackers import initialiser
+    from shipsense.trackers.initialiser import candidate_grid, grid_fit, grid_terms, ridge_inverses
+
+    model = model_from_scenario(load_scenario("S2"))
+    grid = candidate_grid(model, [60.0, 120.0], np.arange(0.0, 360.0, 30.0), np.arange(0.0, 360.0, 60.0), [5.0])
+    G, off, A = grid_terms(model, grid, 14, 2)
+    with pytest.raises(ValueError):
+        A.flags.writeable = True
+    np.testing.assert_array_equal(initialiser._INVERSES[id(A)][1], ridge_inverses(A))
+    np.testing.assert_allclose(ridge_inverses(A) @ (A + 1e-9 * np.eye(3)), np.broadcast_to(np.eye(3), A.shape),
+                               atol=1e-6)
+    sim = simulate(load_scenario("S2"), runs=3, seed=5, random=True)
+    yw = sim.measurements[:, 10:24:2] / model.y_scale
+    yw[1, 2, :3] = np.nan
+    for a, b in zip(grid_fit(model, yw, G, off, A, False), grid_fit(model, yw, G, off, A.copy(), False)):
+        np.testing.assert_array_equal(a, b)
 
 
 def test_fits_and_grid_in_chunks_of_passages_equal_one_batch(monkeypatch):
