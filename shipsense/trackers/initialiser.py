@@ -832,17 +832,14 @@ def refine_minima(model, yfit, starts, *, stages, keep, distinct_m, prior, gof, 
 
 def window_fits(model, yfit, *, ranges, speeds, taus=None, bearing_step_deg=15.0, course_step_deg=30.0,
                 grid_samples=16, keep=5, distinct_m=15.0, source_z=None, z_std=None, refine=None, gof=0.01,
-                explore_samples=None, huber=None, grid_stride=None):
+                explore_samples=None, huber=None):
     """Global fits of given windows ``yfit`` (R, W, m) (internal units, NaN = missing): the grid search on
-    every ``grid_stride``-th sample (default :func:`grid_stride_for` ``(W, grid_samples)``: about
-    ``grid_samples`` of them; the tracker passes its nominal window's), then :func:`refine_minima`.
-    ``taus`` (R, W), optional: the samples' times (s) after each window's first (irregular sampling; the grid
-    search then uses the nominal steps, the fits the times).  Options as for :func:`global_init`; returns
-    :class:`WindowFits`."""
+    every ``W // grid_samples``-th sample (at least ``grid_samples`` of them, fewer than twice as many), then
+    :func:`refine_minima`.  ``taus`` (R, W), optional: the samples' times (s) after each window's first
+    (irregular sampling; the grid search then uses the nominal steps, the fits the times).  Options as for
+    :func:`global_init`; returns :class:`WindowFits`."""
     R, W, _ = yfit.shape
-    stride = grid_stride_for(W, grid_samples) if grid_stride is None else int(grid_stride)
-    if stride < 1:
-        raise ValueError(f"grid_stride must be a positive integer, got {grid_stride!r}")
+    stride = max(1, W // int(grid_samples))
     grid = candidate_grid(model, ranges, np.arange(0.0, 360.0, bearing_step_deg),
                           np.arange(0.0, 360.0, course_step_deg), speeds, source_z)
     stages = _refine_stages(refine, keep)
@@ -851,17 +848,6 @@ def window_fits(model, yfit, *, ranges, speeds, taus=None, bearing_step_deg=15.0
     return refine_minima(model, yfit, starts, stages=stages, keep=keep,
                          distinct_m=distinct_m, prior=depth_prior(model, z_std, source_z), gof=gof,
                          explore_samples=explore_samples, taus=taus, huber=huber)
-
-
-def grid_stride_for(W, grid_samples=16, nominal=None):
-    """The grid search's sample stride for a ``W``-sample window: about ``grid_samples`` samples of a
-    ``nominal``-sample window (default ``W``; ``round(nominal / grid_samples)``), but no more than keeps 8 of
-    this one's.  A tracker passes its nominal window, so that its windows share one grid's terms (each stride
-    is a grid basis of its own), and a short window -- the signal past its peak before the window completed --
-    still has 8 grid samples.  (It was ``W // grid_samples``, which kept up to twice as many: all 30 of S2's
-    30, the grid's projection twice the cost.)"""
-    stride = max(1, round((W if nominal is None else nominal) / grid_samples))
-    return max(1, min(stride, W // 8))
 
 
 def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, course_step_deg=30.0,

@@ -78,7 +78,7 @@ from shipsense.trackers.batchfit import Huber, transitions
 from shipsense.trackers.consistency import quantile_table, window_test
 from shipsense.trackers.filters import get_filter
 from shipsense.trackers.filters._core import Belief, symmetrize
-from shipsense.trackers.initialiser import depth_prior, grid_stride_for, window_fits
+from shipsense.trackers.initialiser import depth_prior, window_fits
 from shipsense.trackers.restarts import due, refit_window
 from shipsense.trackers.seeding import seed_hypotheses
 from shipsense.trackers.selection import report
@@ -96,9 +96,9 @@ BANK_INFLATION_MAX = 100.0   # largest chi-square inflation a failed fit's bank 
 class TrackerOptions:
     """Options of :class:`Tracker` (defaults: the project's measured settings, EXPERIMENTS.md).
 
-    ``window_s``, ``snr_start``, ``refine``, ``explore_samples``, ``z_std`` and
-    ``rescan`` default to the global initialiser's settings for the array's
-    family (:func:`family_options`).
+    ``window_s``, ``snr_start``, ``refine``, ``explore_samples``, ``grid_samples``,
+    ``z_std`` and ``rescan`` default to the global initialiser's settings for
+    the array's family (:func:`family_options`).
     """
 
     method: str = "tracker"
@@ -108,6 +108,7 @@ class TrackerOptions:
     snr_start: float | None = None
     refine: tuple | int | None = None
     explore_samples: int | None = None
+    grid_samples: int | None = None
     z_std: float | None = None
     keep_init: int = 5
     keep: int = 3
@@ -144,6 +145,9 @@ class TrackerOptions:
                              f"got {self.consistency_window!r}")
         if not (np.isfinite(self.consistency_level) and 0.0 < self.consistency_level < 1.0):
             raise ValueError(f"consistency_level must lie strictly between 0 and 1, got {self.consistency_level!r}")
+        if self.grid_samples is not None and not (
+                isinstance(self.grid_samples, int | np.integer) and self.grid_samples >= 1):
+            raise ValueError(f"grid_samples must be a positive integer or None, got {self.grid_samples!r}")
         if self.keep > self.keep_init:
             raise ValueError(f"keep ({self.keep}) cannot exceed keep_init ({self.keep_init})")
 
@@ -152,7 +156,9 @@ def family_options(model, scenario):
     """The global initialiser's settings for an array's family, as measured on the wide-prior study
     (EXPERIMENTS.md): envelope electrodes start at SNR 50 with the bank's depth prior and refine (10, 30, 60)
     grid minima; one magnetometer starts at SNR 50 and explores (20, 60) minima on 15 samples; several
-    magnetometers start at SNR 5 and refine (5, 20).  The window lasts 15 s, 7.5 s for one magnetometer:
+    magnetometers start at SNR 5 and refine (5, 20), their grid searched on every second sample of the
+    15 s window (``grid_samples`` 15 of S2's 30; the others at least 16: 19 of S0's 75, where 15 lost two of
+    1,000 faulty passages, and 19 of S1's 38; EXPERIMENTS.md).  The window lasts 15 s, 7.5 s for one magnetometer:
     at SNR 400 a 15 s window left 5 of 60 S0 passages (seed 100) still initialising when they ended, and
     7.5 s converged on 98 % of them (87 % with 15 s) with the refits correcting the early fits; on the wide
     study's one-magnetometer passages 7.5 s converged on 98 of 100, 15 s on 97.  The single magnetometer's
@@ -170,12 +176,12 @@ def family_options(model, scenario):
     if "electrode" in types:
         z_std = scenario.tracker.bank.z_std if scenario.tracker is not None and scenario.tracker.bank else 1.0
         return {"snr_start": 50.0, "refine": (10, 30, 60), "explore_samples": None, "z_std": z_std, "window_s": 15.0,
-                "rescan": False}
+                "rescan": False, "grid_samples": 16}
     if types.count("magnetometer") == 1:
         return {"snr_start": 50.0, "refine": (20, 60), "explore_samples": 15, "z_std": None, "window_s": 7.5,
-                "rescan": True}
+                "rescan": True, "grid_samples": 16}
     return {"snr_start": 5.0, "refine": (5, 20), "explore_samples": None, "z_std": None, "window_s": 15.0,
-            "rescan": False}
+            "rescan": False, "grid_samples": 15}
 
 
 @dataclass(frozen=True)
@@ -647,7 +653,7 @@ class Tracker:
         o = self.options
         regular = np.allclose(taus, np.arange(taus.shape[1]) * self.model.period, rtol=0, atol=1e-9)
         return window_fits(self.model, yw, **self._grid, taus=None if regular else taus, keep=o.keep_init,
-                           grid_stride=grid_stride_for(yw.shape[1], nominal=self.window),
+                           grid_samples=o.grid_samples,
                            distinct_m=o.distinct_m, z_std=o.z_std, refine=o.refine, gof=o.gof,
                            explore_samples=o.explore_samples, huber=self.huber)
 

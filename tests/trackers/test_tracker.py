@@ -337,3 +337,37 @@ def test_one_magnetometer_rescans_and_leaves_a_wrong_basin():
     truth = tr.model.state_from_truth(sim.truth[79:80])
     err = np.hypot(*(res.estimates[0, :, :2] - truth[0, :, :2]).T)
     assert err[200] < 10.0 and err[-30:].max() < 10.0, (err[200], err[-30:].max())
+
+
+@pytest.mark.parametrize("bad, match", [({"window_s": 0.0}, "window_s must be a positive number"),
+                                        ({"grid_samples": 0}, "grid_samples must be a positive integer"),
+                                        ({"grid_samples": 7.5}, "grid_samples must be a positive integer"),
+                                        ({"consistency_window": 1}, "consistency_window must be an integer"),
+                                        ({"keep": 6}, "keep \\(6\\) cannot exceed keep_init \\(5\\)")])
+def test_bad_options_raise_one_error_naming_the_option(bad, match):
+    with pytest.raises(ValueError, match=match):
+        Tracker("S2", **bad)
+
+
+def test_the_grid_search_samples_follow_the_array_family():
+    """Several magnetometers search their grid on every second sample of S2's 30-sample window (15); one
+    magnetometer and the electrodes keep at least 16 (EXPERIMENTS.md: 15 of S0's 75 lost two of 1,000 faulty
+    passages); an explicit value wins, and window_fits is called with it."""
+    from shipsense.trackers import tracker as tracker_module
+
+    assert Tracker("S2").options.grid_samples == 15
+    assert Tracker("S0").options.grid_samples == 16
+    assert Tracker("S1-P2").options.grid_samples == 16
+    sc = load_scenario("S2")
+    sim = simulate(sc, runs=1, seed=2, random=True)
+    seen = []
+    window_fits = tracker_module.window_fits
+
+    def spy(model, yw, **kw):
+        seen.append(kw["grid_samples"])
+        return window_fits(model, yw, **kw)
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(tracker_module, "window_fits", spy)
+        Tracker(sc, grid_samples=10).track(sim.times, sim.measurements)
+    assert seen and set(seen) == {10}
