@@ -506,9 +506,12 @@ class Tracker:
         d, T = dt[runs], self.model.period
         regular = all(abs(step - T) <= 1e-9 * T for step in d.tolist())
         model = None if regular else self.filter_model.stepped(np.repeat(d, H))
-        if self._compiled is not None and self._compiled.applies(runs) and self._compiled_step(runs, yi, out,
-                                                                                                model):
-            return
+        if self._compiled is not None and self._compiled.applies(runs):
+            runs = self._compiled_step(runs, yi, out, model)          # (those it did not step)
+            if runs.size == 0:
+                return
+            if model is not None:
+                model = self.filter_model.stepped(np.repeat(dt[runs], H))
         ysi = yi * self.model.y_scale
         inn = self.bank.step(ysi, predict=True, runs=runs, model=model)
         sel = np.argmax(self.bank.cum[runs], axis=1)              # (the bank's selected(), of these runs)
@@ -522,8 +525,9 @@ class Tracker:
         out.status[failed] = INCONSISTENT
 
     def _compiled_step(self, runs, yi, out, stepped=None):
-        """:meth:`_step` of passages ``runs`` in one compiled call (``stepped``: the filter model with their
-        transitions, irregular sampling); False (nothing done) where an element's update failed."""
+        """:meth:`_step` of passages ``runs`` in compiled calls (``stepped``: the filter model with their
+        transitions, irregular sampling); returns the passages it did not step (an element's update failed:
+        nothing of theirs written)."""
         o, h = self.options, self.huber
         runs = np.asarray(runs, dtype=np.int64)
         test = bool(o.consistency_window and o.method == "tracker")
@@ -534,12 +538,13 @@ class Tracker:
         selection = (self.model.x_scale, o.method == "tracker", float(o.report_nats), float(o.report_distance_m),
                      self.excess, out.estimate, out.cov, self.own, out.gap_nats, out.ambiguous, out.hypotheses,
                      out.selected)
-        if not self._compiled(runs, yi, self.model.y_scale, self.bank, self.nis, test, consistency, selection,
-                              out.status, self.trusted, (TRACKING, INCONSISTENT), stepped):
-            return False
-        self.bank.belief = Belief(*self.bank.belief)   # (as BankState.step leaves it)
-        self.bank.steps += 1
-        return True
+        left = self._compiled(runs, yi, self.model.y_scale, self.bank, self.nis, test, consistency, selection,
+                              out.status, self.trusted, (TRACKING, INCONSISTENT), stepped)
+        if left.size < runs.size:
+            self.bank.belief = Belief(*self.bank.belief)   # (as BankState.step leaves it)
+        if left.size == 0:
+            self.bank.steps += 1                           # (else the step by step path counts the sample)
+        return left
 
     def _consistency(self, runs, yi, inn, sel):
         """The windowed innovation test (:mod:`~shipsense.trackers.consistency`) of passages ``runs`` with the

@@ -11,6 +11,11 @@ same sequence in one call, with the same kernels in the same order, so the numbe
 bit (tests/trackers/test_tracker_step.py; tracked passages compared with the step by step path), with
 the bank's own transition or, for irregular sampling, one per passage (the model's ``stepped``).
 
+A repeat that fills a bank (a cumulative log-likelihood of -inf: fewer distinct fits than hypotheses) is
+neither predicted nor updated: it stays -inf until the bank restarts and nothing reported reads it, so its
+mean and factor are kept as they are (the step by step path steps it; the outputs are the same).  Many
+passages' steps are split over the CPUs (:data:`THREAD_ROWS`; a passage's numbers do not depend on the split).
+
 What stays in numpy: the hypotheses' covariances ``L L^T`` the time update starts from (numpy's matmul,
 whose sums a compiled loop does not reproduce to the last bit).  What is not taken here (the caller then
 runs the step by step path): a batch large enough for the filters' threads, a model without a compiled
@@ -27,7 +32,7 @@ import numpy as np
 from numba import njit
 
 from shipsense import numba_cache
-from shipsense.parallel import SPLIT_MIN
+from shipsense.parallel import SPLIT_MIN, in_chunks
 from shipsense.trackers.consistency import window_test
 from shipsense.trackers.filters.fused import (
     _UPDATE_KERNELS,
@@ -62,33 +67,78 @@ def _step_kernel_for(code):
         n = mean_all.shape[1]
         m = yi.shape[1]
         B = R * H
-        X = np.empty((B, n))
-        Y = np.empty((B, m))
+        # the live hypotheses: a cumulative log-likelihood of -inf (a repeat that fills a bank: no weight) stays
+        # -inf until the bank restarts, and nothing reported reads such a hypothesis (selection.report), so
+        # only the others are predicted and updated (in the environments 79 % of the rows are such repeats)
+        where = np.empty(B, np.int64)               # a row's place among the live ones, -1 for a repeat
+        nl = 0
+        for p in range(R):
+            for k in range(H):
+                if cum[runs[p], k] == -np.inf:
+                    where[p * H + k] = -1
+                else:
+                    where[p * H + k] = nl
+                    nl += 1
+        X = np.empty((nl, n))
+        Y = np.empty((nl, m))
+        src_l = np.empty((nl, n, n))
+        A_l = np.empty((nl if A.shape[0] > 1 else 1, n, n))
+        Q_l = np.empty((nl if Q.shape[0] > 1 else 1, n, n))
+        if A.shape[0] == 1:
+            A_l[0] = A[0]
+        if Q.shape[0] == 1:
+            Q_l[0] = Q[0]
         for p in range(R):
             r = runs[p]
             for k in range(H):
                 b = p * H + k
+                i = where[b]
+                if i < 0:
+                    continue
                 for a in range(n):
-                    X[b, a] = mean_all[r * H + k, a]
+                    X[i, a] = mean_all[r * H + k, a]
                 for j in range(m):
-                    Y[b, j] = (yi[r, j] * ys_in[j]) / ys_bank[j]
-        x, P, L = np.empty((B, n)), np.empty((B, n, n)), np.zeros((B, n, n))
-        ok = np.empty(B, np.bool_)
-        if not _PREDICT(X, src, A, Q, sqQ, False, x, P, L, ok):  # noqa: F821 - the copy's global
+                    Y[i, j] = (yi[r, j] * ys_in[j]) / ys_bank[j]
+                src_l[i] = src[b]
+                if A.shape[0] > 1:
+                    A_l[i] = A[b]
+                if Q.shape[0] > 1:
+                    Q_l[i] = Q[b]
+        x, P, L = np.empty((nl, n)), np.empty((nl, n, n)), np.zeros((nl, n, n))
+        ok = np.empty(nl, np.bool_)
+        if not _PREDICT(X, src_l, A_l, Q_l, sqQ, False, x, P, L, ok):  # noqa: F821 - the copy's global
             return False
-        mean_out, P_out, L_out = np.empty((B, n)), np.empty((B, n, n)), np.zeros((B, n, n))
-        eps, S = np.empty((B, m)), np.empty((B, m, m))
-        loglik, nis, cnt = np.empty(B), np.empty(B), np.empty(B, np.int64)
+        mean_l, P_l, L_l = np.empty((nl, n)), np.empty((nl, n, n)), np.zeros((nl, n, n))
+        eps_l, S_l = np.empty((nl, m)), np.empty((nl, m, m))
+        loglik_l, nis_l, cnt_l = np.empty(nl), np.empty(nl), np.empty(nl, np.int64)
         mask = np.ones((1, m), np.bool_)
         if not _UPDATE(x, L, P, Y, mask, Rm, spec, spread, center, Wm, Wc, h, gamma, iterations,  # noqa: F821
-                       n_pu, mean_out, P_out, L_out, eps, S, loglik, nis, cnt, ok):
+                       n_pu, mean_l, P_l, L_l, eps_l, S_l, loglik_l, nis_l, cnt_l, ok):
             return False
+        # every row again: a repeat keeps its mean and factor and gains no log-likelihood
+        mean_out, L_out = np.empty((B, n)), np.empty((B, n, n))
+        eps, S = np.full((B, m), np.nan), np.full((B, m, m), np.nan)
+        loglik, nis, cnt = np.zeros(B), np.full(B, np.nan), np.zeros(B, np.int64)
+        for p in range(R):
+            r = runs[p]
+            for k in range(H):
+                b = p * H + k
+                i = where[b]
+                if i < 0:
+                    mean_out[b] = mean_all[r * H + k]
+                    L_out[b] = chol_all[r * H + k]
+                    continue
+                mean_out[b], L_out[b], eps[b], S[b] = mean_l[i], L_l[i], eps_l[i], S_l[i]
+                loglik[b], nis[b], cnt[b] = loglik_l[i], nis_l[i], cnt_l[i]
         if lo.size > 0:     # the means into the state bounds, as np.clip (kept as they are when none moves)
             clipped = np.empty((B, n))
             same = True
             for b in range(B):
                 for a in range(n):
                     v = mean_out[b, a]
+                    if where[b] < 0:                     # (a repeat is kept as it is)
+                        clipped[b, a] = v
+                        continue
                     t = lo[a] if v < lo[a] else v        # (np.clip's order: a NaN, or a -0.0 at 0, kept)
                     t = hi[a] if t > hi[a] else t
                     clipped[b, a] = t
@@ -227,6 +277,9 @@ def _prepare(act, t, y, ys, phase, last_t, n, y_hist, t_hist, cons_now, field, s
     return 0, 0, yi, dt, snr, starts, runs, gap
 
 
+THREAD_ROWS = 96
+"""Hypothesis rows (about 0.3 ms of a step) from which :class:`TrackerStep` splits its passages over the CPUs."""
+
 _STEP_KERNELS = {code: _step_kernel_for(code) for code in (UKF, CDKF, HUBER, EKF, PUEKF)}
 """Each covariance-form filter's compiled step, by its code (compiled at its first call)."""
 
@@ -263,19 +316,34 @@ class TrackerStep:
         """Step passages ``runs`` (int64) with samples ``yi`` (P, m) (internal units of the tracker's model,
         whose scales are ``ys_in``) and the bank's transition, or ``stepped``'s (a model with one per hypothesis,
         irregular sampling); ``consistency`` and ``selection`` the arguments of window_test and report after
-        the innovations and before the outputs; True when done, False to take the step by step path
-        (nothing written)."""
+        the innovations and before the outputs.  Returns the passages not stepped, for the step by step path
+        (nothing of theirs written): none when done, all of them for a pruned bank.
+
+        From :data:`THREAD_ROWS` hypothesis rows on, the passages are stepped in contiguous chunks on the CPUs
+        (:func:`~shipsense.parallel.in_chunks`): a passage's step reads and writes only its own rows and
+        entries, so a split changes no number; a chunk in which an element failed writes nothing and its
+        passages are returned."""
         H = self.H
         if len(bank.idx) != bank.R * H:
-            return False                    # (a pruned bank: BankState.step says why)
+            return runs                     # (a pruned bank: BankState.step says why)
         rows = (runs[:, None] * H + np.arange(H)).ravel()
         C = bank.belief.chol[rows]
         src = C @ np.swapaxes(C, -1, -2)
         A, Q = self.fixed[:2] if stepped is None else (_per_element(a, (rows.size,), bank.model.n)
                                                        for a in (stepped.A, stepped.Q))
-        return self.kernel(runs, H, yi, ys_in, self.ys_bank, bank.belief.mean, bank.belief.chol, src, A, Q,
-                           *self.fixed[2:], *self.bounds, bank.cum, nis_hist, test, *consistency, *selection, status,
-                           trusted, *codes)
+        per_row = A.shape[0] > 1
+
+        def chunk(lo, hi):
+            part = slice(lo * H, hi * H)
+            return self.kernel(runs[lo:hi], H, yi, ys_in, self.ys_bank, bank.belief.mean, bank.belief.chol,
+                               src[part], A[part] if per_row else A, Q[part] if Q.shape[0] > 1 else Q,
+                               *self.fixed[2:], *self.bounds, bank.cum, nis_hist, test, *consistency, *selection,
+                               status, trusted, *codes)
+
+        split = max(2, -(-THREAD_ROWS // H))
+        edges = in_chunks(lambda lo, hi: (lo, hi, chunk(lo, hi)), runs.size, split_min=split)
+        left = [runs[lo:hi] for lo, hi, done in edges if not done]
+        return np.concatenate(left) if left else runs[:0]
 
 
 numba_cache.key_on_sources(globals())   # the caches follow the files these kernels are compiled from

@@ -21,9 +21,9 @@ def _track(scenario, runs, seed, compiled, samples=None, jitter=0.0, **options):
         step = trk._compiled
 
         def counting(*args):
-            done = step(*args)
-            used.append(done)
-            return done
+            left = step(*args)
+            used.append(left.size == 0)
+            return left
 
         trk._compiled = type("Counting", (), {"applies": step.applies, "__call__": staticmethod(counting)})()
     else:
@@ -81,11 +81,14 @@ def test_means_out_of_the_state_bounds_are_clipped_as_numpy_clips_them():
     for trk in pair:
         trk.bank.belief.mean[::2, p] = -50.0 / trk.model.x_scale[p]
         trk.bank.belief.mean[1::3, z] = 3.0 / trk.model.x_scale[z]
+    before = pair[0].bank.belief.mean.copy()
     a, b = (trk.update(sim.times[k], sim.measurements[:, k]) for trk in pair)
     _assert_same_sample(a, b)
     mean = pair[0].bank.belief.mean
-    assert (mean[:, p] == lo[p]).any() and (mean[:, z] == hi[z]).any()          # clipped, not just moved
-    np.testing.assert_array_equal(mean, pair[1].bank.belief.mean)
+    live = ~np.isneginf(pair[0].bank.cum.ravel())       # (a repeat, -inf, is not stepped: kept as it was)
+    assert live.any() and (mean[live, p] == lo[p]).any() and (mean[live, z] == hi[z]).any()   # clipped, not moved
+    np.testing.assert_array_equal(mean[live], pair[1].bank.belief.mean[live])
+    np.testing.assert_array_equal(mean[~live], before[~live])
 
 
 def test_a_failed_element_leaves_the_state_untouched_and_the_numpy_path_takes_the_step():
@@ -98,13 +101,60 @@ def test_a_failed_element_leaves_the_state_untouched_and_the_numpy_path_takes_th
     bank = [a.copy() for a in (trk.bank.belief.mean, trk.bank.belief.chol, trk.bank.cum)]
     out = trk._prior_sample()
     blank = [np.copy(getattr(out, f)) for f in ("estimate", "cov", "status")]
-    assert not trk._compiled_step(np.arange(2), sim.measurements[:, k] / trk.model.y_scale, out)
+    np.testing.assert_array_equal(trk._compiled_step(np.arange(2), sim.measurements[:, k] / trk.model.y_scale, out),
+                                  [0, 1])
     for name in names:
         np.testing.assert_array_equal(getattr(trk, name), before[name], err_msg=name)
     for now, was in zip((trk.bank.belief.mean, trk.bank.belief.chol, trk.bank.cum, out.estimate, out.cov,
                          out.status), bank + blank):
         np.testing.assert_array_equal(now, was)
     _assert_same_sample(*(t.update(sim.times[k], sim.measurements[:, k]) for t in pair))
+
+
+def test_passages_stepped_in_chunks_on_threads_equal_one_chunk_and_a_failed_chunk_falls_back(monkeypatch):
+    """24 passages (120 hypothesis rows, more than THREAD_ROWS): stepped in two chunks on two threads, the
+    samples equal those of one chunk on one thread, and the step by step path's, bit for bit.  With a
+    hypothesis of passage 0 broken, the first chunk writes nothing and its passages take the step by step
+    path (their samples equal that path's on those passages alone), the second chunk's passages are stepped as
+    if nothing had failed.  (The step by step path on all 24 would move every passage at rounding: its
+    Cholesky repair re-factors the whole batch.)"""
+    import copy
+
+    from shipsense.trackers import tracker_step
+
+    runs = 24
+    assert tracker_step.THREAD_ROWS <= runs * 5 < tracker_step.SPLIT_MIN
+    sim = simulate("S2", runs=runs, seed=4)
+    trackers = [Tracker("S2", passages=runs) for _ in range(3)]
+    trackers[2]._compiled = None
+    k = 0
+    while not (trackers[0].phase == 2).all():                     # (2: _RUNNING)
+        for trk, threads in zip(trackers, ("2", "1", "1")):
+            monkeypatch.setenv("SHIPSENSE_THREADS", threads)
+            trk.update(sim.times[k], sim.measurements[:, k])
+        k += 1
+    calls = []
+    kernel = trackers[0]._compiled.kernel
+    monkeypatch.setattr(trackers[0]._compiled, "kernel", lambda runs, *a: calls.append(runs.copy()) or kernel(runs, *a))
+    for j in range(k, k + 4):
+        samples = []
+        for trk, threads in zip(trackers, ("2", "1", "1")):
+            monkeypatch.setenv("SHIPSENSE_THREADS", threads)
+            samples.append(trk.update(sim.times[j], sim.measurements[:, j]))
+        _assert_same_sample(samples[0], samples[1])
+        _assert_same_sample(samples[0], samples[2])
+    assert [len(c) for c in calls] == [12] * 8                    # two chunks a sample
+    monkeypatch.setenv("SHIPSENSE_THREADS", "2")
+    broken, healthy, numpy_path = (copy.deepcopy(trackers[1]) for _ in range(3))
+    for trk in (broken, numpy_path):
+        trk.bank.belief.chol[0] = np.nan                           # passage 0's first hypothesis
+    numpy_path._compiled = None
+    t, y = sim.times[k + 4], sim.measurements[:, k + 4]
+    a, b = broken.update(t, y), healthy.update(t, y)
+    first = numpy_path.update(t, y[:12], passages=np.arange(12))
+    for f in ("estimate", "cov", "status", "gap_nats", "ambiguous", "hypotheses", "selected"):
+        np.testing.assert_array_equal(getattr(a, f)[12:], getattr(b, f)[12:], err_msg=f)
+        np.testing.assert_array_equal(getattr(a, f)[:12], getattr(first, f), err_msg=f)
 
 
 def test_a_batch_for_the_filters_threads_takes_the_step_by_step_path():
