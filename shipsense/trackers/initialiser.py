@@ -126,7 +126,7 @@ def linear_basis(model, theta, steps, stride=1):
     return _linear_basis(model, np.ascontiguousarray(theta, dtype=float), steps, stride)
 
 
-def grid_terms(model, theta, steps, stride=1):
+def grid_terms(model, theta, steps, stride=1, reserve=0):
     """The grid search's terms of candidates ``theta`` over a window of ``steps`` samples taken every
     ``stride``: whitened field-channel basis ``G`` (W', mF, C*P), bearing offsets ``off`` (W', mB, C) and the
     Gram matrices ``A`` (C, P, P) of ``G`` over the window's W' samples (every sample present).
@@ -134,16 +134,17 @@ def grid_terms(model, theta, steps, stride=1):
     ``G`` and ``off`` are window-major, so a shorter window is a prefix (a view, no copy): the last few grids'
     terms are kept for the longest window asked so far, and a longer one extends them to at least twice
     its length -- a tracker whose windows vary from passage to passage computes them a few times, not once
-    per window.  The Gram matrices of each window length asked for are kept with them, each continued from
-    the longest shorter one's (:func:`_gram_on`: the sums a fresh one would make).  Treat the results as
-    read-only.
+    per window; ``reserve`` (steps) sizes terms that must be computed for at least that window (a tracker
+    passes its longest, so that each stride is computed once).  The Gram matrices of each window length asked
+    for are kept with them, each continued from the longest shorter one's (:func:`_gram_on`: the sums a fresh
+    one would make).  Treat the results as read-only.
     """
     theta = np.ascontiguousarray(theta, dtype=float)
     with _CACHE_LOCK:
-        return _grid_terms(model, theta, steps, stride)
+        return _grid_terms(model, theta, steps, stride, reserve)
 
 
-def _grid_terms(model, theta, steps, stride):
+def _grid_terms(model, theta, steps, stride, reserve=0):
     """:func:`grid_terms` under the caches' lock."""
     frozen = _MADE.get(id(theta)) is theta                        # (candidate_grid's: its values cannot change)
     key = next((k for k, v in _TERMS_CACHE.items() if v["theta"] is theta and k[0] == id(model) and k[-1] == stride),
@@ -156,7 +157,7 @@ def _grid_terms(model, theta, steps, stride):
     if hit is not None:
         _TERMS_CACHE[key] = hit                      # the most recently used last
     if hit is None or hit["steps"] < steps:
-        longest = steps if hit is None else max(steps, 2 * hit["steps"])
+        longest = max(steps, int(reserve)) if hit is None else max(steps, int(reserve), 2 * hit["steps"])
         G, off = _grid_arrays(model, theta, longest, stride)
         hit = {"model": model, "theta": theta if frozen else None, "steps": longest, "G": G,
                "off": off, "P": len(_parameter_slots(model)), "grams": {}}
@@ -170,7 +171,8 @@ def _grid_terms(model, theta, steps, stride):
     if W not in grams:          # from the longest shorter window's: only the samples after it are added
         rows = G.shape[1]
         below = max((w for w in grams if w < W), default=0)
-        start = grams[below] if below else np.zeros((len(theta), hit["P"], hit["P"]))
+        start = grams[below].copy() if below else np.zeros((len(theta), hit["P"], hit["P"]))   # (writeable: one
+        # compiled signature of _gram_on)
         full = hit["G"].reshape(hit["G"].shape[0] * rows, hit["G"].shape[2])
         A = np.array(_gram_on(start, full, below * rows, W * rows))   # (numpy's: numba's base is not an array)
         A.flags.writeable = False
@@ -753,7 +755,7 @@ class WindowFits:
         return distinct_loglik(self.chi2, self.found)
 
 
-def grid_minima(model, yw, grid, window, stride, count, distinct_m, mid):
+def grid_minima(model, yw, grid, window, stride, count, distinct_m, mid, reserve=0):
     """The ``count`` best distinct grid candidates of each passage (R, count, n), best first, with their
     least-squares moments (:func:`grid_fit`): a candidate more than ``distinct_m`` from every better pick at
     the window's middle (``mid`` (2, n): the state's position there), the best repeated when fewer are
@@ -764,7 +766,7 @@ def grid_minima(model, yw, grid, window, stride, count, distinct_m, mid):
     chi-square and moments (C and C x P per passage) exist for a chunk of passages at a time.
     """
     slots = _parameter_slots(model)
-    G, off, A = grid_terms(model, grid, window, stride)
+    G, off, A = grid_terms(model, grid, window, stride, reserve)
     clamp = "p" in model.labels                                   # the envelope needs p >= 0
     R, C, P = yw.shape[0], len(grid), A.shape[-1]
     mid_grid = (grid @ mid.T)[None]                                                      # (1, C, 2)
@@ -832,19 +834,19 @@ def refine_minima(model, yfit, starts, *, stages, keep, distinct_m, prior, gof, 
 
 def window_fits(model, yfit, *, ranges, speeds, taus=None, bearing_step_deg=15.0, course_step_deg=30.0,
                 grid_samples=16, keep=5, distinct_m=15.0, source_z=None, z_std=None, refine=None, gof=0.01,
-                explore_samples=None, huber=None):
+                explore_samples=None, huber=None, grid_reserve=0):
     """Global fits of given windows ``yfit`` (R, W, m) (internal units, NaN = missing): the grid search on
-    every ``W // grid_samples``-th sample (at least ``grid_samples`` of them, fewer than twice as many), then
-    :func:`refine_minima`.  ``taus`` (R, W), optional: the samples' times (s) after each window's first
-    (irregular sampling; the grid search then uses the nominal steps, the fits the times).  Options as for
-    :func:`global_init`; returns :class:`WindowFits`."""
+    every ``W // grid_samples``-th sample (at least ``grid_samples`` of them, fewer than twice as many;
+    ``grid_reserve``: :func:`grid_terms`' ``reserve``), then :func:`refine_minima`.  ``taus`` (R, W),
+    optional: the samples' times (s) after each window's first (irregular sampling; the grid search then uses
+    the nominal steps, the fits the times).  Options as for :func:`global_init`; returns :class:`WindowFits`."""
     R, W, _ = yfit.shape
     stride = max(1, W // int(grid_samples))
     grid = candidate_grid(model, ranges, np.arange(0.0, 360.0, bearing_step_deg),
                           np.arange(0.0, 360.0, course_step_deg), speeds, source_z)
     stages = _refine_stages(refine, keep)
     starts = grid_minima(model, yfit[:, ::stride], grid, W, stride, stages[-1], distinct_m,
-                         _window_middle(model, W))
+                         _window_middle(model, W), grid_reserve)
     return refine_minima(model, yfit, starts, stages=stages, keep=keep,
                          distinct_m=distinct_m, prior=depth_prior(model, z_std, source_z), gof=gof,
                          explore_samples=explore_samples, taus=taus, huber=huber)

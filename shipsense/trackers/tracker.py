@@ -658,7 +658,7 @@ class Tracker:
         o = self.options
         regular = np.allclose(taus, np.arange(taus.shape[1]) * self.model.period, rtol=0, atol=1e-9)
         return window_fits(self.model, yw, **self._grid, taus=None if regular else taus, keep=o.keep_init,
-                           grid_samples=o.grid_samples,
+                           grid_samples=o.grid_samples, grid_reserve=self.window,
                            distinct_m=o.distinct_m, z_std=o.z_std, refine=o.refine, gof=o.gof,
                            explore_samples=o.explore_samples, huber=self.huber)
 

@@ -459,6 +459,11 @@ def test_the_grid_terms_serve_shorter_windows_from_a_longer_one_exactly(monkeypa
         np.testing.assert_array_equal(A, gram_reference(G0.reshape(-1, G0.shape[-1]), len(grid), 3))
         assert not (G.flags.writeable or off.flags.writeable or A.flags.writeable)
     assert {v["steps"] for v in initialiser._TERMS_CACHE.values()} == {30}    # 12 -> 30 (stride 1); 30 (stride 4)
+    initialiser._TERMS_CACHE.clear()                 # a reserve: computed once for the longest window to come
+    G = grid_terms(model, grid, 7, 2, reserve=30)[0]
+    assert G.shape[0] == 4 and [v["steps"] for v in initialiser._TERMS_CACHE.values()] == [30]
+    G30 = grid_terms(model, grid, 30, 2)[0]
+    assert np.shares_memory(G30, G) and G30.shape[0] == 15
 
 
 
