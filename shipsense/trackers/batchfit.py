@@ -24,6 +24,20 @@ def powers(A, K):
     return out
 
 
+def shared_powers(A, K):
+    """:func:`powers`, read-only and kept for the last few ``(A, K)`` (the window fits ask for the same ones at
+    every window: K matrix products each time)."""
+    A = np.ascontiguousarray(A, dtype=float)
+    return _shared_powers(A.tobytes(), A.shape, int(K))
+
+
+@lru_cache(maxsize=32)
+def _shared_powers(data, shape, K):
+    out = powers(np.frombuffer(data, dtype=float).reshape(shape), K)
+    out.flags.writeable = False
+    return out
+
+
 def transitions(model, taus):
     """Constant-velocity transitions ``A(tau)`` (..., n, n) over ``taus`` (...) seconds (negative: backwards).
 
@@ -183,7 +197,7 @@ def fit_passages(model, y, theta_init, steps, stride=1, iterations=40, return_in
     if huber is not None:
         noise = huber if isinstance(huber, Huber) else Huber(gamma=float(huber))
     if taus is None:
-        Ak = powers(model.A, steps)[::stride][None]                     # (1, K', n, n)
+        Ak = shared_powers(model.A, steps)[::stride][None]              # (1, K', n, n)
     else:
         Ak = transitions(model, taus)                                    # (B or 1, K', n, n)
     y = np.asarray(y, dtype=float)

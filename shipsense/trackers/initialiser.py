@@ -22,7 +22,7 @@ import numpy as np
 from numba import njit
 
 from shipsense import numba_cache
-from shipsense.trackers.batchfit import FIT_CHUNK_BYTES, fit_passages, powers
+from shipsense.trackers.batchfit import FIT_CHUNK_BYTES, fit_passages, powers, shared_powers
 from shipsense.trackers.compiled_linalg import solve_in_place
 from shipsense.trackers.measurement import _wrap
 
@@ -784,7 +784,7 @@ def grid_minima(model, yw, grid, window, stride, count, distinct_m, mid, reserve
 def _window_middle(model, W):
     """The position at the middle of a ``W``-sample window as a linear map of its first state (2, n): where
     the distinct minima are told apart."""
-    return powers(model.A, W)[W // 2][:2]
+    return shared_powers(model.A, W)[W // 2][:2]
 
 
 def refine_minima(model, yfit, starts, *, stages, keep, distinct_m, prior, gof, explore_samples, taus=None,

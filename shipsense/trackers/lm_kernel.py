@@ -43,6 +43,8 @@ def lm_fits(spec, theta, Ak, y, w, mu, root, gamma, bounds, iterations, tol, inf
     cost = np.empty(B)
     evaluations = np.zeros(B, dtype=np.int64)
     Ak = np.ascontiguousarray(Ak, dtype=float)
+    if not Ak.flags.writeable:                   # (shared powers: one compiled signature, a writeable array)
+        Ak = Ak.copy()
     args = (spec, theta, Ak, y0, present, np.ascontiguousarray(w, dtype=float),
             np.ascontiguousarray(mu, dtype=float), np.ascontiguousarray(root, dtype=float), float(gamma), lo, hi,
             int(iterations), float(tol), _constant_velocity(Ak), cost, evaluations,
