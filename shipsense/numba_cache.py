@@ -20,7 +20,7 @@ DEPENDS = {
     "envs/features.py": (),
     "envs/passage.py": ("config.py", "envs/arguments.py", "envs/core_env.py", "envs/features.py", "simulator.py"),
     "envs/passage_v1.py": ("config.py", "envs/arguments.py", "envs/core_env.py", "envs/features.py", "simulator.py",
-                           "trackers/compiled_linalg.py", "trackers/tracker.py"),
+                           "trackers/compiled_linalg.py", "trackers/measurement.py", "trackers/tracker.py"),
     "physics/kernels.py": ("physics/magnetic.py",),
     "physics/hed_kernel.py": (),
     "trackers/measurement.py": ("parallel.py", "physics/hed_kernel.py", "physics/kernels.py"),

@@ -146,6 +146,7 @@ from shipsense.envs.features import at_least, error_and_nees, track_features
 from shipsense.simulator import simulate
 from shipsense.trackers import Tracker
 from shipsense.trackers.compiled_linalg import solve_in_place
+from shipsense.trackers.measurement import FIELD, _h_jac, kernel_of
 from shipsense.trackers.tracker import INITIALISING, NO_DATA
 
 PASSAGE_BLOCK = 16
@@ -217,9 +218,11 @@ class PassageV1Core:
         self._passages = {}
         self._rows = np.arange(E)
         # the observer's noise (internal units) and the one-step transition
-        self._Rinv = 1.0 / self.tracker.filter_model.R
+        self._Rinv = np.ascontiguousarray(1.0 / self.tracker.filter_model.R, dtype=float)
         self._A = self.model.A
         self._xs = self.model.x_scale
+        self._xs2 = np.outer(self._xs, self._xs)
+        self._first = np.asarray(self.first_channel, dtype=np.int64)
 
     # -- episodes ---------------------------------------------------------------
     def reset_envs(self, envs, seeds, fresh=False):
@@ -281,11 +284,10 @@ class PassageV1Core:
         envs = envs[~blind]   # (the prior's mean is the array centroid: a sensor may sit there)
         if envs.size == 0:
             return
-        xs = self._xs
-        x = (self.last.estimate[envs] / xs) @ self._A.T
-        P = self.last.cov[envs] / np.outer(xs, xs)
+        x = (self.last.estimate[envs] / self._xs) @ self._A.T
+        P = self.last.cov[envs] / self._xs2
         P = self._A @ P @ self._A.T
-        self.gains[envs] = information_gains(self.model.H(x), self._Rinv, P, self.first_channel, self.subsets)
+        self.gains[envs] = information_gains_at(self.model, x, self._Rinv, P, self._first, self.subsets)
 
     def _blind(self, envs):
         """Whether the observers of ``envs`` have no track yet (status no data or initialising)."""
@@ -412,6 +414,39 @@ def information_gains(Hm, Rinv, P, first_channel, subsets):
     _gains(Hm, np.ascontiguousarray(Rinv, dtype=float), P, np.asarray(first_channel, dtype=np.int64),
            np.ascontiguousarray(subsets, dtype=np.bool_), out)
     return out
+
+
+def information_gains_at(model, x, Rinv, P, first_channel, subsets):
+    """:func:`information_gains` with the Jacobians of ``model`` at its internal states ``x`` (E, n): in one
+    compiled call with the model's compiled measurement kernel (the Jacobians :meth:`FieldModel.H` gives, from
+    the same kernel), else through ``model.H``."""
+    spec = kernel_of(model)
+    if spec is None or spec[0] != FIELD:
+        return information_gains(model.H(x), Rinv, P, first_channel, subsets)
+    P = np.ascontiguousarray(P, dtype=float)
+    out = np.empty((P.shape[0], len(subsets)))
+    _gains_at(np.ascontiguousarray(x, dtype=float), spec, np.ascontiguousarray(Rinv, dtype=float), P,
+              np.asarray(first_channel, dtype=np.int64), np.ascontiguousarray(subsets, dtype=np.bool_), out)
+    return out
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def _gains_at(X, spec, Rinv, P, first_channel, subsets, out):
+    """:func:`information_gains_at`: each state's Jacobian from the measurement kernel (as
+    :func:`~shipsense.trackers.measurement.h_and_jacobian`), then :func:`_gains`."""
+    E, n = X.shape
+    m = Rinv.shape[0]
+    Hm = np.empty((E, m, n))
+    x, yhat, H = np.empty(n), np.empty(m), np.empty((m, n))
+    r3, m3, B, dBq, dBm = np.empty(3), np.empty(3), np.empty(3), np.empty((3, 3)), np.empty((3, 3))
+    for e in range(E):
+        for a in range(n):
+            x[a] = X[e, a]
+        _h_jac(x, spec, yhat, H, r3, m3, B, dBq, dBm)
+        for i in range(m):
+            for a in range(n):
+                Hm[e, i, a] = H[i, a]
+    _gains(Hm, Rinv, P, first_channel, subsets, out)
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
@@ -665,7 +700,7 @@ class PassageV1VectorEnv(CoreVectorEnv):
 
 
 __all__ = ["BASELINES", "PassageV1Core", "PassageV1Env", "PassageV1VectorEnv", "information_gains",
-           "observation_potential", "subsets"]
+           "information_gains_at", "observation_potential", "subsets"]
 
 
 numba_cache.key_on_sources(globals())   # the caches follow the files these kernels are compiled from
