@@ -244,6 +244,43 @@ def test_the_compiled_gains_equal_the_kalman_form_and_are_zero_where_undefined()
     assert (information_gains(Hm, Rinv, P, first, table)[2] == 0).all()
 
 
+def test_the_gains_at_states_equal_the_gains_of_the_models_jacobians():
+    """information_gains_at (the Jacobians from the compiled measurement kernel, in one call) equals
+    information_gains of model.H bit for bit; a model without a compiled kernel (the series HED path) goes
+    through model.H."""
+    from shipsense import load_scenario
+    from shipsense.envs.passage_v1 import information_gains, information_gains_at, subsets
+    from shipsense.trackers.models import model_from_scenario
+
+    rng = np.random.default_rng(5)
+    from dataclasses import replace
+
+    from shipsense.trackers.measurement import kernel_of
+    from shipsense.trackers.models import FieldModel
+
+    for name, series in (("S2", False), ("S1-P2", False), ("S1-P2", True)):
+        model = model_from_scenario(load_scenario(name))
+        if series:                                        # no compiled kernel: model.H's numpy path
+            model = FieldModel(replace(model.array, electric_method="series"), model.period, model.Q, model.R)
+            assert kernel_of(model) is None
+        S = len(model.array.ids)
+        first = np.flatnonzero(np.diff(np.concatenate([[-1], model.array.channel_sensor])))
+        x = model.state_from_truth(simulate_truth(name))[:5, 10] / model.x_scale
+        x = x + 0.01 * rng.normal(size=x.shape) * np.abs(x)
+        L = rng.normal(size=(5, model.n, model.n))
+        P = L @ np.swapaxes(L, -1, -2) + 0.1 * np.eye(model.n)
+        Rinv = 1.0 / model.R
+        table = subsets(S, min(2, S))
+        np.testing.assert_array_equal(information_gains_at(model, x, Rinv, P, first, table),
+                                      information_gains(model.H(x), Rinv, P, first, table))
+
+
+def simulate_truth(name):
+    from shipsense import simulate
+
+    return simulate(name, runs=5, seed=6, random=True).truth
+
+
 def _observe_numpy(c):
     """The observation table written in numpy (the reference of the compiled ``observe``)."""
     S, est, cov = c.S, c.last.estimate, c.last.cov
