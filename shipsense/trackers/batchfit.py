@@ -171,8 +171,8 @@ def fit_passages(model, y, theta_init, steps, stride=1, iterations=40, return_in
     at the solution: the inverse of the batch-fit covariance).  Stops after
     ``iterations``; a fit stops earlier once it stalled three times in a row
     (an accepted step gaining less than the relative ``tol``, or a rejected
-    step at a damping of 1e6 or more or whose linearised model predicted a
-    gain below ``tol``).  A model with a compiled measurement
+    step at a damping of 1e6 or more or, unless the bounds moved it, whose
+    linearised model predicted a gain below ``tol``).  A model with a compiled measurement
     kernel (every field model but the series HED path) runs each fit's
     iterations in one compiled loop (:mod:`~shipsense.trackers.lm_kernel`),
     the others the batched numpy loop (:func:`_levenberg_marquardt`): the same
@@ -353,8 +353,10 @@ def _levenberg_marquardt(problem, theta, iterations, tol, lo, hi):
     """Damped Gauss-Newton steps of every fit of ``problem`` from ``theta`` (B, n), projected on ``[lo, hi]``.
 
     A fit that stalled three times in a row (an accepted step gaining less than ``tol`` relative, or a
-    rejected one at a damping of 1e6 or more or whose linearised model promised less than ``tol`` relative:
-    MINPACK's ``ftol`` test, a fit at its minimum to rounding, where a step is as often rejected as accepted)
+    rejected one at a damping of 1e6 or more, or one the bounds did not move whose linearised model promised
+    less than ``tol`` relative: MINPACK's ``ftol`` test, a fit at its minimum to rounding, where a step is as
+    often rejected as accepted; a projected step is not the model's minimiser, and its prediction can be
+    anything)
     is done: only the others are stepped, so the late iterations of a few slow fits do not cost a full
     batch.  Returns the states, costs, residuals, propagated states and
     (a fused model) Jacobians at the solution.
@@ -381,8 +383,11 @@ def _levenberg_marquardt(problem, theta, iterations, tol, lo, hi):
         A = JtJ + lam[a, None, None] * (np.eye(n) * (D + 1e-12)[:, None, :])
         step = -np.linalg.solve(A, g[..., None])[..., 0]
         trial = theta[a] + step
+        projected = np.zeros(len(trial), dtype=bool)
         if lo is not None:   # projected steps: the fit stays physical (e.g. the source in the water)
+            free = trial
             trial = np.clip(trial, lo, hi)
+            projected = (trial != free).any(axis=-1)
         d = trial - theta[a]                                # the linearised model's gain -(2 g.d + d^T N d)
         pred = -np.einsum("bp,bp->b", d, 2.0 * g + np.einsum("bpq,bq->bp", JtJ, d))
         r_t, X_t, H_t = problem.residual(trial, a)
@@ -397,7 +402,9 @@ def _levenberg_marquardt(problem, theta, iterations, tol, lo, hi):
             Hs[ok] = H_t[better]
         cost[ok] = cost_t[better]
         lam[a] = np.clip(np.where(better, lam[a] / 3.0, lam[a] * 5.0), 1e-9, 1e9)
-        stalled = np.where(better, gain < tol, (lam[a] >= 1e6) | (pred <= tol * np.maximum(cost[a], 1e-300)))
+        # (a step the bounds moved is no longer the model's minimiser: its predicted gain says nothing)
+        stalled = np.where(better, gain < tol,
+                           (lam[a] >= 1e6) | (~projected & (pred <= tol * np.maximum(cost[a], 1e-300))))
         stall[a] = np.where(stalled, stall[a] + 1, 0)
     return theta, cost, r, X, Hs
 

@@ -174,10 +174,9 @@ def _grid_terms(model, theta, steps, stride, reserve=0):
         start = grams[below].copy() if below else np.zeros((len(theta), hit["P"], hit["P"]))   # (writeable: one
         # compiled signature of _gram_on)
         full = hit["G"].reshape(hit["G"].shape[0] * rows, hit["G"].shape[2])
-        A = np.array(_gram_on(start, full, below * rows, W * rows))   # (numpy's: numba's base is not an array)
-        A.flags.writeable = False
-        grams[W] = A.view()     # (its base is read-only: the view cannot be made writeable)
-        grams[W].flags.writeable = False
+        A = _gram_on(start, full, below * rows, W * rows)
+        # over a bytes object, so that neither it nor a base can be made writeable: its inverses are kept
+        grams[W] = np.frombuffer(A.tobytes(), dtype=float).reshape(A.shape)
         key = id(grams[W])      # its inverses, for grid_fit's windows with every sample present
         _INVERSES[key] = (weakref.ref(grams[W], lambda _, key=key: _INVERSES.pop(key, None)),
                           ridge_inverses(grams[W]))
@@ -836,7 +835,8 @@ def window_fits(model, yfit, *, ranges, speeds, taus=None, bearing_step_deg=15.0
                 grid_samples=16, keep=5, distinct_m=15.0, source_z=None, z_std=None, refine=None, gof=0.01,
                 explore_samples=None, huber=None, grid_reserve=0):
     """Global fits of given windows ``yfit`` (R, W, m) (internal units, NaN = missing): the grid search on
-    every ``W // grid_samples``-th sample (at least ``grid_samples`` of them, fewer than twice as many;
+    every ``W // grid_samples``-th sample (at least ``grid_samples`` of them and fewer than twice as many, or
+    all of a window shorter than that;
     ``grid_reserve``: :func:`grid_terms`' ``reserve``), then :func:`refine_minima`.  ``taus`` (R, W),
     optional: the samples' times (s) after each window's first (irregular sampling; the grid search then uses
     the nominal steps, the fits the times).  Options as for :func:`global_init`; returns :class:`WindowFits`."""

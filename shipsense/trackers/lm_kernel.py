@@ -77,6 +77,7 @@ def _lm_loop(spec, theta, Ak, y, present, w, mu, root, gamma, lo, hi, iterations
         c = 0.0
         lam = 1e-2
         pred = 0.0
+        projected = False
         stall = 0
         for it in range(iterations + 1):           # 0: the start's cost and normal equations; then the steps
             if it > 0:
@@ -88,10 +89,13 @@ def _lm_loop(spec, theta, Ak, y, present, w, mu, root, gamma, lo, hi, iterations
                     M[p, p] += lam * (N[p, p] + 1e-12)
                     tt[p] = -g[p]
                 solve_in_place(M, tt, n)
+                projected = False
                 for a in range(n):
                     tt[a] += th[a]
                     if lo.size > 0:
+                        free = tt[a]
                         tt[a] = min(max(tt[a], lo[a]), hi[a])
+                        projected = projected or tt[a] != free
                 pred = 0.0                           # the linearised model's gain -(2 g.d + d^T N d), d = tt - th
                 for p in range(n):
                     dp = tt[p] - th[p]
@@ -120,7 +124,8 @@ def _lm_loop(spec, theta, Ak, y, present, w, mu, root, gamma, lo, hi, iterations
                     for q in range(n):
                         N[p, q] = Nt[p, q]
             lam = min(max(lam / 3.0 if better else lam * 5.0, 1e-9), 1e9)
-            stalled = gain < tol if better else (lam >= 1e6 or pred <= tol * max(c, 1e-300))
+            # (a step the bounds moved is no longer the model's minimiser: its predicted gain says nothing)
+            stalled = gain < tol if better else (lam >= 1e6 or (not projected and pred <= tol * max(c, 1e-300)))
             stall = stall + 1 if stalled else 0
         for a in range(n):
             theta[b, a] = th[a]

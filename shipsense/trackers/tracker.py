@@ -145,8 +145,8 @@ class TrackerOptions:
                              f"got {self.consistency_window!r}")
         if not (np.isfinite(self.consistency_level) and 0.0 < self.consistency_level < 1.0):
             raise ValueError(f"consistency_level must lie strictly between 0 and 1, got {self.consistency_level!r}")
-        if self.grid_samples is not None and not (
-                isinstance(self.grid_samples, int | np.integer) and self.grid_samples >= 1):
+        if self.grid_samples is not None and (isinstance(self.grid_samples, bool) or not (
+                isinstance(self.grid_samples, int | np.integer) and self.grid_samples >= 1)):
             raise ValueError(f"grid_samples must be a positive integer or None, got {self.grid_samples!r}")
         if self.keep > self.keep_init:
             raise ValueError(f"keep ({self.keep}) cannot exceed keep_init ({self.keep_init})")

@@ -12,15 +12,17 @@ bit (tests/trackers/test_tracker_step.py; tracked passages compared with the ste
 the bank's own transition or, for irregular sampling, one per passage (the model's ``stepped``).
 
 A repeat that fills a bank (a cumulative log-likelihood of -inf: fewer distinct fits than hypotheses) is
-neither predicted nor updated: it stays -inf until the bank restarts and nothing reported reads it, so its
-mean and factor are kept as they are (the step by step path steps it; the outputs are the same).  Many
-passages' steps are split over the CPUs (:data:`THREAD_ROWS`; a passage's numbers do not depend on the split).
+neither predicted nor updated while its passage has another hypothesis: it stays -inf until the bank
+restarts and nothing reported reads it, so its mean and factor are kept as they are (the step by step path
+steps it; the outputs are the same).  The passages are stepped in chunks of about :data:`THREAD_ROWS` rows,
+shared among the CPUs (a passage's numbers do not depend on its chunk); a chunk in which an element fails
+writes nothing, and its passages take the step by step path.
 
 What stays in numpy: the hypotheses' covariances ``L L^T`` the time update starts from (numpy's matmul,
 whose sums a compiled loop does not reproduce to the last bit).  What is not taken here (the caller then
 runs the step by step path): a batch large enough for the filters' threads, a model without a compiled
-kernel, the SR-CDKF (its own time update), and a step in which an element fails numerically (nothing is
-written before both kernels succeed).
+kernel, the SR-CDKF (its own time update), and the passages of a chunk in which an element fails numerically
+(nothing of the chunk is written before both kernels succeed).
 """
 
 from __future__ import annotations
@@ -68,13 +70,18 @@ def _step_kernel_for(code):
         m = yi.shape[1]
         B = R * H
         # the live hypotheses: a cumulative log-likelihood of -inf (a repeat that fills a bank: no weight) stays
-        # -inf until the bank restarts, and nothing reported reads such a hypothesis (selection.report), so
-        # only the others are predicted and updated (in the environments 79 % of the rows are such repeats)
+        # -inf until the bank restarts, and nothing reported reads such a hypothesis while its passage has
+        # another (selection.report selects the first maximum), so only the others are predicted and updated
+        # (in the environments 79 % of the rows are such repeats); a passage whose every hypothesis is -inf
+        # (an absurd sample) steps them all, as the step by step path does
         where = np.empty(B, np.int64)               # a row's place among the live ones, -1 for a repeat
         nl = 0
         for p in range(R):
+            any_live = False
             for k in range(H):
-                if cum[runs[p], k] == -np.inf:
+                any_live = any_live or cum[runs[p], k] != -np.inf
+            for k in range(H):
+                if any_live and cum[runs[p], k] == -np.inf:
                     where[p * H + k] = -1
                 else:
                     where[p * H + k] = nl
@@ -278,7 +285,8 @@ def _prepare(act, t, y, ys, phase, last_t, n, y_hist, t_hist, cons_now, field, s
 
 
 THREAD_ROWS = 96
-"""Hypothesis rows (about 0.3 ms of a step) from which :class:`TrackerStep` splits its passages over the CPUs."""
+"""Hypothesis rows (about 0.3 ms of a step) in a chunk of :class:`TrackerStep`'s passages; the chunks are shared
+among the CPUs."""
 
 _STEP_KERNELS = {code: _step_kernel_for(code) for code in (UKF, CDKF, HUBER, EKF, PUEKF)}
 """Each covariance-form filter's compiled step, by its code (compiled at its first call)."""
@@ -319,10 +327,11 @@ class TrackerStep:
         the innovations and before the outputs.  Returns the passages not stepped, for the step by step path
         (nothing of theirs written): none when done, all of them for a pruned bank.
 
-        From :data:`THREAD_ROWS` hypothesis rows on, the passages are stepped in contiguous chunks on the CPUs
-        (:func:`~shipsense.parallel.in_chunks`): a passage's step reads and writes only its own rows and
-        entries, so a split changes no number; a chunk in which an element failed writes nothing and its
-        passages are returned."""
+        The passages are stepped in contiguous chunks of about :data:`THREAD_ROWS` hypothesis rows, the chunks
+        shared among the CPUs (:func:`~shipsense.parallel.in_chunks`): a passage's step reads and writes only its
+        own rows and entries, so the chunks change no number; a chunk in which an element failed writes nothing
+        and its passages are returned.  The chunks do not depend on the number of threads, so neither do the
+        passages a failure sends to the step by step path (whose batch is then theirs)."""
         H = self.H
         if len(bank.idx) != bank.R * H:
             return runs                     # (a pruned bank: BankState.step says why)
@@ -340,9 +349,11 @@ class TrackerStep:
                                *self.fixed[2:], *self.bounds, bank.cum, nis_hist, test, *consistency, *selection,
                                status, trusted, *codes)
 
-        split = max(2, -(-THREAD_ROWS // H))
-        edges = in_chunks(lambda lo, hi: (lo, hi, chunk(lo, hi)), runs.size, split_min=split)
-        left = [runs[lo:hi] for lo, hi, done in edges if not done]
+        size = max(1, -(-THREAD_ROWS // H))            # passages a chunk
+        count = -(-runs.size // size)
+        parts = in_chunks(lambda c0, c1: [(c * size, min(runs.size, (c + 1) * size)) for c in range(c0, c1)
+                                          if not chunk(c * size, min(runs.size, (c + 1) * size))], count, split_min=2)
+        left = [runs[lo:hi] for failed in parts for lo, hi in failed]
         return np.concatenate(left) if left else runs[:0]
 
 

@@ -342,6 +342,7 @@ def test_one_magnetometer_rescans_and_leaves_a_wrong_basin():
 @pytest.mark.parametrize("bad, match", [({"window_s": 0.0}, "window_s must be a positive number"),
                                         ({"grid_samples": 0}, "grid_samples must be a positive integer"),
                                         ({"grid_samples": 7.5}, "grid_samples must be a positive integer"),
+                                        ({"grid_samples": True}, "grid_samples must be a positive integer"),
                                         ({"consistency_window": 1}, "consistency_window must be an integer"),
                                         ({"keep": 6}, "keep \\(6\\) cannot exceed keep_init \\(5\\)")])
 def test_bad_options_raise_one_error_naming_the_option(bad, match):
