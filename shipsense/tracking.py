@@ -30,7 +30,7 @@ PLOT_POINTS = 2000
 """Samples kept for the picture of a long passage (evenly spaced, the last included)."""
 
 
-FIRST_USE = ("compiling the numerical kernels on their first use on this machine (under a minute on two "
+FIRST_USE = ("compiling the numerical kernels on their first use on this machine (about a minute on two "
              "cores; cached for later runs)")
 
 
