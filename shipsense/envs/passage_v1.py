@@ -146,7 +146,7 @@ from shipsense.envs.features import at_least, error_and_nees, track_features
 from shipsense.simulator import simulate
 from shipsense.trackers import Tracker
 from shipsense.trackers.compiled_linalg import solve_in_place
-from shipsense.trackers.measurement import FIELD, _h_jac, kernel_of
+from shipsense.trackers.measurement import FIELD, _batch_kernel, kernel_of
 from shipsense.trackers.tracker import INITIALISING, NO_DATA
 
 PASSAGE_BLOCK = 16
@@ -432,20 +432,12 @@ def information_gains_at(model, x, Rinv, P, first_channel, subsets):
 
 @njit(cache=True, error_model="numpy", nogil=True)
 def _gains_at(X, spec, Rinv, P, first_channel, subsets, out):
-    """:func:`information_gains_at`: each state's Jacobian from the measurement kernel (as
-    :func:`~shipsense.trackers.measurement.h_and_jacobian`), then :func:`_gains`."""
+    """:func:`information_gains_at`: the states' Jacobians from the measurement kernel's batch
+    (:func:`~shipsense.trackers.measurement._batch_kernel`, as ``model.H``), then :func:`_gains`."""
     E, n = X.shape
     m = Rinv.shape[0]
     Hm = np.empty((E, m, n))
-    x, yhat, H = np.empty(n), np.empty(m), np.empty((m, n))
-    r3, m3, B, dBq, dBm = np.empty(3), np.empty(3), np.empty(3), np.empty((3, 3)), np.empty((3, 3))
-    for e in range(E):
-        for a in range(n):
-            x[a] = X[e, a]
-        _h_jac(x, spec, yhat, H, r3, m3, B, dBq, dBm)
-        for i in range(m):
-            for a in range(n):
-                Hm[e, i, a] = H[i, a]
+    _batch_kernel(X, spec, np.empty((E, m)), Hm, True)
     _gains(Hm, Rinv, P, first_channel, subsets, out)
 
 

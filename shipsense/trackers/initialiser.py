@@ -542,8 +542,9 @@ def _grid_full(b, A_all, inverses, dd, bear, clamp, chi2, params, r, c_lo, c_hi)
 @njit(cache=True, error_model="numpy", nogil=True)
 def _grid_chi2(x, A, i, b, r, base, P, dd, bear, clamp, chi2, params, c):
     """The clamp of parameters ``x``, then passage ``r``'s chi-square ``|d|^2 - 2 x.b + x^T A[i] x`` plus its
-    bearings' ``bear`` and parameters for candidate ``c``.  (``A`` is indexed here: a view ``A[i]`` made per
-    candidate cost more than the arithmetic, 0.40 against 0.16 ms for 6,912 candidates.)"""
+    bearings' ``bear`` and parameters for candidate ``c``.  (``A`` is 3-D and indexed here, not a view ``A[i]``
+    made per candidate; with such a view and this helper inlined, 6,912 candidates took 0.40 ms, 0.21 as it
+    is, 0.16 written out in the caller.)"""
     if clamp and P > 0 and x[P - 1] < 0.0:
         x[P - 1] = 0.0
     s = dd

@@ -501,12 +501,13 @@ class Tracker:
 
     def _step(self, runs, yi, dt, out):
         """Predict (time steps ``dt``) and update the banks of passages ``runs``; write their output (one
-        compiled call where it applies, :mod:`~shipsense.trackers.tracker_step`: the same numbers)."""
+        compiled call where the model has a compiled step, :mod:`~shipsense.trackers.tracker_step`: the same
+        numbers)."""
         H = self._H
         d, T = dt[runs], self.model.period
         regular = all(abs(step - T) <= 1e-9 * T for step in d.tolist())
         model = None if regular else self.filter_model.stepped(np.repeat(d, H))
-        if self._compiled is not None and self._compiled.applies(runs):
+        if self._compiled is not None:
             runs = self._compiled_step(runs, yi, out, model)          # (those it did not step)
             if runs.size == 0:
                 return

@@ -25,7 +25,7 @@ def _track(scenario, runs, seed, compiled, samples=None, jitter=0.0, **options):
             used.append(left.size == 0)
             return left
 
-        trk._compiled = type("Counting", (), {"applies": step.applies, "__call__": staticmethod(counting)})()
+        trk._compiled = type("Counting", (), {"__call__": staticmethod(counting)})()
     else:
         trk._compiled = None
     K = samples or sim.measurements.shape[1]
@@ -124,7 +124,7 @@ def test_passages_stepped_in_chunks_on_threads_equal_one_chunk_and_a_failed_chun
     from shipsense.trackers import tracker_step
 
     runs = 24
-    assert tracker_step.THREAD_ROWS <= runs * 5 < tracker_step.SPLIT_MIN
+    assert tracker_step.THREAD_ROWS <= runs * 5 < 2 * tracker_step.THREAD_ROWS
     sim = simulate("S2", runs=runs, seed=4)
     trackers = [Tracker("S2", passages=runs) for _ in range(3)]
     trackers[2]._compiled = None
@@ -173,11 +173,16 @@ def test_a_passage_whose_every_hypothesis_is_a_repeat_is_stepped():
         _assert_same_sample(*(trk.update(sim.times[j], sim.measurements[:, j]) for trk in pair))
 
 
-def test_a_batch_for_the_filters_threads_takes_the_step_by_step_path():
-    trk = Tracker("S2", passages=2)
-    H = trk._H
-    assert trk._compiled.applies(np.arange(2))
-    assert not trk._compiled.applies(np.arange(-(-512 // H)))
+def test_a_large_batch_takes_the_compiled_step_with_the_same_numbers():
+    """110 passages (550 hypothesis rows, beyond the filters' own thread split at 512): the compiled step
+    runs (six chunks) and its samples equal the step by step path's bit for bit."""
+    pair, sim, k = _running_pair("S2", 110, 8)
+    calls = []
+    kernel = pair[0]._compiled.kernel
+    pair[0]._compiled.kernel = lambda runs, *a: calls.append(len(runs)) or kernel(runs, *a)
+    for j in range(k, k + 3):
+        _assert_same_sample(*(trk.update(sim.times[j], sim.measurements[:, j]) for trk in pair))
+    assert sum(calls) == 3 * 110 and max(calls) == 20
 
 
 def test_a_refused_sample_writes_nothing():
