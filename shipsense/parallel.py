@@ -38,19 +38,53 @@ def threads() -> int:
         return os.cpu_count() or 1
 
 
+def _executor():
+    """The process's pool of threads (a forked child has the pool object but not its threads: a new one)."""
+    global _pool
+    if _pool is None or _pool[0] != os.getpid():
+        from concurrent.futures import ThreadPoolExecutor
+
+        _pool = (os.getpid(), ThreadPoolExecutor(thread_name_prefix="shipsense"))
+    return _pool[1]
+
+
 def in_chunks(fn, n, split_min=SPLIT_MIN):
     """``[fn(lo, hi), ...]`` over contiguous chunks ``[lo, hi)`` covering ``range(n)``, in order: one chunk (the
     whole range, called here) below ``split_min``, else up to :func:`threads` chunks, the first run on the
     calling thread and the others in a shared pool."""
-    global _pool
     parts = min(threads(), n // (split_min // 2)) if n >= split_min else 1
     if parts <= 1:
         return [fn(0, n)]
-    if _pool is None or _pool[0] != os.getpid():     # a forked child has the pool object but not its threads
-        from concurrent.futures import ThreadPoolExecutor
-
-        _pool = (os.getpid(), ThreadPoolExecutor(thread_name_prefix="shipsense"))
     edges = [n * i // parts for i in range(parts + 1)]
-    futures = [_pool[1].submit(fn, edges[i], edges[i + 1]) for i in range(1, parts)]
+    futures = [_executor().submit(fn, edges[i], edges[i + 1]) for i in range(1, parts)]
     first = fn(edges[0], edges[1])
     return [first] + [f.result() for f in futures]
+
+
+def in_turns(fn, n):
+    """``fn(i, i + 1)`` for every ``i`` in ``range(n)``, each item taken by whichever thread is free next: the
+    calling thread and up to :func:`threads` - 1 threads of the pool take the next item as they finish their
+    last.  For a few items of unequal cost (Levenberg-Marquardt fits: a fit from a far start runs 40
+    iterations, one from a near start 6), where :func:`in_chunks`' contiguous halves leave one CPU idle.  A
+    single item, or a single thread, runs here (``fn(0, n)``).  ``fn`` must release the GIL (a ``nogil``
+    kernel) and write only its item's results: the order in which the items run then changes nothing."""
+    workers = min(threads(), n)
+    if n < 2 or workers <= 1:
+        fn(0, n)
+        return
+    items = iter(range(n))            # (next() on a range iterator is atomic under the GIL)
+
+    def work():
+        for i in items:
+            fn(i, i + 1)
+
+    futures = [_executor().submit(work) for _ in range(workers - 1)]
+    try:
+        work()
+    finally:   # a helper that has not started has nothing left to take: cancelled, not waited for
+        for f in futures:
+            if not f.cancel():
+                f.exception()         # (waits for it: no item of this call runs after the call returns)
+    for f in futures:
+        if not f.cancelled() and f.exception() is not None:
+            raise f.exception()

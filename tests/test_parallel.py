@@ -55,3 +55,54 @@ def test_the_thread_count_setting_is_checked(monkeypatch):
         parallel.threads()
     monkeypatch.setenv("SHIPSENSE_THREADS", "2")
     assert parallel.threads() == 2
+
+
+def test_turns_hand_each_item_to_the_thread_that_is_free(monkeypatch):
+    """Every item runs once; while the calling thread is held by a slow first item, the pool's thread takes
+    all the others (contiguous halves would leave it the second half only).  time.sleep and Event.wait release
+    the GIL, as the compiled kernels do."""
+    import threading
+
+    monkeypatch.setenv("SHIPSENSE_THREADS", "2")
+    n, ran, lock, rest_done = 9, [], threading.Lock(), threading.Event()
+    caller = threading.get_ident()
+
+    def fn(lo, hi):
+        assert hi == lo + 1
+        if lo == 0:
+            rest_done.wait(30)                 # (a hang would fail below, not block the suite)
+        else:
+            time.sleep(0.005)
+        with lock:
+            ran.append((lo, threading.get_ident()))
+            if sum(i != 0 for i, _ in ran) == n - 1:
+                rest_done.set()
+
+    parallel.in_turns(fn, n)
+    assert sorted(i for i, _ in ran) == list(range(n))
+    assert all(t != caller for i, t in ran if i != 0)
+    assert [t for i, t in ran if i == 0] == [caller]
+
+
+def test_turns_in_one_thread_and_their_errors(monkeypatch):
+    """One thread (or one item): the whole range in one call here.  An item's error reaches the caller, after
+    every item taken has finished."""
+    monkeypatch.setenv("SHIPSENSE_THREADS", "1")
+    calls = []
+    parallel.in_turns(lambda lo, hi: calls.append((lo, hi)), 5)
+    monkeypatch.setenv("SHIPSENSE_THREADS", "2")
+    parallel.in_turns(lambda lo, hi: calls.append((lo, hi)), 1)
+    assert calls == [(0, 5), (0, 1)]
+    finished = []
+
+    def fn(lo, hi):
+        time.sleep(0.01)
+        if lo == 3:
+            raise ValueError("item 3")
+        finished.append(lo)
+
+    with pytest.raises(ValueError, match="item 3"):
+        parallel.in_turns(fn, 8)
+    count = len(finished)
+    time.sleep(0.1)
+    assert len(finished) == count              # nothing of the call runs after it returned

@@ -20,7 +20,7 @@ import numpy as np
 from numba import njit
 
 from shipsense import numba_cache
-from shipsense.parallel import in_chunks
+from shipsense.parallel import in_turns
 from shipsense.trackers.compiled_linalg import solve_in_place
 from shipsense.trackers.measurement import _h_jac, _loop_jit, _wrap
 
@@ -49,7 +49,7 @@ def lm_fits(spec, theta, Ak, y, w, mu, root, gamma, bounds, iterations, tol, inf
             np.ascontiguousarray(mu, dtype=float), np.ascontiguousarray(root, dtype=float), float(gamma), lo, hi,
             int(iterations), float(tol), _constant_velocity(Ak), cost, evaluations,
             np.empty((0, n, n)) if information is None else information)
-    in_chunks(lambda b_lo, b_hi: _lm_kernel(*args, b_lo, b_hi), B, split_min=16)
+    in_turns(lambda b_lo, b_hi: _lm_kernel(*args, b_lo, b_hi), B)
     return theta, cost, evaluations
 
 
