@@ -101,10 +101,9 @@ def _candidate_grid(model, ranges, bearings_deg, courses_deg, speeds, source_z):
     theta[:, 3] = V_ * np.sin(C_)
     if "z" in model.labels:
         theta[:, model.labels.index("z")] = model.source_z if source_z is None else source_z
-    theta.flags.writeable = False
-    view = theta.view()                              # (its base is read-only: the view cannot be made writeable)
-    view.flags.writeable = False
-    return view
+    # over a bytes object, so that neither it nor its base can be made writeable (grid_terms keeps its terms
+    # by its identity, not its values)
+    return np.frombuffer(theta.tobytes(), dtype=float).reshape(theta.shape)
 
 
 _GRID_CACHE: dict = {}

@@ -480,8 +480,9 @@ def test_the_candidate_grid_is_kept_and_its_terms_found_by_identity_only_when_fr
     args = ([50.0, 150.0], np.arange(0.0, 360.0, 90.0), np.arange(0.0, 360.0, 120.0), [4.0])
     grid = candidate_grid(model, *args)
     assert candidate_grid(model, *args) is grid and not grid.flags.writeable
-    with pytest.raises(ValueError):
-        grid.flags.writeable = True                             # shared: no one can change it
+    for a in (grid, grid.base):
+        with pytest.raises(ValueError):
+            a.flags.writeable = True                            # shared: no one can change it, nor its base
     assert candidate_grid(model, args[0], args[1], args[2], [5.0]) is not grid
     assert candidate_grid(model_from_scenario("S2"), *args) is not grid
     electrodes = model_from_scenario("S1-P2")                   # a source depth in the state
