@@ -81,6 +81,10 @@ def in_turns(fn, n):
     futures = [_executor().submit(work) for _ in range(workers - 1)]
     try:
         work()
+    except BaseException:      # (an error, or Ctrl-C between two items): the helpers take no further item
+        for _ in items:
+            pass
+        raise
     finally:   # a helper that has not started has nothing left to take: cancelled, not waited for
         for f in futures:
             if not f.cancel():

@@ -106,3 +106,24 @@ def test_turns_in_one_thread_and_their_errors(monkeypatch):
     count = len(finished)
     time.sleep(0.1)
     assert len(finished) == count              # nothing of the call runs after it returned
+
+
+def test_an_error_on_the_calling_thread_stops_the_helpers(monkeypatch):
+    """An item that fails on the calling thread (or Ctrl-C between items) ends the call: the helper finishes
+    the item it holds and takes no other (without the stop it would go on through all 50)."""
+    import threading
+
+    monkeypatch.setenv("SHIPSENSE_THREADS", "2")
+    caller, done, holding = threading.get_ident(), [], threading.Event()
+
+    def fn(lo, hi):
+        if threading.get_ident() == caller:
+            holding.wait(30)                   # until the helper holds an item
+            raise KeyboardInterrupt
+        holding.set()
+        time.sleep(0.2)
+        done.append(lo)
+
+    with pytest.raises(KeyboardInterrupt):
+        parallel.in_turns(fn, 50)
+    assert 1 <= len(done) <= 2
