@@ -1,10 +1,11 @@
-"""Threads for the compiled kernels: a large batch split into contiguous chunks, each run by a kernel that
-releases the GIL (numba ``nogil=True``).
+"""Threads for the compiled kernels, each run by a kernel that releases the GIL (numba ``nogil=True``): a large
+batch split into contiguous chunks (:func:`in_chunks`), or a few items of unequal cost handed out one at a
+time (:func:`in_turns`).
 
-The filter steps (:mod:`shipsense.trackers.filters.fused`) and the fast HED field
-(:mod:`shipsense.physics.electric`) treat every element independently, so a split changes no result; it
-only spreads a large batch over the CPUs this process may use (``SHIPSENSE_THREADS`` overrides; 1 keeps
-every step on the calling thread).
+The filter steps (:mod:`shipsense.trackers.filters.fused`), the tracker's step, the grid search, the
+Levenberg-Marquardt fits and the fast HED field (:mod:`shipsense.physics.electric`) treat every element
+independently, so a split changes no result; it only spreads the work over the CPUs this process may use
+(``SHIPSENSE_THREADS`` overrides; 1 keeps every step on the calling thread).
 """
 
 from __future__ import annotations
