@@ -69,8 +69,8 @@ def in_turns(fn, n):
     12, in Passage-v0's vector env), where :func:`in_chunks`' contiguous halves leave one CPU idle.  A
     single item, or a single thread, runs here (``fn(0, n)``).  ``fn`` must release the GIL (a ``nogil``
     kernel) and write only its item's results: the order in which the items run then changes nothing."""
-    workers = min(threads(), n)
-    if n < 2 or workers <= 1:
+    workers = min(threads(), n) if n >= 2 else 1
+    if workers <= 1:
         fn(0, n)
         return
     items = iter(range(n))            # (next() on a range iterator is atomic under the GIL)
