@@ -64,11 +64,16 @@ def in_chunks(fn, n, split_min=SPLIT_MIN):
 
 def in_turns(fn, n):
     """``fn(i, i + 1)`` for every ``i`` in ``range(n)``, each item taken by whichever thread is free next: the
-    calling thread and up to :func:`threads` - 1 threads of the pool take the next item as they finish their
-    last.  For a few items of unequal cost (Levenberg-Marquardt fits: 4 to 41 cost evaluations each, median
-    12, in Passage-v0's vector env), where :func:`in_chunks`' contiguous halves leave one CPU idle.  A
-    single item, or a single thread, runs here (``fn(0, n)``).  ``fn`` must release the GIL (a ``nogil``
-    kernel) and write only its item's results: the order in which the items run then changes nothing."""
+    calling thread and up to :func:`threads` - 1 threads of the shared pool (itself at most ``min(32, CPUs +
+    4)`` threads) take the next item as they finish their last.  For a few items of unequal cost
+    (Levenberg-Marquardt fits: 4 to 41 cost evaluations each, median 12, in Passage-v0's vector env), where
+    :func:`in_chunks`' contiguous halves leave one CPU idle.  A single item, or a single thread, runs here
+    (``fn(0, n)``).  ``fn`` must release the GIL (a ``nogil`` kernel) and write only its item's results: the
+    order in which the items run then changes nothing.
+
+    An error in an item reaches the caller once the items taken have finished; an error (or Ctrl-C) on the
+    calling thread stops the helpers after the item each holds, and the call returns after them -- unless a
+    second Ctrl-C interrupts that wait, when a helper may still finish the one item it holds."""
     workers = min(threads(), n) if n >= 2 else 1
     if workers <= 1:
         fn(0, n)
@@ -79,17 +84,25 @@ def in_turns(fn, n):
         for i in items:
             fn(i, i + 1)
 
-    futures = [_executor().submit(work) for _ in range(workers - 1)]
-    try:
-        work()
-    except BaseException:      # (an error, or Ctrl-C between two items): the helpers take no further item
+    def stop():                       # the helpers take no further item
         for _ in items:
             pass
+
+    futures = []
+    try:
+        futures += [_executor().submit(work) for _ in range(workers - 1)]
+        work()
+    except BaseException:
+        stop()
         raise
     finally:   # a helper that has not started has nothing left to take: cancelled, not waited for
-        for f in futures:
-            if not f.cancel():
-                f.exception()         # (waits for it: no item of this call runs after the call returns)
+        try:
+            for f in futures:
+                if not f.cancel():
+                    f.exception()     # (waits for it: no item of this call runs after the call returns)
+        except BaseException:
+            stop()
+            raise
     for f in futures:
         if not f.cancelled() and f.exception() is not None:
             raise f.exception()

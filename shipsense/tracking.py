@@ -36,10 +36,10 @@ FIRST_USE = ("compiling the numerical kernels on their first use on this machine
 
 def first_use_notice(filter_name=None):
     """:data:`FIRST_USE` if the tracker's compiled kernels (filter ``filter_name``'s update, default the
-    tracker's UKF, the predict, measurement kernel, least-squares loop, the grid search and the tracker's step)
-    are not yet compiled on disk for the current sources, else None."""
+    tracker's UKF, the predict, measurement kernel, least-squares loop, the grid search, the restart rule and the
+    tracker's step) are not yet compiled on disk for the current sources, else None."""
     from shipsense import numba_cache
-    from shipsense.trackers import initialiser, lm_kernel, measurement, tracker_step
+    from shipsense.trackers import initialiser, lm_kernel, measurement, restarts, tracker_step
     from shipsense.trackers.filters import fused
 
     code = fused.filter_code(filter_name or "ukf")
@@ -47,7 +47,7 @@ def first_use_notice(filter_name=None):
                                        else ())
     ready = numba_cache.cached(fused._UPDATE_KERNELS[code], fused._UPDATE_LOOPS[code], fused._predict_kernel,
                                measurement._batch_kernel, lm_kernel._lm_kernel, initialiser._grid_solve_kernel,
-                               initialiser.ridge_inverses, *step)
+                               initialiser.ridge_inverses, restarts.due, *step)
     return None if ready else FIRST_USE
 
 

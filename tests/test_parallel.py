@@ -58,30 +58,32 @@ def test_the_thread_count_setting_is_checked(monkeypatch):
 
 
 def test_turns_hand_each_item_to_the_thread_that_is_free(monkeypatch):
-    """Every item runs once; while the calling thread is held by a slow first item, the pool's thread takes
-    all the others (contiguous halves would leave it the second half only).  time.sleep and Event.wait release
-    the GIL, as the compiled kernels do."""
+    """Every item runs once; while one thread is held by a slow item (the first taken, by whichever thread),
+    the other takes all the rest (contiguous halves would leave the held thread's half waiting).  Event.wait
+    and time.sleep release the GIL, as the compiled kernels do."""
     import threading
 
     monkeypatch.setenv("SHIPSENSE_THREADS", "2")
-    n, ran, lock, rest_done = 9, [], threading.Lock(), threading.Event()
-    caller = threading.get_ident()
+    n, ran, lock, rest_done, held = 9, [], threading.Lock(), threading.Event(), []
 
     def fn(lo, hi):
         assert hi == lo + 1
-        if lo == 0:
+        with lock:
+            slow = not held
+            if slow:
+                held.append(threading.get_ident())
+        if slow:
             rest_done.wait(30)                 # (a hang would fail below, not block the suite)
         else:
             time.sleep(0.005)
         with lock:
-            ran.append((lo, threading.get_ident()))
-            if sum(i != 0 for i, _ in ran) == n - 1:
+            ran.append((lo, threading.get_ident(), slow))
+            if sum(not s for _, _, s in ran) == n - 1:
                 rest_done.set()
 
     parallel.in_turns(fn, n)
-    assert sorted(i for i, _ in ran) == list(range(n))
-    assert all(t != caller for i, t in ran if i != 0)
-    assert [t for i, t in ran if i == 0] == [caller]
+    assert sorted(i for i, _, _ in ran) == list(range(n))
+    assert all(t != held[0] for _, t, slow in ran if not slow)
 
 
 def test_turns_in_one_thread_and_their_errors(monkeypatch):
