@@ -167,19 +167,27 @@ def _print_summary(sim):
         print(f"  {sid:<10} {arr.types[s]:<13} {arr.kinds[s]:<9} {closest:>11.1f} {peak:>14} {snr:>9}")
 
 
+def _first_use(command, filter_name=None):
+    """Say on stderr, before work that runs the tracker, that its compiled kernels are about to compile (and so
+    that this run's times include compiling): :func:`~shipsense.tracking.first_use_notice`."""
+    from shipsense.tracking import first_use_notice
+
+    notice = first_use_notice(filter_name)
+    if notice:
+        print(f"{command}: {notice}", file=sys.stderr)
+
+
 def cmd_demo(args) -> int:
     from shipsense.atomic import staged_directory
     from shipsense.config import load_scenario
     from shipsense.plotting import plot_simulation, plot_track
     from shipsense.simulator import simulate
-    from shipsense.tracking import describe, first_use_notice, track_to_files
+    from shipsense.tracking import describe, track_to_files
 
     out = Path(args.out)
     _writable("--out", out, directory=True)
     sc = load_scenario("demo")
-    notice = first_use_notice()
-    if notice:
-        print(f"demo: {notice}", file=sys.stderr)
+    _first_use("demo")
     bar = _progress(3, "demo: simulate")
     with staged_directory(out) as stage:   # all of the demo's files, or none
         sim = simulate(sc, runs=1)
@@ -214,7 +222,7 @@ def cmd_track(args) -> int:
     from shipsense.recording import RecordingError, read_recording
     from shipsense.simulator import simulate
     from shipsense.trackers.filters import FILTER_NAMES
-    from shipsense.tracking import describe, first_use_notice, track_to_files
+    from shipsense.tracking import describe, track_to_files
 
     sc = load_scenario(args.scenario)
     if args.filter is not None and args.filter not in FILTER_NAMES:
@@ -236,9 +244,7 @@ def cmd_track(args) -> int:
         times, y, truth = sim.times, sim.measurements[0], sim.truth[0]
         used_seed = sc.seed if args.seed is None else args.seed
         source = f"simulated {'random' if args.random else 'nominal'} passage of {sc.name} (seed {used_seed})"
-    notice = first_use_notice(args.filter)
-    if notice:
-        print(f"track: {notice}", file=sys.stderr)
+    _first_use("track", args.filter)
     with staged_directory(out) as stage:   # the tables and the plot, or nothing
         try:
             summary = track_to_files(sc, times, y, stage, truth=truth, method=args.method, unit=args.filter,
@@ -409,6 +415,8 @@ def cmd_train(args) -> int:
     _within_budget(args, budget.training(args.task, timesteps + imitation, evaluations, args.eval_episodes))
     env_kwargs = _json_kwargs("--env-kwargs", args.env_kwargs)
     out = args.out or f"results/train-{args.task}"
+    if args.task == "scheduling":              # (Passage environments: the tracker observes)
+        _first_use("train")
     try:
         with staged_directory(out) as stage:   # the models, logs, curve and summary, or nothing
             s = training.train(args.task, args.env, timesteps, stage, args.seed, args.n_envs, args.eval_every,
@@ -446,6 +454,8 @@ def cmd_evaluate(args) -> int:
 
     _within_budget(args, budget.evaluation(args.env_id, args.policy, args.episodes))
     env_kwargs = _json_kwargs("--env-kwargs", args.env_kwargs)
+    if "Passage" in args.env_id:               # (the tracker observes)
+        _first_use("evaluate")
     try:
         result = evaluate(args.env_id, args.policy, args.episodes, args.seed, env_kwargs,
                           progress=not _QUIET["on"])

@@ -191,8 +191,26 @@ def test_train_names_the_flag_of_a_bad_value(args, flag, tmp_path, capsys):
 
     assert main(["train", "scheduling", "--env", "shipsense/PassageEasy-v1", "--timesteps", "64", *args,
                  "--out", str(tmp_path / "x")]) == 2
-    err = capsys.readouterr().err
-    assert err.count("\n") == 1 and f"error: {flag}" in err and not (tmp_path / "x").exists()
+    err = [line for line in capsys.readouterr().err.splitlines()
+           if "compiling the numerical kernels" not in line]          # (a cold cache's notice comes first)
+    assert len(err) == 1 and f"error: {flag}" in err[0] and not (tmp_path / "x").exists()
+
+
+def test_train_and_evaluate_say_when_the_tracker_will_compile(monkeypatch, capsys, tmp_path):
+    """The Passage environments run the tracker: with its kernels not yet on disk, ``train`` (scheduling) and
+    ``evaluate`` say so first (their times then include compiling); ArrayDesign's do not."""
+    from shipsense import tracking
+    from shipsense.cli import main
+
+    monkeypatch.setattr(tracking, "first_use_notice", lambda filter_name=None: "compiling the numerical kernels")
+    assert main(["--quiet", "evaluate", "shipsense/PassageEasy-v1", "--policy", "random", "--episodes", "1"]) == 0
+    assert "evaluate: compiling the numerical kernels" in capsys.readouterr().err
+    assert main(["--quiet", "evaluate", SMALL_ID, "--env-kwargs", json.dumps(KW), "--policy", "random",
+                 "--episodes", "1"]) == 0
+    assert "compiling" not in capsys.readouterr().err
+    assert main(["train", "scheduling", "--env", "shipsense/PassageEasy-v1", "--timesteps", "64", "--imitate",
+                 "oracle", "--out", str(tmp_path / "x")]) == 2
+    assert capsys.readouterr().err.startswith("train: compiling the numerical kernels\n")
 
 
 def test_training_defaults_are_the_measured_best_where_the_environment_allows_them():
