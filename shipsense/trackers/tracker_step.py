@@ -124,14 +124,13 @@ def _step_kernel_for(code):
         if not _UPDATE(x, L, P, Y, mask, Rm, spec, spread, center, Wm, Wc, h, gamma, iterations,  # noqa: F821
                        n_pu, mean_l, P_l, L_l, eps_l, S_l, loglik_l, nis_l, cnt_l, ok):
             return False
-        # every row again: a repeat keeps its mean and factor and gains no log-likelihood
+        # every row again: a repeat gains no log-likelihood, and its mean and factor are not written (kept)
         mean_out, L_out = np.empty((B, n)), np.empty((B, n, n))
         eps, S = np.full((B, m), np.nan), np.full((B, m, m), np.nan)
         loglik, nis, cnt = np.zeros(B), np.full(B, np.nan), np.zeros(B, np.int64)
         for b in range(B):
             i = where[b]
             if i < 0:
-                mean_out[b], L_out[b] = mean_all[row[b]], chol_all[row[b]]
                 continue
             mean_out[b], L_out[b], eps[b], S[b] = mean_l[i], L_l[i], eps_l[i], S_l[i]
             loglik[b], nis[b], cnt[b] = loglik_l[i], nis_l[i], cnt_l[i]
@@ -139,11 +138,10 @@ def _step_kernel_for(code):
             clipped = np.empty((B, n))
             same = True
             for b in range(B):
+                if where[b] < 0:                         # (a repeat is not written)
+                    continue
                 for a in range(n):
                     v = mean_out[b, a]
-                    if where[b] < 0:                     # (a repeat is kept as it is)
-                        clipped[b, a] = v
-                        continue
                     t = lo[a] if v < lo[a] else v        # (np.clip's order: a NaN, or a -0.0 at 0, kept)
                     t = hi[a] if t > hi[a] else t
                     clipped[b, a] = t
@@ -156,11 +154,11 @@ def _step_kernel_for(code):
             r = runs[p]
             for k in range(H):
                 b = p * H + k
-                row = r * H + k
-                for a in range(n):
-                    mean_all[row, a] = mean_out[b, a]
-                    for c in range(n):
-                        chol_all[row, a, c] = L_out[b, a, c]
+                if where[b] >= 0:
+                    for a in range(n):
+                        mean_all[row[b], a] = mean_out[b, a]
+                        for c in range(n):
+                            chol_all[row[b], a, c] = L_out[b, a, c]
                 cum[r, k] += loglik[b]
                 cum_runs[p, k] = cum[r, k]
             sel[p] = first_max(cum_runs[p])
