@@ -68,6 +68,7 @@ two agree exactly.
 
 from __future__ import annotations
 
+import copy
 import time
 from dataclasses import dataclass, field, replace
 
@@ -220,6 +221,26 @@ class Sample:
         return Sample(*(getattr(self, f)[rows] for f in Sample.__dataclass_fields__))
 
 
+@dataclass(frozen=True)
+class PassageState:
+    """One passage's whole state in a :class:`Tracker` (:meth:`Tracker.passage_states`), to be carried on by
+    the tracker it came from or one of its siblings (:meth:`Tracker.sibling`; :meth:`Tracker.set_passage_states`).
+
+    ``fields``: the per-passage state (name -> array without the passage axis); the sample history holds only
+    its ``hist`` first rows (the rest unwritten: a passage that has seen fewer samples than the history keeps);
+    ``mean``, ``chol``, ``ok``, ``loglik``: its bank's hypotheses (internal units); ``gaps``: its gaps (start
+    and end times, s)."""
+
+    model: object
+    hist: int
+    fields: dict
+    mean: np.ndarray
+    chol: np.ndarray
+    ok: np.ndarray
+    loglik: np.ndarray
+    gaps: tuple
+
+
 @dataclass
 class TrackResult:
     """A batch of tracked passages (SI): per sample estimates (P, K, n), full covariances (P, K, n, n), status
@@ -243,6 +264,10 @@ class TrackResult:
     def status_names(self):
         """Status names (P, K)."""
         return np.asarray(STATUSES, dtype=object)[self.status]
+
+
+_HISTORY = ("y_hist", "t_hist")
+"""The per-passage sample history (:meth:`Tracker.passage_states` keeps its written rows only)."""
 
 
 class Tracker:
@@ -338,6 +363,65 @@ class Tracker:
         H, n = self._H, self.model.n
         self.bank.reset_runs(idx, np.broadcast_to(self._prior[0], (idx.size, H, n)), self._prior[1])
         return self
+
+    def sibling(self, passages):
+        """A tracker of this one's model and options over ``passages`` passages of its own, sharing this one's
+        compiled kernels and caches: passages run side by side there and are carried on here
+        (:meth:`passage_states`, :meth:`set_passage_states`), e.g. the run-ins of an environment's next
+        passages in one batch."""
+        return copy.copy(self).reset(passages)
+
+    def passage_states(self, passages):
+        """The :class:`PassageState` of each of ``passages`` (indices): copies, for :meth:`set_passage_states`
+        of this tracker or a sibling (:meth:`sibling`)."""
+        idx = np.asarray(passages, dtype=int)
+        self._check_unpruned()
+        H, size = self._H, self.y_hist.shape[1]
+        out = []
+        for p in idx.tolist():
+            hist = int(min(self.n[p], size))
+            fields = {name: np.array(getattr(self, name)[p][:hist] if name in _HISTORY else getattr(self, name)[p])
+                      for name in self._state_fields()}
+            rows = slice(p * H, (p + 1) * H)
+            b = self.bank.belief
+            out.append(PassageState(self.model, hist, fields, b.mean[rows].copy(), b.chol[rows].copy(),
+                                    b.ok[rows].copy(), self.bank.cum[p].copy(),
+                                    tuple((g.start_s, g.end_s) for g in self.gaps if g.passage == p)))
+        return out
+
+    def set_passage_states(self, passages, states):
+        """Carry on ``states`` (:meth:`passage_states` of this tracker or a sibling) as passages ``passages``
+        (indices, distinct): everything of theirs is replaced, as if they had run here; their gaps are added
+        to :attr:`gaps`."""
+        idx = np.asarray(passages, dtype=int)
+        states = list(states)
+        if idx.ndim != 1 or idx.size != len(states) or np.unique(idx).size != idx.size:
+            raise ValueError(f"give one state for each of distinct passages, got {len(states)} states for "
+                             f"passages {idx.tolist()}")
+        if idx.size and (idx.min() < 0 or idx.max() >= self.P):
+            raise IndexError(f"passages {idx.tolist()} out of range for {self.P} passages")
+        if any(not isinstance(st, PassageState) or st.model is not self.model for st in states):
+            raise ValueError("passage states must come from this tracker or a sibling (Tracker.sibling)")
+        self._check_unpruned()
+        H, b = self._H, self.bank.belief
+        for p, st in zip(idx.tolist(), states):
+            for name, (_, _, value) in self._state_fields().items():
+                arr = getattr(self, name)
+                if name in _HISTORY:
+                    arr[p] = value
+                    arr[p][:st.hist] = st.fields[name]
+                else:
+                    arr[p] = st.fields[name]
+            rows = slice(p * H, (p + 1) * H)
+            b.mean[rows], b.chol[rows], b.ok[rows] = st.mean, st.chol, st.ok
+            self.bank.cum[p] = st.loglik
+            self.gaps.extend(Gap(p, start, end) for start, end in st.gaps)
+        self.bank.belief = Belief(*b)       # written in place: drop a filter's covariance cache
+        return self
+
+    def _check_unpruned(self):
+        if len(self.bank.idx) != self.bank.R * self.bank.H:
+            raise ValueError("passage states need a bank without pruning (the tracker method's)")
 
     def _state_fields(self):
         """Per-passage state: name -> (shape after the passage axis, dtype, value at a passage's start)."""

@@ -405,20 +405,23 @@ def test_a_passage_the_observer_never_tracks_leaves_one_step_and_no_gains():
     assert term and info["episode_metrics"]["steps"] == 1.0 and info["error"] > 10.0 and np.isfinite(r)
 
 
-def test_the_run_in_fits_every_window_together_and_observes_what_one_at_a_time_did(monkeypatch):
-    """The run-in defers each observer's window fits to its end (``Tracker.fit_pending``: one batch for all the
-    environments reset together, whose windows complete at different samples and lengths): observations,
-    rewards and errors equal, to the bit, those of the run-in fitting each window at the sample it completes
-    (the loop before, replayed here), over reset cycles of a vector env and a single env."""
+def test_the_run_ins_in_one_batch_observe_what_one_at_a_time_did(monkeypatch):
+    """The observers' run-ins run side by side on a sibling tracker (every queued passage of the environments
+    reset together, their window fits deferred to the end: ``Tracker.fit_pending``) and are carried into the
+    environments (``Tracker.set_passage_states``): observations, rewards and errors equal, to the bit, those of
+    each passage's run-in alone, its window fitted at the sample it completes (the loop before, replayed
+    here), over reset cycles of a vector env."""
     from shipsense.envs import passage_v1
 
-    def one_at_a_time(self, envs):                                   # the run-in before: each window fitted
-        waiting = envs[self._blind(envs) & (self.k[envs] < self.K - 2)]   # at the sample it completes
-        while waiting.size:
-            self.k[waiting] += 1
-            self._record(self.tracker.update(self.times[self.k[waiting]], self.y[waiting, self.k[waiting]],
-                                             passages=waiting), waiting)
-            waiting = waiting[self._blind(waiting) & (self.k[waiting] < self.K - 2)]
+    def one_at_a_time(self, entries):                                # the run-in before: one passage, its
+        for entry in entries:                                       # window fitted at the sample it completes
+            trk, y, k = self.tracker.sibling(1), entry[0][None], 0
+            last = trk.update(self.times[0], y[:, 0])
+            while self._blind_status(last.status)[0] and k < self.K - 2:
+                k += 1
+                last = trk.update(self.times[k], y[:, k])
+            record = {name: np.copy(getattr(last, name)[0]) for name in passage_v1._RECORDED}
+            entry[2] = (k, record, trk.passage_states([0])[0])
 
     def run():
         out = []
@@ -431,7 +434,7 @@ def test_the_run_in_fits_every_window_together_and_observes_what_one_at_a_time_d
             out += [o, r, info["error"]]
         return out
 
-    deferred = run()
-    monkeypatch.setattr(passage_v1.PassageV1Core, "_run_in", one_at_a_time)
-    for a, b in zip(deferred, run()):
+    together = run()
+    monkeypatch.setattr(passage_v1.PassageV1Core, "_run_ins", one_at_a_time)
+    for a, b in zip(together, run(), strict=True):
         np.testing.assert_array_equal(a, b)

@@ -104,6 +104,43 @@ def test_deferred_window_fits_are_the_fits_update_makes(scenario, runs):
         np.testing.assert_allclose(cov, ref.covs, rtol=1e-8, atol=1e-10)
 
 
+@pytest.mark.parametrize("history", [1000, 12])
+def test_passage_states_carried_into_a_sibling_go_on_as_they_would_have(s2, history):
+    """A passage's state taken mid-track (``passage_states``) and set into other rows of a sibling tracker
+    (``set_passage_states``) goes on exactly as it would have: estimates, covariances and statuses equal to the
+    bit those of tracking it without a break, and its gap is carried (renumbered).  With a 12-sample history
+    the history has wrapped at the break and is carried whole; a fresh row of the sibling is left alone.
+    States move only between a tracker and its siblings, one per distinct passage in range."""
+    sc, t, y, truth, _ = s2
+    P, K = y.shape[:2]
+    times = np.repeat(t[None], P, axis=0)
+    times[1, 20:] += 8.0                                # a gap longer than S2's 5 s limit, before the break
+    opts = {"sensors": ["M1", "M2"], "history": history}
+    ref = Tracker(sc, passages=P, **opts).track(times, y)
+    first = Tracker(sc, passages=P, **opts)
+    k = 40
+    for j in range(k):
+        first.update(times[:, j], y[:, j])
+    states = first.passage_states(range(P))
+    other = first.sibling(P + 1)
+    rows = np.array([3, 0, 4, 1])                       # passage p goes on as row rows[p]; row 2 stays fresh
+    other.set_passage_states(rows, states)
+    assert [(g.passage, g.start_s) for g in other.gaps] == [(0, times[1, 19])]
+    for j in range(k, K):
+        s = other.update(times[:, j], y[:, j], passages=rows)
+        np.testing.assert_array_equal(s.estimate, ref.estimates[:, j])
+        np.testing.assert_array_equal(s.cov, ref.covs[:, j])
+        np.testing.assert_array_equal(s.status, ref.status[:, j])
+    assert other.n[2] == 0 and other.phase[2] == Tracker(sc, passages=1, **opts).phase[0]
+    assert set(np.unique(ref.status[:, k:])) - {INITIALISING, NO_DATA}       # it was tracking by then
+    with pytest.raises(ValueError, match="sibling"):
+        Tracker(sc, passages=P, **opts).set_passage_states([0], states[:1])
+    with pytest.raises(ValueError, match="distinct"):
+        other.set_passage_states([0, 0], states[:2])
+    with pytest.raises(IndexError, match="out of range"):
+        other.set_passage_states([P + 1], states[:1])
+
+
 def test_each_passage_starts_from_its_own_data_and_nothing_raises_for_the_batch(s2):
     sc, t, y, truth, res = s2
     y2 = y.copy()
