@@ -78,7 +78,7 @@ from shipsense.trackers.bank import BankState
 from shipsense.trackers.batchfit import Huber, transitions
 from shipsense.trackers.consistency import quantile_table, window_test
 from shipsense.trackers.filters import get_filter
-from shipsense.trackers.filters._core import Belief, symmetrize
+from shipsense.trackers.filters._core import _UNROLL_MIN_BATCH, Belief, symmetrize
 from shipsense.trackers.initialiser import depth_prior, window_fits
 from shipsense.trackers.restarts import due, refit_window
 from shipsense.trackers.seeding import seed_hypotheses
@@ -370,6 +370,14 @@ class Tracker:
         (:meth:`passage_states`, :meth:`set_passage_states`), e.g. the run-ins of an environment's next
         passages in one batch."""
         return copy.copy(self).reset(passages)
+
+    @property
+    def independent_batch(self):
+        """The most passages whose banks may start in one call with the numbers each would have alone: a
+        bank's start factorises its hypotheses' covariances (``safe_cholesky``), which from 512 matrices on
+        takes an unrolled form equal to LAPACK's only to rounding (e.g. run-ins side by side,
+        :meth:`sibling`)."""
+        return max(1, (_UNROLL_MIN_BATCH - 1) // self._H)
 
     def passage_states(self, passages):
         """The :class:`PassageState` of each of ``passages`` (indices): copies, for :meth:`set_passage_states`
