@@ -32,6 +32,30 @@ def test_large_batch_cholesky_flags_only_the_bad_elements():
     np.testing.assert_allclose(L[good], np.linalg.cholesky(P[good]), rtol=1e-10, atol=1e-12)
 
 
+def test_a_bad_element_leaves_the_others_their_own_factors():
+    """Below the unrolled form's batch, a batch with an indefinite, a non-finite and a very indefinite element
+    (LAPACK fails on the whole stack) gives every other element LAPACK's factor to the bit -- what it gets alone
+    --, and the bad ones what they get alone (flagged): the factors do not depend on the batch.  (Before, the
+    whole batch was repaired through its eigendecomposition, moving every factor at rounding: an environment's
+    run-ins side by side differed from one at a time.)"""
+    rng = np.random.default_rng(4)
+    P = spd(rng, 200, 7)
+    P[17] = -np.eye(7)
+    P[120, 0, 0] = np.nan
+    P[121] -= 50.0 * np.eye(7)
+    L, ok = safe_cholesky(P)
+    assert np.flatnonzero(~ok).tolist() == [17, 120, 121]
+    for i in range(200):
+        alone, ok_alone = safe_cholesky(P[i:i + 1])
+        np.testing.assert_array_equal(L[i], alone[0])
+        assert ok[i] == ok_alone[0]
+        if ok[i]:
+            np.testing.assert_array_equal(L[i], np.linalg.cholesky(P[i]))
+    L2, ok2 = safe_cholesky(P.reshape(20, 10, 7, 7))                 # leading batch axes kept
+    np.testing.assert_array_equal(L2.reshape(L.shape), L)
+    np.testing.assert_array_equal(ok2.ravel(), ok)
+
+
 @pytest.mark.parametrize("A", [cv_transition(0.5, 3), np.eye(4) + np.triu(np.ones((4, 4)), 1)], ids=["cv", "dense"])
 def test_transition_by_row_operations_equals_matmul(A):
     M = np.random.default_rng(2).standard_normal((5, A.shape[0], A.shape[0]))

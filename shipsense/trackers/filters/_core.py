@@ -162,22 +162,63 @@ def safe_cholesky(P):
     Elements that are non-finite or not positive definite are flagged
     ``ok = False`` and repaired (non-finite ones replaced by the identity,
     indefinite ones by clipping eigenvalues to a small positive floor) so
-    that one bad element never stops the batch.
+    that one bad element never stops the batch -- nor changes the other
+    elements' factors: below the unrolled form's batch, every element gets
+    the factor it would get alone (:func:`_factor_or_repair`).
     """
     P = np.asarray(P, dtype=float)
-    if P.shape[-1] <= _UNROLL_MAX_N and P.size >= _UNROLL_MIN_BATCH * P.shape[-1] ** 2:
+    n = P.shape[-1]
+    if n <= _UNROLL_MAX_N and P.size >= _UNROLL_MIN_BATCH * n ** 2:
         with np.errstate(invalid="ignore", divide="ignore"):
             L = _cholesky_unrolled(P)
         if np.isfinite(L).all():
             return L, np.ones(L.shape[:-2], dtype=bool)
-    else:
-        try:
-            L = np.linalg.cholesky(P)  # raises on an indefinite element; NaN propagates to the diagonal
-            n = L.shape[-1]
-            if math.isfinite(L.reshape(-1, n * n)[:, ::n + 1].sum()):   # the diagonals' sum: finite iff all are
-                return L, np.ones(L.shape[:-2], dtype=bool)
-        except np.linalg.LinAlgError:
-            pass
+        return _repair(P)
+    L, ok = _factor_or_repair(P.reshape(-1, n, n))
+    return L.reshape(P.shape), ok.reshape(P.shape[:-2])
+
+
+def _lapack(P):
+    """LAPACK's factors of the stack ``P`` (B, n, n), or None if one of them fails (indefinite or NaN)."""
+    try:
+        L = np.linalg.cholesky(P)  # raises on an indefinite element; NaN propagates to the diagonal
+    except np.linalg.LinAlgError:
+        return None
+    n = L.shape[-1]
+    return L if math.isfinite(L.reshape(-1, n * n)[:, ::n + 1].sum()) else None   # the diagonals' sum: finite
+    # iff all are
+
+
+def _factor_or_repair(P):
+    """:func:`safe_cholesky` of a stack ``P`` (B, n, n): LAPACK's factor of every element it factorises, the
+    stack halved around the elements it does not (a few calls per bad element), which :func:`_repair`
+    repairs one by one."""
+    L = _lapack(P)
+    if L is not None:
+        return L, np.ones(len(P), dtype=bool)
+    L, ok = np.empty(P.shape), np.ones(len(P), dtype=bool)
+    parts = [(0, len(P) // 2), (len(P) // 2, len(P))] if len(P) > 1 else []
+    if not parts:
+        L[:], ok[:] = _repair(P)
+    while parts:
+        lo, hi = parts.pop()
+        if hi <= lo:
+            continue
+        part = _lapack(P[lo:hi])
+        if part is not None:
+            L[lo:hi] = part
+        elif hi - lo == 1:
+            L[lo:hi], ok[lo:hi] = _repair(P[lo:hi])
+        else:
+            mid = (lo + hi) // 2
+            parts += [(lo, mid), (mid, hi)]
+    return L, ok
+
+
+def _repair(P):
+    """The factors and flags of elements of ``P`` that LAPACK does not factorise (or of a batch the unrolled
+    form failed on): non-finite elements replaced by the identity, eigenvalues clipped to ``1e-12`` of the
+    largest (flagged), then factorised."""
     P = symmetrize(P)
     n = P.shape[-1]
     finite = np.isfinite(P).all(axis=(-1, -2))
