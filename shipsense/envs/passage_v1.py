@@ -339,24 +339,21 @@ class PassageV1Core:
         """Advance environments ``envs`` (default all) by one sample with actions (E,) (indices of
         :attr:`subsets`).  Returns rewards, terminated (E,) and an info dict of (E,) arrays; entries of
         environments that did not step are meaningless."""
-        actions = np.asarray(actions).reshape(self.E)
-        who = self._rows if envs is None else np.asarray(envs, dtype=int)
-        read = self.subsets[actions]
-        self.k[who] += 1
-        y = np.where(read[:, self.sensor_of], self.y[self._rows, self.k], np.nan)[who]
+        actions = np.asarray(actions, dtype=np.int64).reshape(self.E)
+        who = self._rows if envs is None else np.asarray(envs, dtype=np.int64)
+        y, reads = np.empty((who.size, self.model.m)), np.empty(self.E)
+        bad = _read(actions, who, self.subsets, self.sensor_of, self.y, self.k, self.since, self.last_read, y, reads)
+        if bad >= 0:
+            raise ValueError(f"actions must be integers in [0, {len(self.subsets)}), got {actions[bad]} for "
+                             f"environment {bad}")
         self._record(self.tracker.update(self.times[self.k[who]], y, passages=who), who)
-        self.last_read[who] = read[who]
-        self.since[who] += 1.0
-        self.since[who] = np.where(read[who], 0.0, self.since[who])
         error, nees = np.zeros(self.E), np.zeros(self.E)
         error[who], nees[who] = self._measure(who)
         self._predict_gains(who)
-        reads = read.sum(axis=1).astype(float)
         error_term = -np.log1p(error / self.error_scale)
         energy_term = -self.energy_cost * reads
         rewards = error_term + energy_term
-        self.returns[who] += rewards[who]
-        self.reads[who] += reads[who]
+        _accumulate(who, rewards, reads, self.returns, self.reads)
         info = {"error": error, "nees": nees, "inside95": nees <= CHI2_2_95, "reads": reads,
                 "error_term": error_term, "energy_term": energy_term, "status": self.last.status.copy(),
                 "truth": self.truth[self._rows, self.k, :2].copy(), "estimate": self.last.estimate[:, :2].copy()}
@@ -550,6 +547,43 @@ def _observe(est, cov, status, k, since, gains, centre, position_scale, steps, o
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
+def _read(actions, who, subsets, sensor_of, y_all, k, since, last_read, y, reads):
+    """The reads of :meth:`PassageV1Core.step`: every environment's reads (``reads``, float) under its action
+    (a row of ``subsets``); for environments ``who``, the next sample (``k``), its channels of the sensors read
+    (``y``, the others NaN), the read mask (``last_read``) and the steps since each sensor was read
+    (``since``: 0 read, else one more).  Returns -1, or the first environment whose action is not a row of
+    ``subsets`` (then nothing is written)."""
+    S = subsets.shape[1]
+    for e in range(actions.size):
+        if actions[e] < 0 or actions[e] >= subsets.shape[0]:
+            return e                                    # (nothing written)
+    for e in range(actions.size):
+        count = 0
+        for s in range(S):
+            count += subsets[actions[e], s]
+        reads[e] = count
+    for i in range(who.size):
+        e = who[i]
+        row = subsets[actions[e]]
+        k[e] += 1
+        for j in range(y.shape[1]):
+            y[i, j] = y_all[e, k[e], j] if row[sensor_of[j]] else np.nan
+        for s in range(S):
+            last_read[e, s] = row[s]
+            since[e, s] = 0.0 if row[s] else since[e, s] + 1.0
+    return -1
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def _accumulate(who, rewards, reads, returns, total_reads):
+    """The episode's sums of environments ``who``: their rewards and reads."""
+    for i in range(who.size):
+        e = who[i]
+        returns[e] += rewards[e]
+        total_reads[e] += reads[e]
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
 def _measure(envs, k, est, cov, truth, limit, est_hist, errors, inside, error, nees):
     """:meth:`PassageV1Core._measure` of environments ``envs``: the position error (into ``error``) and NEES
     (``nees``; inf where not finite) at each one's current sample, stored in the histories."""
@@ -634,7 +668,7 @@ class PassageV1Env(RebuiltOnUnpickle, ClosesItsFigure, gym.Env):
             raise RuntimeError("call reset() before step()")
         if self.core.k[0] >= self.core.K - 1:
             raise RuntimeError("the passage has ended: call reset()")
-        if not self.action_space.contains(action):
+        if not (0 <= action < self.action_space.n if type(action) is int else self.action_space.contains(action)):
             raise ValueError(f"action must be an integer in [0, {self.action_space.n}), got {action!r}")
         rewards, terminated, info = self.core.step(np.array([int(action)]))
         obs = self.core.observe()[0]
