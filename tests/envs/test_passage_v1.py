@@ -438,3 +438,17 @@ def test_the_run_ins_in_one_batch_observe_what_one_at_a_time_did(monkeypatch):
     monkeypatch.setattr(passage_v1.PassageV1Core, "_run_ins", one_at_a_time)
     for a, b in zip(together, run(), strict=True):
         np.testing.assert_array_equal(a, b)
+
+
+def test_the_core_refuses_an_action_out_of_range_before_writing_anything():
+    env = PassageV1Env(**KW)
+    env.reset(seed=0)
+    core = env.core
+    before = (core.k.copy(), core.since.copy(), core.returns.copy())
+    for bad in (-1, len(core.subsets)):
+        with pytest.raises(ValueError, match=r"actions must be integers in \[0, "):
+            core.step(np.array([bad]))
+    for a, b in zip(before, (core.k, core.since, core.returns)):
+        np.testing.assert_array_equal(a, b)
+    with pytest.raises(ValueError, match="action must be an integer"):
+        env.step(len(core.subsets))
