@@ -813,7 +813,14 @@ class Tracker:
             self.alarms[sel] += alarm[due_]
             self.restarts[sel] += 1
             failed_test = self.cons_now[runs]
-            self._refit(sel, alarm[due_], rescan[due_], out)
+            # one batch per window length: a batch of windows of different lengths would pad the shorter ones
+            # (their global starts would then pick other samples, their fits move at rounding), so a passage's
+            # refit would depend on the passages refitted with it
+            first = np.maximum(self.k0[sel], self.n[sel] - self.y_hist.shape[1] + 1)
+            length = self.n[sel] - first
+            for w in np.unique(length):
+                group = length == w
+                self._refit(sel[group], alarm[due_][group], rescan[due_][group], out)
             # a refit after a failed consistency test: the sample is still the test's (inconsistent), with the
             # refit's covariance -- unless the fit failed its own test (then as any failed fit)
             ok = runs[failed_test & self.trusted[runs]]

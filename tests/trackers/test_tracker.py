@@ -141,6 +141,22 @@ def test_passage_states_carried_into_a_sibling_go_on_as_they_would_have(s2, hist
         other.set_passage_states([P + 1], states[:1])
 
 
+def test_a_passage_is_tracked_as_alone_whatever_is_refitted_beside_it():
+    """Refits are batched per window length: two S0 passages (one magnetometer, which rescans) refitted at
+    the same samples with windows of different lengths get, each, exactly what it gets alone.  (Before, the
+    shorter window was padded to the longer: its global starts picked other samples and passage 5 of this
+    draw moved, tracked with passage 0 -- so a vector environment's sub-environment differed from a single
+    environment with the same seed.)"""
+    sim = simulate("S0", runs=6, seed=11, random=True)
+    y = sim.measurements[[5, 0]]
+    both = Tracker("S0", passages=2).track(sim.times, y)
+    for i in range(2):
+        alone = Tracker("S0", passages=1).track(sim.times, y[i:i + 1])
+        np.testing.assert_array_equal(both.estimates[i], alone.estimates[0])
+        np.testing.assert_array_equal(both.covs[i], alone.covs[0])
+        np.testing.assert_array_equal(both.status[i], alone.status[0])
+
+
 def test_each_passage_starts_from_its_own_data_and_nothing_raises_for_the_batch(s2):
     sc, t, y, truth, res = s2
     y2 = y.copy()
