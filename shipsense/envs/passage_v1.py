@@ -339,7 +339,10 @@ class PassageV1Core:
         """Advance environments ``envs`` (default all) by one sample with actions (E,) (indices of
         :attr:`subsets`).  Returns rewards, terminated (E,) and an info dict of (E,) arrays; entries of
         environments that did not step are meaningless."""
-        actions = np.asarray(actions, dtype=np.int64).reshape(self.E)
+        actions = np.asarray(actions)
+        if actions.dtype == bool or not np.issubdtype(actions.dtype, np.integer):
+            raise ValueError(f"actions must be integers in [0, {len(self.subsets)}), got {actions.dtype} values")
+        actions = actions.astype(np.int64, copy=False).reshape(self.E)
         who = self._rows if envs is None else np.asarray(envs, dtype=np.int64)
         y, reads = np.empty((who.size, self.model.m)), np.empty(self.E)
         bad = _read(actions, who, self.subsets, self.sensor_of, self.y, self.k, self.since, self.last_read, y, reads)
@@ -737,7 +740,8 @@ class PassageV1VectorEnv(CoreVectorEnv):
 
     def step(self, actions):
         actions = np.asarray(actions).reshape(self.num_envs)
-        if np.any((actions < 0) | (actions >= len(self.subsets))):
+        if (actions.dtype == bool or not np.issubdtype(actions.dtype, np.integer)
+                or np.any((actions < 0) | (actions >= len(self.subsets)))):
             raise ValueError(f"actions must be integers in [0, {len(self.subsets)})")
         done = self._autoreset()
         live = ~done

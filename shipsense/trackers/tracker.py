@@ -382,7 +382,7 @@ class Tracker:
     def passage_states(self, passages):
         """The :class:`PassageState` of each of ``passages`` (indices): copies, for :meth:`set_passage_states`
         of this tracker or a sibling (:meth:`sibling`)."""
-        idx = np.asarray(passages, dtype=int)
+        idx = self._passage_indices(passages)
         self._check_unpruned()
         H, size = self._H, self.y_hist.shape[1]
         out = []
@@ -399,19 +399,19 @@ class Tracker:
 
     def set_passage_states(self, passages, states):
         """Carry on ``states`` (:meth:`passage_states` of this tracker or a sibling) as passages ``passages``
-        (indices, distinct): everything of theirs is replaced, as if they had run here; their gaps are added
-        to :attr:`gaps`."""
-        idx = np.asarray(passages, dtype=int)
+        (indices, distinct): everything of theirs is replaced, as if they had run here (their gaps in
+        :attr:`gaps` too)."""
+        idx = self._passage_indices(passages)
         states = list(states)
-        if idx.ndim != 1 or idx.size != len(states) or np.unique(idx).size != idx.size:
+        if idx.size != len(states) or np.unique(idx).size != idx.size:
             raise ValueError(f"give one state for each of distinct passages, got {len(states)} states for "
                              f"passages {idx.tolist()}")
-        if idx.size and (idx.min() < 0 or idx.max() >= self.P):
-            raise IndexError(f"passages {idx.tolist()} out of range for {self.P} passages")
         if any(not isinstance(st, PassageState) or st.model is not self.model for st in states):
             raise ValueError("passage states must come from this tracker or a sibling (Tracker.sibling)")
         self._check_unpruned()
         H, b = self._H, self.bank.belief
+        moved = set(idx.tolist())
+        self.gaps = [g for g in self.gaps if g.passage not in moved]      # (a previous occupant's)
         for p, st in zip(idx.tolist(), states):
             for name, (_, _, value) in self._state_fields().items():
                 arr = getattr(self, name)
@@ -426,6 +426,17 @@ class Tracker:
             self.gaps.extend(Gap(p, start, end) for start, end in st.gaps)
         self.bank.belief = Belief(*b)       # written in place: drop a filter's covariance cache
         return self
+
+    def _passage_indices(self, passages):
+        """``passages`` as an int64 vector of indices in range (not booleans, not fractions)."""
+        idx = np.asarray(passages)
+        if idx.size == 0:
+            return np.zeros(0, dtype=np.int64)
+        if idx.ndim != 1 or idx.dtype == bool or not np.issubdtype(idx.dtype, np.integer):
+            raise ValueError(f"passages must be a sequence of passage indices (integers), got {passages!r}")
+        if idx.min() < 0 or idx.max() >= self.P:
+            raise IndexError(f"passages {idx.tolist()} out of range for {self.P} passages")
+        return idx.astype(np.int64)
 
     def _check_unpruned(self):
         if len(self.bank.idx) != self.bank.R * self.bank.H:

@@ -452,3 +452,10 @@ def test_the_core_refuses_an_action_out_of_range_before_writing_anything():
         np.testing.assert_array_equal(a, b)
     with pytest.raises(ValueError, match="action must be an integer"):
         env.step(len(core.subsets))
+    with pytest.raises(ValueError, match="actions must be integers"):
+        core.step(np.array([1.5]))
+    venv = PassageV1VectorEnv(2, **KW)
+    venv.reset(seed=0)
+    for bad in (np.array([1.5, 2.0]), np.array([True, False])):
+        with pytest.raises(ValueError, match="actions must be integers"):
+            venv.step(bad)

@@ -139,6 +139,15 @@ def test_passage_states_carried_into_a_sibling_go_on_as_they_would_have(s2, hist
         other.set_passage_states([0, 0], states[:2])
     with pytest.raises(IndexError, match="out of range"):
         other.set_passage_states([P + 1], states[:1])
+    for bad in ([-1], [P + 1]):
+        with pytest.raises(IndexError, match="out of range"):
+            first.passage_states(bad)
+    for bad in ([True, False], [0.9]):
+        with pytest.raises(ValueError, match="integers"):
+            first.passage_states(bad)
+    assert first.passage_states([]) == [] and first.passage_states(np.array([1], dtype=np.int32))[0].gaps
+    other.set_passage_states([0], states[:1])            # row 0's gap (passage 1's) goes with its occupant
+    assert other.gaps == []
 
 
 def test_a_passage_is_tracked_as_alone_whatever_is_refitted_beside_it():
