@@ -340,7 +340,7 @@ class PassageV1Core:
         :attr:`subsets`).  Returns rewards, terminated (E,) and an info dict of (E,) arrays; entries of
         environments that did not step are meaningless."""
         actions = np.asarray(actions)
-        if actions.dtype == bool or not np.issubdtype(actions.dtype, np.integer):
+        if actions.dtype.kind not in "iu":                    # (not bool, not fractions)
             raise ValueError(f"actions must be integers in [0, {len(self.subsets)}), got {actions.dtype} values")
         actions = actions.astype(np.int64, copy=False).reshape(self.E)
         who = self._rows if envs is None else np.asarray(envs, dtype=np.int64)
@@ -740,8 +740,7 @@ class PassageV1VectorEnv(CoreVectorEnv):
 
     def step(self, actions):
         actions = np.asarray(actions).reshape(self.num_envs)
-        if (actions.dtype == bool or not np.issubdtype(actions.dtype, np.integer)
-                or np.any((actions < 0) | (actions >= len(self.subsets)))):
+        if actions.dtype.kind not in "iu" or np.any((actions < 0) | (actions >= len(self.subsets))):
             raise ValueError(f"actions must be integers in [0, {len(self.subsets)})")
         done = self._autoreset()
         live = ~done

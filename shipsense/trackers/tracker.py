@@ -80,6 +80,7 @@ from shipsense.trackers.consistency import quantile_table, window_test
 from shipsense.trackers.filters import get_filter
 from shipsense.trackers.filters._core import _UNROLL_MIN_BATCH, Belief, symmetrize
 from shipsense.trackers.initialiser import depth_prior, window_fits
+from shipsense.trackers.measurement import FIELD, kernel_of
 from shipsense.trackers.restarts import due, refit_window
 from shipsense.trackers.seeding import seed_hypotheses
 from shipsense.trackers.selection import report
@@ -333,6 +334,8 @@ class Tracker:
         self._prior = prior_belief(self.model, sc, self.bank_config)
         self._prior_info = np.diag(self.model.x_scale ** 2 / np.diag(self._prior[1]))   # internal units
         self._compiled = TrackerStep.of(self.unit, self.filter_model, self._H)
+        spec = kernel_of(self.model)
+        self._pads_exactly = self.huber is None and spec is not None and spec[0] == FIELD   # (_restart's refits)
         self._R_used = np.ascontiguousarray(self.filter_model.R[None], dtype=float)
         self.reset(passages)
 
@@ -432,7 +435,7 @@ class Tracker:
         idx = np.asarray(passages)
         if idx.size == 0:
             return np.zeros(0, dtype=np.int64)
-        if idx.ndim != 1 or idx.dtype == bool or not np.issubdtype(idx.dtype, np.integer):
+        if idx.ndim != 1 or idx.dtype.kind not in "iu":
             raise ValueError(f"passages must be a sequence of passage indices (integers), got {passages!r}")
         if idx.min() < 0 or idx.max() >= self.P:
             raise IndexError(f"passages {idx.tolist()} out of range for {self.P} passages")
@@ -766,15 +769,18 @@ class Tracker:
                            distinct_m=o.distinct_m, z_std=o.z_std, refine=o.refine, gof=o.gof,
                            explore_samples=o.explore_samples, huber=self.huber)
 
-    def _global_starts(self, yw, taus, which):
+    def _global_starts(self, yw, taus, which, lengths):
         """Starts (R, keep_init, n) at the windows' first samples: the global fits of the windows ``which``
-        (a restart after an alarm need not stay near the track that diverged), NaN for the others."""
+        (a restart after an alarm need not stay near the track that diverged), NaN for the others; ``lengths``
+        (R,): each window's samples (the others padding)."""
         starts = np.full((yw.shape[0], self.options.keep_init, self.model.n), np.nan)
         # (they are only starts, which the refit takes to all the samples: the global fits see at most a
-        # window's worth of them, evenly spread from the first to the last, so their cost does not grow)
-        W = yw.shape[1]
-        pick = np.unique(np.round(np.linspace(0, W - 1, min(W, self.window))).astype(int))
-        starts[which] = self._fits(yw[which][:, pick], taus[which][:, pick]).theta
+        # window's worth of them, evenly spread from the first to the last, so their cost does not grow; one
+        # batch per window length, its own samples: a passage's starts do not depend on the windows beside it)
+        for W in np.unique(lengths[which]):
+            rows = np.flatnonzero(which & (lengths == W))
+            pick = np.unique(np.round(np.linspace(0, W - 1, min(W, self.window))).astype(int))
+            starts[rows] = self._fits(yw[rows][:, pick], taus[rows][:, pick]).theta
         return starts
 
     def _start_banks(self, runs, fits, tau, inflate, out):
@@ -824,14 +830,18 @@ class Tracker:
             self.alarms[sel] += alarm[due_]
             self.restarts[sel] += 1
             failed_test = self.cons_now[runs]
-            # one batch per window length: a batch of windows of different lengths would pad the shorter ones
-            # (their global starts would then pick other samples, their fits move at rounding), so a passage's
-            # refit would depend on the passages refitted with it
-            first = np.maximum(self.k0[sel], self.n[sel] - self.y_hist.shape[1] + 1)
-            length = self.n[sel] - first
-            for w in np.unique(length):
-                group = length == w
-                self._refit(sel[group], alarm[due_][group], rescan[due_][group], out)
+            # one batch, the shorter windows padded with missing samples: the compiled least-squares fits and
+            # their information skip them, so a passage's refit is the one it gets alone; numpy's fits (a model
+            # without a compiled kernel) and a robust fit's information run over the padded window and move at
+            # rounding with its length, so those are batched per window length
+            if self._pads_exactly:
+                self._refit(sel, alarm[due_], rescan[due_], out)
+            else:
+                first = np.maximum(self.k0[sel], self.n[sel] - self.y_hist.shape[1] + 1)
+                length = self.n[sel] - first
+                for w in np.unique(length):
+                    group = length == w
+                    self._refit(sel[group], alarm[due_][group], rescan[due_][group], out)
             # a refit after a failed consistency test: the sample is still the test's (inconsistent), with the
             # refit's covariance -- unless the fit failed its own test (then as any failed fit)
             ok = runs[failed_test & self.trusted[runs]]
@@ -861,7 +871,8 @@ class Tracker:
         t0 = time.perf_counter()
         multistart = alarm | rescan
         if multistart.any():   # an alarm: the global initialiser again, on everything since the detection
-            theta = np.concatenate([theta, self._global_starts(yw, taus, multistart)], axis=1)
+            theta = np.concatenate([theta, self._global_starts(yw, taus, multistart, self.n[runs] - first + 1)],
+                                   axis=1)
         prior = depth_prior(self.model, o.z_std)
         fits = refit_window(self.model, yw, theta, taus=taus, prior=prior, keep=o.keep, distinct_m=o.distinct_m,
                             gof=o.gof, huber=self.huber)

@@ -63,8 +63,8 @@ def test_deferred_window_fits_are_the_fits_update_makes(scenario, runs):
     then catch up) get exactly ``track``'s estimates, covariances and statuses, though their windows, of
     different lengths (the demo's end early past their peak), complete at different samples and are fitted
     together.  A pending passage refuses another sample.  The passages' different paces also put their later
-    refits in other batches than ``track``'s, which changes nothing: refits are batched per window length (the
-    demo's moved at 1e-9 while a batch padded the shorter windows)."""
+    refits in other batches than ``track``'s, which changes nothing (the demo's moved at 1e-9 while the global
+    starts were fitted over the padded windows)."""
     sim = simulate(scenario, runs=runs, seed=7, random=True)
     t, y = np.broadcast_to(sim.times, sim.measurements.shape[:2]), sim.measurements
     ref = Tracker(scenario, passages=runs).track(sim.times, y)
@@ -146,11 +146,11 @@ def test_passage_states_carried_into_a_sibling_go_on_as_they_would_have(s2, hist
 
 
 def test_a_passage_is_tracked_as_alone_whatever_is_refitted_beside_it():
-    """Refits are batched per window length: two S0 passages (one magnetometer, which rescans) refitted at
-    the same samples with windows of different lengths get, each, exactly what it gets alone.  (Before, the
-    shorter window was padded to the longer: its global starts picked other samples and passage 5 of this
-    draw moved, tracked with passage 0 -- so a vector environment's sub-environment differed from a single
-    environment with the same seed.)"""
+    """Two S0 passages (one magnetometer, which rescans) refitted at the same samples with windows of
+    different lengths get, each, exactly what it gets alone: the batch pads the shorter window, which the
+    compiled fits skip, and the global starts are fitted per window length.  (Before, they were fitted over
+    the padded window, picking other samples: passage 5 of this draw moved, tracked with passage 0 -- so a
+    vector environment's sub-environment differed from a single environment with the same seed.)"""
     sim = simulate("S0", runs=6, seed=11, random=True)
     y = sim.measurements[[5, 0]]
     both = Tracker("S0", passages=2).track(sim.times, y)
@@ -159,6 +159,27 @@ def test_a_passage_is_tracked_as_alone_whatever_is_refitted_beside_it():
         np.testing.assert_array_equal(both.estimates[i], alone.estimates[0])
         np.testing.assert_array_equal(both.covs[i], alone.covs[0])
         np.testing.assert_array_equal(both.status[i], alone.status[0])
+
+
+def test_robust_refits_are_batched_per_window_length():
+    """A robust tracker's refits (their information numpy's over the window) are batched per window length:
+    PassageHard-v1's passage 1 of this draw, refitted beside passage 0 with windows of other lengths, gets
+    exactly what it gets alone; in one padded batch it moved."""
+    from shipsense.config import load_scenario
+    from shipsense.envs import PASSAGE_V1_VARIANTS
+
+    sc = load_scenario("S2").with_updates(**PASSAGE_V1_VARIANTS["shipsense/PassageHard-v1"]["overrides"])
+    sim = simulate(sc, runs=2, seed=2, random=True)
+    y = sim.measurements[[1, 0]]
+    alone = Tracker(sc, passages=1).track(sim.times, y[:1])
+    both = Tracker(sc, passages=2)
+    assert both.huber is not None and not both._pads_exactly
+    res = both.track(sim.times, y)
+    np.testing.assert_array_equal(res.estimates[0], alone.estimates[0])
+    np.testing.assert_array_equal(res.covs[0], alone.covs[0])
+    padded = Tracker(sc, passages=2)
+    padded._pads_exactly = True                          # one padded batch, as the compiled fits take
+    assert not np.array_equal(padded.track(sim.times, y).estimates[0], alone.estimates[0])
 
 
 def test_each_passage_starts_from_its_own_data_and_nothing_raises_for_the_batch(s2):
