@@ -59,7 +59,8 @@ def atomic_path(path):
 @contextlib.contextmanager
 def staged_directory(out):
     """Yield a hidden folder beside ``out`` to write into; on success its files replace their namesakes in
-    ``out`` (created if needed), on any error the folder is removed and ``out`` is left as it was."""
+    ``out`` (created if needed; a folder replaces its namesake whole: a training's ``tensorboard`` logs of an
+    earlier run into the same ``out``), on any error the folder is removed and ``out`` is left as it was."""
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".partial", dir=out.parent))
@@ -67,6 +68,9 @@ def staged_directory(out):
         yield stage
         out.mkdir(parents=True, exist_ok=True)
         for f in sorted(stage.iterdir()):
-            os.replace(f, out / f.name)
+            target = out / f.name
+            if f.is_dir() and target.is_dir() and not target.is_symlink():
+                shutil.rmtree(target)                   # (os.replace refuses a folder that is not empty)
+            os.replace(f, target)
     finally:
         shutil.rmtree(stage, ignore_errors=True)
