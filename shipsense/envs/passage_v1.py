@@ -153,6 +153,15 @@ PASSAGE_BLOCK = 16
 """Passages simulated per simulator call and environment (see :meth:`PassageV1Core.reset_envs`)."""
 _RECORDED = ("estimate", "cov", "status", "selected")
 """What the environment keeps of its observer's output (:attr:`PassageV1Core.last`)."""
+
+
+def _copy_outputs(sample, rows, into):
+    """What the environment keeps of an observer's output ``sample`` (a :class:`~shipsense.trackers.tracker.Sample`
+    or a dict of its fields) written into rows ``rows`` of the Sample ``into``."""
+    for name in _RECORDED:
+        getattr(into, name)[rows] = sample[name] if isinstance(sample, dict) else getattr(sample, name)
+
+
 CHI2_2_95 = 5.991464547107979
 """95 % quantile of the chi-square distribution with 2 degrees of freedom."""
 BASELINES = ("random", "round-robin", "greedy")
@@ -246,12 +255,12 @@ class PassageV1Core:
                   [entry for queue in self._passages.values() for entry in queue])
         todo = [entry for entry in queued if entry[2] is None]
         self._run_ins(todo)
+        states = []
         for e in envs.tolist():
-            self.y[e], self.truth[e], (k, record, state) = self._passages[e].pop(0)
-            self.tracker.set_passage_states([e], [state])
-            self.k[e] = k
-            for name, value in record.items():
-                getattr(self.last, name)[e] = value
+            self.y[e], self.truth[e], (self.k[e], record, state) = self._passages[e].pop(0)
+            _copy_outputs(record, e, self.last)
+            states.append(state)
+        self.tracker.set_passage_states(envs, states)
         self.start[envs] = self.k[envs]
         self.since[envs] = 0.0
         self.last_read[envs] = True
@@ -284,27 +293,21 @@ class PassageV1Core:
             y = np.stack([entry[0] for entry in part])
             rows, k = np.arange(R), np.zeros(R, dtype=int)
             last = trk._prior_sample()
-
-            def record(sample, which, last=last):
-                for name in _RECORDED:
-                    getattr(last, name)[which] = getattr(sample, name)
-
-            record(trk.update(self.times[0], y[:, 0]), rows)
+            _copy_outputs(trk.update(self.times[0], y[:, 0]), rows, last)
             waiting = rows[self._blind_status(last.status) & (k < self.K - 2)]
             while waiting.size:
                 k[waiting] += 1
-                record(trk.update(self.times[k[waiting]], y[waiting, k[waiting]], passages=waiting,
-                                  defer_fits=True), waiting)
+                _copy_outputs(trk.update(self.times[k[waiting]], y[waiting, k[waiting]], passages=waiting,
+                                         defer_fits=True), waiting, last)
                 waiting = waiting[~trk.pending(waiting) & self._blind_status(last.status[waiting])
                                   & (k[waiting] < self.K - 2)]
             fitted, sample = trk.fit_pending()
-            record(sample, fitted)
+            _copy_outputs(sample, fitted, last)
             for r, (entry, state) in enumerate(zip(part, trk.passage_states(rows))):
                 entry[2] = (int(k[r]), {name: np.copy(getattr(last, name)[r]) for name in _RECORDED}, state)
 
     def _record(self, sample, envs):
-        for name in _RECORDED:
-            getattr(self.last, name)[envs] = getattr(sample, name)
+        _copy_outputs(sample, envs, self.last)
 
     def _measure(self, envs):
         """Error and 95 % ellipse coverage of ``envs`` at their current sample (stored in the histories;

@@ -387,12 +387,12 @@ class Tracker:
         of this tracker or a sibling (:meth:`sibling`)."""
         idx = self._passage_indices(passages)
         self._check_unpruned()
-        H, size = self._H, self.y_hist.shape[1]
+        H, size, names = self._H, self.y_hist.shape[1], list(self._state_fields())
         out = []
         for p in idx.tolist():
             hist = int(min(self.n[p], size))
             fields = {name: np.array(getattr(self, name)[p][:hist] if name in _HISTORY else getattr(self, name)[p])
-                      for name in self._state_fields()}
+                      for name in names}
             rows = slice(p * H, (p + 1) * H)
             b = self.bank.belief
             out.append(PassageState(self.model, hist, fields, b.mean[rows].copy(), b.chol[rows].copy(),
@@ -412,11 +412,11 @@ class Tracker:
         if any(not isinstance(st, PassageState) or st.model is not self.model for st in states):
             raise ValueError("passage states must come from this tracker or a sibling (Tracker.sibling)")
         self._check_unpruned()
-        H, b = self._H, self.bank.belief
+        H, b, fresh = self._H, self.bank.belief, self._state_fields()
         moved = set(idx.tolist())
         self.gaps = [g for g in self.gaps if g.passage not in moved]      # (a previous occupant's)
         for p, st in zip(idx.tolist(), states):
-            for name, (_, _, value) in self._state_fields().items():
+            for name, (_, _, value) in fresh.items():
                 arr = getattr(self, name)
                 if name in _HISTORY:
                     arr[p] = value
@@ -830,18 +830,7 @@ class Tracker:
             self.alarms[sel] += alarm[due_]
             self.restarts[sel] += 1
             failed_test = self.cons_now[runs]
-            # one batch, the shorter windows padded with missing samples: the compiled least-squares fits and
-            # their information skip them, so a passage's refit is the one it gets alone; numpy's fits (a model
-            # without a compiled kernel) and a robust fit's information run over the padded window and move at
-            # rounding with its length, so those are batched per window length
-            if self._pads_exactly:
-                self._refit(sel, alarm[due_], rescan[due_], out)
-            else:
-                first = np.maximum(self.k0[sel], self.n[sel] - self.y_hist.shape[1] + 1)
-                length = self.n[sel] - first
-                for w in np.unique(length):
-                    group = length == w
-                    self._refit(sel[group], alarm[due_][group], rescan[due_][group], out)
+            self._refit(sel, alarm[due_], rescan[due_], out)
             # a refit after a failed consistency test: the sample is still the test's (inconsistent), with the
             # refit's covariance -- unless the fit failed its own test (then as any failed fit)
             ok = runs[failed_test & self.trusted[runs]]
@@ -853,6 +842,15 @@ class Tracker:
         window fits; the bank restarts from the ``keep`` best distinct fits."""
         o, H, n = self.options, self._H, self.model.n
         first = np.maximum(self.k0[runs], self.n[runs] - self.y_hist.shape[1] + 1)
+        lengths = self.n[runs] - first + 1
+        if not self._pads_exactly and np.unique(lengths).size > 1:
+            # one batch pads the shorter windows with missing samples: the compiled least-squares fits and their
+            # information skip them (a passage's refit is the one it gets alone), numpy's fits (a model without
+            # a compiled kernel) and a robust fit's information do not (they move at rounding with the length)
+            for w in np.unique(lengths):
+                group = lengths == w
+                self._refit(runs[group], alarm[group], rescan[group], out)
+            return
         yw, taus = self._window(runs, first)
         back = transitions(self.model, -taus[:, -1])                                    # now -> window start
         rows = (runs[:, None] * H + np.arange(H)).ravel()
@@ -871,8 +869,7 @@ class Tracker:
         t0 = time.perf_counter()
         multistart = alarm | rescan
         if multistart.any():   # an alarm: the global initialiser again, on everything since the detection
-            theta = np.concatenate([theta, self._global_starts(yw, taus, multistart, self.n[runs] - first + 1)],
-                                   axis=1)
+            theta = np.concatenate([theta, self._global_starts(yw, taus, multistart, lengths)], axis=1)
         prior = depth_prior(self.model, o.z_std)
         fits = refit_window(self.model, yw, theta, taus=taus, prior=prior, keep=o.keep, distinct_m=o.distinct_m,
                             gof=o.gof, huber=self.huber)

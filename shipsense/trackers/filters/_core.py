@@ -196,23 +196,10 @@ def _factor_or_repair(P):
     L = _lapack(P)
     if L is not None:
         return L, np.ones(len(P), dtype=bool)
-    L, ok = np.empty(P.shape), np.ones(len(P), dtype=bool)
-    parts = [(0, len(P) // 2), (len(P) // 2, len(P))] if len(P) > 1 else []
-    if not parts:
-        L[:], ok[:] = _repair(P)
-    while parts:
-        lo, hi = parts.pop()
-        if hi <= lo:
-            continue
-        part = _lapack(P[lo:hi])
-        if part is not None:
-            L[lo:hi] = part
-        elif hi - lo == 1:
-            L[lo:hi], ok[lo:hi] = _repair(P[lo:hi])
-        else:
-            mid = (lo + hi) // 2
-            parts += [(lo, mid), (mid, hi)]
-    return L, ok
+    if len(P) == 1:
+        return _repair(P)
+    halves = [_factor_or_repair(part) for part in (P[:len(P) // 2], P[len(P) // 2:])]
+    return tuple(np.concatenate(a) for a in zip(*halves))
 
 
 def _repair(P):
