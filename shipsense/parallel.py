@@ -11,6 +11,8 @@ independently, so a split changes no result; it only spreads the work over the C
 from __future__ import annotations
 
 import os
+import threading
+from contextlib import contextmanager
 
 from shipsense.errors import ShipsenseError
 
@@ -19,10 +21,15 @@ SPLIT_MIN = 512
 of microseconds of work, and handing one to a thread costs tens of microseconds)."""
 
 _pool = None
+_background = None
+_local = threading.local()
 
 
 def threads() -> int:
-    """Threads a large batch is split across: ``SHIPSENSE_THREADS`` if set, else the CPUs this process may use."""
+    """Threads a large batch is split across: 1 inside :func:`serial`, else ``SHIPSENSE_THREADS`` if set, else the
+    CPUs this process may use."""
+    if getattr(_local, "serial", False):
+        return 1
     value = os.environ.get("SHIPSENSE_THREADS", "").strip()
     if value:
         try:
@@ -47,6 +54,55 @@ def _executor():
 
         _pool = (os.getpid(), ThreadPoolExecutor(thread_name_prefix="shipsense"))
     return _pool[1]
+
+
+@contextmanager
+def serial():
+    """Run every split of this thread on this thread (:func:`threads` is 1 here): for work done beside another
+    thread's, on the CPU that thread leaves (:func:`background`), where splitting it would only make the two
+    wait on each other's chunks."""
+    before = getattr(_local, "serial", False)
+    _local.serial = True
+    try:
+        yield
+    finally:
+        _local.serial = before
+
+
+def background():
+    """The process's one background thread (a forked child gets its own): ``background().submit(fn)`` returns a
+    :class:`~concurrent.futures.Future` of ``fn()``, run in turn.  For work a caller will need later, done
+    meanwhile under :func:`serial` (e.g. Passage-v1's next run-ins).  A daemon thread: work still queued when
+    the interpreter exits is dropped, not waited for."""
+    global _background
+    if _background is None or _background[0] != os.getpid():
+        _background = (os.getpid(), _Background())
+    return _background[1]
+
+
+class _Background:
+    def __init__(self):
+        import queue
+
+        self._queue = queue.SimpleQueue()
+        threading.Thread(target=self._work, name="shipsense-background", daemon=True).start()
+
+    def submit(self, fn):
+        from concurrent.futures import Future
+
+        future = Future()
+        self._queue.put((future, fn))
+        return future
+
+    def _work(self):
+        while True:
+            future, fn = self._queue.get()
+            if not future.set_running_or_notify_cancel():      # cancelled before it started
+                continue
+            try:
+                future.set_result(fn())
+            except BaseException as exc:                       # (the caller gets it from the future)
+                future.set_exception(exc)
 
 
 def in_chunks(fn, n, split_min=SPLIT_MIN):

@@ -129,3 +129,34 @@ def test_an_error_on_the_calling_thread_stops_the_helpers(monkeypatch):
     with pytest.raises(KeyboardInterrupt):
         parallel.in_turns(fn, 50)
     assert 1 <= len(done) <= 2
+
+
+def test_serial_keeps_a_threads_splits_on_it_and_ends_with_the_block(monkeypatch):
+    monkeypatch.setenv("SHIPSENSE_THREADS", "4")
+    n = 5 * parallel.SPLIT_MIN
+    with parallel.serial():
+        assert parallel.threads() == 1 and len(parallel.in_chunks(lambda lo, hi: hi - lo, n)) == 1
+        with parallel.serial():
+            pass
+        assert parallel.threads() == 1               # (nested: still serial until the outer block ends)
+    assert parallel.threads() == 4 and len(parallel.in_chunks(lambda lo, hi: hi - lo, n)) == 4
+
+
+def test_the_background_thread_runs_work_in_turn_and_hands_back_results_and_errors():
+    import threading
+
+    order, gate = [], threading.Event()
+    first = parallel.background().submit(lambda: (gate.wait(10), order.append(1), threading.current_thread().name))
+    second = parallel.background().submit(lambda: order.append(2))
+    third = parallel.background().submit(lambda: order.append(3))
+    assert third.cancel()                              # not started: cancelled, never run
+    gate.set()
+
+    def boom():
+        raise ValueError("from the background")
+
+    failed = parallel.background().submit(boom)
+    assert first.result(10)[2] == "shipsense-background" and second.result(10) is None
+    with pytest.raises(ValueError, match="from the background"):
+        failed.result(10)
+    assert order == [1, 2]

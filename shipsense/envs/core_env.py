@@ -3,6 +3,8 @@ native vector envs' partial reset."""
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
@@ -16,6 +18,7 @@ class RebuiltOnUnpickle:
     state (the core's attributes, the generator, whether it was reset); unpickling rebuilds it from them."""
 
     def __getstate__(self):
+        getattr(self.core, "settle", lambda: None)()       # (work of the core's still in flight: finished)
         return {"kwargs": self._kwargs, "core": self.core.__dict__, "np_random": self._np_random,
                 "started": self._started}
 
@@ -68,6 +71,15 @@ def stream_generators(seed, num_envs, high=SEED_HIGH):
     return [np.random.Generator(np.random.PCG64(np.random.SeedSequence(s))) for s in seeds]
 
 
+def seed_ahead(rng, j):
+    """The ``j``-th episode seed (``j >= 1``) generator ``rng`` will hand out (one ``integers(SEED_HIGH)`` per
+    reset), drawn from a copy: ``rng`` is left as it is."""
+    twin = copy.deepcopy(rng)
+    for _ in range(int(j) - 1):
+        twin.integers(SEED_HIGH)
+    return int(twin.integers(SEED_HIGH))
+
+
 class CoreVectorEnv(VectorEnv):
     """A native vector env on one batched core: one generator per sub-environment (:func:`stream_generators`),
     ``reset`` of all or of the masked sub-environments (:func:`reset_rows`), next-step autoreset
@@ -101,12 +113,21 @@ class CoreVectorEnv(VectorEnv):
         """Each of sub-environments ``envs``'s next episode seed, from its own generator."""
         return [int(self._rngs[i].integers(SEED_HIGH)) for i in envs]
 
+    def _seed_ahead(self, e, j):
+        """The episode seed sub-environment ``e``'s ``j``-th reset from now will draw (``j >= 1``), its generator
+        left as it is (:func:`seed_ahead`)."""
+        return seed_ahead(self._rngs[e], j)
+
+    def _reset_core(self, envs, fresh):
+        ahead = {"ahead": self._seed_ahead} if getattr(self.core, "looks_ahead", False) else {}
+        self.core.reset_envs(envs, self._episode_seeds(envs), fresh=fresh, **ahead)
+
     def reset(self, *, seed=None, options=None):
         fresh = seed is not None or self._rngs is None
         if fresh:
             self._reseed(seed)
         envs = reset_rows(options, self.num_envs)
-        self.core.reset_envs(envs, self._episode_seeds(envs), fresh=fresh)
+        self._reset_core(envs, fresh)
         self._prev_done[envs] = False
         return self._observation(), {}
 
@@ -115,8 +136,7 @@ class CoreVectorEnv(VectorEnv):
         step's action); returns their mask."""
         done = self._prev_done
         if done.any():
-            idx = np.flatnonzero(done)
-            self.core.reset_envs(idx, self._episode_seeds(idx))
+            self._reset_core(np.flatnonzero(done), False)
         return done
 
     def render(self):

@@ -64,7 +64,11 @@ prior's mean whatever is read, so those samples would add the same 50-100 m
 errors to every policy's return and hide the scheduling (measured on S2
 before the run-in: the first 30 of 80 samples made up most of every
 baseline's return).  A passage that never gets a track leaves the agent one
-step.
+step.  The run-in does not depend on the agent, so the environment does the
+run-ins of its next passages ahead, in batches, on the process's background
+thread while the agent steps (:meth:`PassageV1Core.reset_envs`; episodes are
+the same to the bit; ``SHIPSENSE_THREADS=1`` keeps everything on the calling
+thread).
 
 ## Episode end
 
@@ -138,10 +142,10 @@ import numpy as np
 from gymnasium import spaces
 from numba import njit
 
-from shipsense import numba_cache
+from shipsense import numba_cache, parallel
 from shipsense.config import load_scenario
 from shipsense.envs.arguments import number
-from shipsense.envs.core_env import SEED_HIGH, ClosesItsFigure, CoreVectorEnv, RebuiltOnUnpickle
+from shipsense.envs.core_env import SEED_HIGH, ClosesItsFigure, CoreVectorEnv, RebuiltOnUnpickle, seed_ahead
 from shipsense.envs.features import at_least, error_and_nees, track_features
 from shipsense.simulator import simulate
 from shipsense.trackers import Tracker
@@ -176,6 +180,32 @@ def subsets(S, k):
             r[list(c)] = True
             rows.append(r)
     return np.array(rows)
+
+
+class _Later:
+    """Work left to the background thread (:func:`~shipsense.parallel.background`, under
+    :func:`~shipsense.parallel.serial`): :meth:`result` waits for it, or does it here if it has not started.
+    ``seed``: what it was made from (a block's)."""
+
+    def __init__(self, fn, seed=None):
+        self.seed, self._fn, self._done, self._value = seed, fn, False, None
+        self._future = parallel.background().submit(self._serial)
+
+    def _serial(self):
+        with parallel.serial():
+            return self._fn()
+
+    def result(self):
+        if not self._done:
+            if self._future.cancel():          # not started: here, with this thread's splits
+                self._value = self._fn()
+            else:
+                self._value = self._future.result()
+            self._done, self._fn, self._future = True, None, None
+        return self._value
+
+    def __getstate__(self):
+        return {"seed": self.seed, "_fn": None, "_done": True, "_value": self.result(), "_future": None}
 
 
 class PassageV1Core:
@@ -226,7 +256,8 @@ class PassageV1Core:
         self.last_read = np.zeros((E, self.S), dtype=bool)
         self.last = self.tracker._prior_sample()
         self.gains = np.zeros((E, len(self.subsets)))   # predicted gain (nats) of every action
-        self._passages = {}
+        self._passages = {}      # environment -> its queue of passages, [y, truth, run-in, job] each
+        self._next = {}          # environment -> its next block, left to the background (reset_envs)
         self._rows = np.arange(E)
         # the observer's noise (internal units) and the one-step transition
         self._Rinv = np.ascontiguousarray(1.0 / self.tracker.filter_model.R, dtype=float)
@@ -236,30 +267,55 @@ class PassageV1Core:
         self._first = np.asarray(self.first_channel, dtype=np.int64)
 
     # -- episodes ---------------------------------------------------------------
-    def reset_envs(self, envs, seeds, fresh=False):
+    looks_ahead = True
+    """:meth:`reset_envs` takes ``ahead`` (:class:`~shipsense.envs.core_env.CoreVectorEnv` passes it)."""
+
+    def reset_envs(self, envs, seeds, fresh=False, ahead=None):
         """Draw new passages for ``envs`` (indices) from integer ``seeds``, each with its observer's run-in
         done (:meth:`_run_ins`).  Passages are simulated in blocks of :data:`PASSAGE_BLOCK` per environment; an
-        explicit seed (``fresh``) drops the rest of a block first.  Returns the observations of ``envs``."""
+        explicit seed (``fresh``) drops the rest of a block first.  Returns the observations of ``envs``.
+
+        ``ahead(e, j)``, optional: the seed environment ``e``'s ``j``-th reset from now will be given.  With it
+        (and :func:`~shipsense.parallel.threads` above 1), a reset that is not ``fresh`` leaves the run-ins its
+        environments need later -- the rest of their blocks, and their next block, drawn from the seed the reset
+        that empties the block will get -- to the process's background thread
+        (:func:`~shipsense.parallel.background`), where they are done while the environments step.  Nothing
+        changes but when they are done: a passage's run-in does not depend on the batch or thread it runs in, a
+        block is used only if its seed is the one that reset draws (else it is drawn again here), and work the
+        background has not started when it is needed is done here."""
         envs = np.asarray(envs, dtype=int)
-        for e, s in zip(envs, seeds):   # each environment draws from its own reproducible stream
-            queue = self._passages.setdefault(int(e), [])
+        for e, s in zip(envs.tolist(), seeds):   # each environment draws from its own reproducible stream
+            queue = self._passages.setdefault(e, [])
             if fresh:
                 queue.clear()
+                self._next.pop(e, None)
             if not queue:
-                sim = simulate(self.scenario, runs=PASSAGE_BLOCK, seed=int(s), random=True)
-                queue.extend([y, truth, None] for y, truth in zip(sim.measurements,
-                                                                   self.model.state_from_truth(sim.truth)))
-        # the run-ins these resets need; unless the seeds are fresh (an evaluation's reset(seed=...) per episode
-        # would waste the rest of every block), with those of every passage queued in any environment
-        queued = ([self._passages[e][0] for e in envs.tolist()] if fresh else
-                  [entry for queue in self._passages.values() for entry in queue])
-        todo = [entry for entry in queued if entry[2] is None]
-        self._run_ins(todo)
+                block = self._next.pop(e, None)
+                queue.extend(block.result() if block is not None and block.seed == int(s) else self._block(int(s)))
+        later = ahead is not None and not fresh and parallel.threads() > 1
+        if fresh:      # (an evaluation's reset(seed=...) per episode would waste the rest of every block)
+            now = [self._passages[e][0] for e in envs.tolist()]
+        elif later:
+            now = [self._passages[e][0] for e in envs.tolist()]
+        else:          # with those of every passage queued in any environment, in one batch
+            now = [entry for queue in self._passages.values() for entry in queue]
+        self._settle(now)
         states = []
         for e in envs.tolist():
-            self.y[e], self.truth[e], (self.k[e], record, state) = self._passages[e].pop(0)
+            self.y[e], self.truth[e], (self.k[e], record, state), _ = self._passages[e].pop(0)
             _copy_outputs(record, e, self.last)
             states.append(state)
+        if later:
+            for e in envs.tolist():
+                queue = self._passages[e]
+                rest = [entry for entry in queue if entry[2] is None and entry[3] is None]
+                if rest:
+                    job = _Later(lambda rest=rest: self._run_ins(rest))
+                    for entry in rest:
+                        entry[3] = job
+                if e not in self._next:
+                    seed = int(ahead(e, len(queue) + 1))
+                    self._next[e] = _Later(lambda seed=seed: self._run_ins(self._block(seed)), seed)
         self.tracker.set_passage_states(envs, states)
         self.start[envs] = self.k[envs]
         self.since[envs] = 0.0
@@ -270,14 +326,39 @@ class PassageV1Core:
         self._predict_gains(envs)
         return self.observe()[envs]
 
+    def _block(self, seed):
+        """The queue entries ``[y, truth, run-in, job]`` of a block of passages simulated from ``seed`` (no run-in
+        yet)."""
+        sim = simulate(self.scenario, runs=PASSAGE_BLOCK, seed=seed, random=True)
+        return [[y, truth, None, None] for y, truth in zip(sim.measurements, self.model.state_from_truth(sim.truth))]
+
+    def _settle(self, entries):
+        """Give queue ``entries`` their run-ins: those left to the background waited for (or, not started, done
+        here), the others done here in one batch."""
+        for entry in entries:
+            if entry[3] is not None:
+                entry[3].result()
+                entry[3] = None
+        self._run_ins([entry for entry in entries if entry[2] is None])
+
+    def settle(self):
+        """Finish every run-in left to the background thread (:meth:`reset_envs`): nothing of this core is then
+        in flight (pickling calls it)."""
+        for block in self._next.values():
+            block.result()
+        self._settle([entry for queue in self._passages.values() for entry in queue if entry[3] is not None])
+
+    def __getstate__(self):
+        self.settle()
+        return self.__dict__
+
     def _run_ins(self, entries):
-        """The observer's run-in of queued passages ``entries`` (``[y, truth, None]`` lists; the run-in is put
-        in their third place), in batches on a sibling of the observer
+        """The observer's run-in of queued passages ``entries`` (``[y, truth, None, ...]`` lists; the run-in is put
+        in their third place; returns ``entries``), in batches on a sibling of the observer
         (:meth:`~shipsense.trackers.Tracker.sibling`): a passage's run-in does not depend on the agent (every
         sensor is read) nor on the passages beside it in a batch, so it is the one it would have had in its
         environment, at a fraction of the cost (its window fits in one batch: 1.9-2.1 ms a passage in a batch
-        of 16 or 102, 5.3 alone; :meth:`reset_envs` passes every queued passage of every environment without
-        one, or with fresh seeds those of the environments reset).  A batch holds at most
+        of 16 or 102, 5.3 alone).  A batch holds at most
         :attr:`~shipsense.trackers.Tracker.independent_batch` passages (102): in a larger one the banks' starts
         move at rounding.
 
@@ -305,6 +386,7 @@ class PassageV1Core:
             _copy_outputs(sample, fitted, last)
             for r, (entry, state) in enumerate(zip(part, trk.passage_states(rows))):
                 entry[2] = (int(k[r]), {name: np.copy(getattr(last, name)[r]) for name in _RECORDED}, state)
+        return entries
 
     def _record(self, sample, envs):
         _copy_outputs(sample, envs, self.last)
@@ -663,7 +745,8 @@ class PassageV1Env(RebuiltOnUnpickle, ClosesItsFigure, gym.Env):
 
     def reset(self, *, seed=None, options=None):
         super().reset(seed=seed)
-        obs = self.core.reset_envs([0], [int(self.np_random.integers(SEED_HIGH))], fresh=seed is not None)
+        obs = self.core.reset_envs([0], [int(self.np_random.integers(SEED_HIGH))], fresh=seed is not None,
+                                   ahead=lambda e, j: seed_ahead(self.np_random, j))
         self._started = True
         if self.render_mode == "human":
             self.render()

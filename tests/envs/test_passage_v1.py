@@ -459,3 +459,82 @@ def test_the_core_refuses_an_action_out_of_range_before_writing_anything():
     for bad in (np.array([1.5, 2.0]), np.array([True, False])):
         with pytest.raises(ValueError, match="actions must be integers"):
             venv.step(bad)
+
+
+def _vector_rollout(steps, seed=5, num_envs=4):
+    venv = PassageV1VectorEnv(num_envs, **KW)
+    obs, _ = venv.reset(seed=seed)
+    out, rng = [obs], np.random.default_rng(0)
+    for _ in range(steps):
+        o, r, _, _, info = venv.step(rng.integers(0, venv.single_action_space.n, num_envs))
+        out += [o, r, info["error"], info["status"]]
+    return venv, out
+
+
+def test_run_ins_left_to_the_background_change_nothing(monkeypatch):
+    """With two threads a reset leaves the run-ins its environments need later (the rest of their blocks, their
+    next block from the seed that will empty the block) to the background thread; with one everything is done
+    when needed.  Over more than one block per environment, every observation, reward, error and status is
+    the same to the bit."""
+    import sys
+
+    from shipsense.envs import passage_v1
+
+    drawn, block = [], passage_v1.PassageV1Core._block
+    monkeypatch.setattr(passage_v1.PassageV1Core, "_block",
+                        lambda self, seed: drawn.append(sys._getframe(1).f_code.co_name) or block(self, seed))
+    monkeypatch.setenv("SHIPSENSE_THREADS", "2")
+    venv, ahead = _vector_rollout(800)
+    # every block but the first of each environment drawn ahead (by the work left to the background; by the
+    # reset that needs it if the background had not started it) and used: none drawn again at its reset
+    assert drawn.count("reset_envs") == 4 and len(drawn) > 8
+    monkeypatch.setenv("SHIPSENSE_THREADS", "1")
+    venv, alone = _vector_rollout(800)
+    assert not venv.core._next
+    for a, b in zip(ahead, alone, strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_a_block_drawn_ahead_is_dropped_when_its_seed_does_not_come(monkeypatch):
+    """A block is drawn ahead from the seed the reset that empties the current block will get -- if nothing else
+    draws from the environment's generator meanwhile.  A user's draw moves that seed: the block drawn ahead
+    is dropped and the passages are those of an environment that never drew ahead."""
+    def run(threads):
+        monkeypatch.setenv("SHIPSENSE_THREADS", threads)
+        env = PassageV1Env(**KW)
+        obs, _ = env.reset(seed=0)
+        out, resets = [obs], 0
+        while resets < 40:
+            obs, r, term, _, info = env.step(1)
+            out += [obs, r, info["error"]]
+            if term:
+                resets += 1
+                if resets % 7 == 0:
+                    env.np_random.integers(10)            # a draw the environment did not foresee
+                out.append(env.reset()[0])
+        return out
+
+    for a, b in zip(run("2"), run("1"), strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_pickling_and_copying_wait_for_the_work_in_flight(monkeypatch):
+    import copy
+    import pickle
+
+    monkeypatch.setenv("SHIPSENSE_THREADS", "2")
+    env = PassageV1Env(**KW)
+    env.reset(seed=0)
+    for _ in range(3):                     # non-fresh resets: work left to the background
+        while not env.step(1)[2]:
+            pass
+        env.reset()
+    clones = [pickle.loads(pickle.dumps(env)), copy.deepcopy(env)]
+    for _ in range(60):                    # into the next passages, from the states copied
+        outs = [e.step(2) for e in (env, *clones)]
+        for out in outs[1:]:
+            np.testing.assert_array_equal(out[0], outs[0][0])
+            assert out[1:4] == outs[0][1:4]
+        if outs[0][2]:
+            for e in (env, *clones):
+                e.reset()
