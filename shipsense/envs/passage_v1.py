@@ -149,7 +149,7 @@ from shipsense.envs.core_env import SEED_HIGH, ClosesItsFigure, CoreVectorEnv, R
 from shipsense.envs.features import at_least, error_and_nees, track_features
 from shipsense.simulator import simulate
 from shipsense.trackers import Tracker
-from shipsense.trackers.compiled_linalg import solve_in_place
+from shipsense.trackers.compiled_linalg import solve_many_in_place
 from shipsense.trackers.measurement import FIELD, _batch_kernel, kernel_of
 from shipsense.trackers.tracker import INITIALISING, NO_DATA
 
@@ -573,7 +573,6 @@ def _gains(Hm, Rinv, P, first_channel, subsets, out):
     S = first_channel.size
     Js = np.empty((S, n, n))
     Pinv, M, X = np.empty((n, n)), np.empty((n, n)), np.empty((n, n))
-    col = np.empty(n)
     reads = np.zeros(subsets.shape[0], dtype=np.bool_)
     for t in range(subsets.shape[0]):
         for s in range(S):
@@ -587,28 +586,23 @@ def _gains(Hm, Rinv, P, first_channel, subsets, out):
                     for i in range(first_channel[s], hi):
                         acc += Hm[e, i, a] * Rinv[i] * Hm[e, i, b]
                     Js[s, a, b] = acc
-        for j in range(n):                      # P^-1, a column at a time
-            for a in range(n):
-                for b in range(n):
-                    M[a, b] = P[e, a, b]
-                col[a] = 1.0 if a == j else 0.0
-            solve_in_place(M, col, n)
-            for a in range(n):
-                Pinv[a, j] = col[a]
+        for a in range(n):                      # P^-1: one elimination, the identity's columns
+            for b in range(n):
+                M[a, b] = P[e, a, b]
+                Pinv[a, b] = 1.0 if a == b else 0.0
+        solve_many_in_place(M, Pinv, n, n)
         before = math.log(abs(P[e, 0, 0] * P[e, 1, 1] - P[e, 0, 1] * P[e, 1, 0]))
         for t in range(subsets.shape[0]):
-            for j in range(2):                  # the first two columns of (P^-1 + J)^-1
-                for a in range(n):
-                    for b in range(n):
-                        acc = Pinv[a, b]
-                        for s in range(S):
-                            if subsets[t, s]:
-                                acc += Js[s, a, b]
-                        M[a, b] = acc
-                    col[a] = 1.0 if a == j else 0.0
-                solve_in_place(M, col, n)
-                for a in range(2):
-                    X[a, j] = col[a]
+            for a in range(n):                  # the first two columns of (P^-1 + J)^-1
+                for b in range(n):
+                    acc = Pinv[a, b]
+                    for s in range(S):
+                        if subsets[t, s]:
+                            acc += Js[s, a, b]
+                    M[a, b] = acc
+                X[a, 0] = 1.0 if a == 0 else 0.0
+                X[a, 1] = 1.0 if a == 1 else 0.0
+            solve_many_in_place(M, X, n, 2)
             g = before - math.log(abs(X[0, 0] * X[1, 1] - X[0, 1] * X[1, 0]))
             out[e, t] = max(g, 0.0) if math.isfinite(g) and reads[t] else 0.0
 

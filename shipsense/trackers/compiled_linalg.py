@@ -33,4 +33,33 @@ def solve_in_place(M, x, n):
         x[k] = t / M[k, k]
 
 
+@njit(cache=True, error_model="numpy", inline="always")
+def solve_many_in_place(M, X, n, c):
+    """``X[:n, :c] <- M^-1 X[:n, :c]`` for the leading ``n x n`` block of ``M`` (overwritten): one elimination
+    for ``c`` right-hand sides, each column getting the operations :func:`solve_in_place` would give it alone
+    (the same numbers)."""
+    for k in range(n):
+        piv = k
+        for i in range(k + 1, n):
+            if abs(M[i, k]) > abs(M[piv, k]):
+                piv = i
+        if piv != k:
+            for q in range(n):
+                M[k, q], M[piv, q] = M[piv, q], M[k, q]
+            for j in range(c):
+                X[k, j], X[piv, j] = X[piv, j], X[k, j]
+        for i in range(k + 1, n):
+            f = M[i, k] / M[k, k]
+            for q in range(k, n):
+                M[i, q] -= f * M[k, q]
+            for j in range(c):
+                X[i, j] -= f * X[k, j]
+    for k in range(n - 1, -1, -1):
+        for j in range(c):
+            t = X[k, j]
+            for q in range(k + 1, n):
+                t -= M[k, q] * X[q, j]
+            X[k, j] = t / M[k, k]
+
+
 numba_cache.key_on_sources(globals())   # the caches follow the files these kernels are compiled from
