@@ -473,6 +473,7 @@ def _grid_solve_kernel(b, G, A_all, inverses, present, dd, yb, off, std_b, clamp
     x = np.empty(P)
     idx = np.empty(K, dtype=np.int64)
     bear = np.empty(c_hi - c_lo)
+    sums = np.empty((c_hi - c_lo, P, P))        # the candidates' normal matrices (lower triangles)
     for r in range(R):
         missing = 0
         for k in range(K):
@@ -500,18 +501,22 @@ def _grid_solve_kernel(b, G, A_all, inverses, present, dd, yb, off, std_b, clamp
             _grid_full(b, A_all, inverses, dd[r], bear, clamp, chi2, params, r, c_lo, c_hi)
             continue
         for c in range(c_lo, c_hi):
-            base = c * P
             for p in range(P):
-                for q in range(P):
-                    A[p, q] = 0.0 if from_present else A_all[c, p, q]
-            for i in range(count):
-                k = idx[i]
+                for q in range(p + 1):
+                    sums[c - c_lo, p, q] = 0.0 if from_present else A_all[c, p, q]
+        for i in range(count):                  # a sample's row of G for every candidate: read in order
+            k = idx[i]
+            for c in range(c_lo, c_hi):
+                base = c * P
                 for p in range(P):
                     g = sign * G[k, base + p]
                     for q in range(p + 1):
-                        A[p, q] += g * G[k, base + q]
+                        sums[c - c_lo, p, q] += g * G[k, base + q]
+        for c in range(c_lo, c_hi):
+            base = c * P
             for p in range(P):
-                for q in range(p):
+                for q in range(p + 1):
+                    A[p, q] = sums[c - c_lo, p, q]
                     A[q, p] = A[p, q]
             for p in range(P):
                 x[p] = b[r, base + p]
