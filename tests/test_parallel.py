@@ -160,3 +160,29 @@ def test_the_background_thread_runs_work_in_turn_and_hands_back_results_and_erro
     with pytest.raises(ValueError, match="from the background"):
         failed.result(10)
     assert order == [1, 2]
+
+
+def test_the_background_thread_holds_one_cpu_while_it_works(monkeypatch):
+    """While the background thread has work the other threads split over one CPU fewer (at least one); it may
+    take work only when more than one thread is configured, and not from inside ``serial``."""
+    import threading
+
+    monkeypatch.setenv("SHIPSENSE_THREADS", "3")
+    gate = threading.Event()
+    job = parallel.background().submit(lambda: gate.wait(10))
+    queued = parallel.background().submit(lambda: None)
+    try:
+        assert parallel.threads() == 2 and parallel.configured_threads() == 3
+        monkeypatch.setenv("SHIPSENSE_THREADS", "1")
+        assert parallel.threads() == 1 and not parallel.background_allowed()
+    finally:
+        assert queued.cancel()
+        gate.set()
+        job.result(10)
+    monkeypatch.setenv("SHIPSENSE_THREADS", "3")
+    deadline = time.monotonic() + 10
+    while parallel.threads() != 3 and time.monotonic() < deadline:   # (its done-callback runs as it finishes)
+        time.sleep(0.01)
+    assert parallel.threads() == 3 and parallel.background_allowed()
+    with parallel.serial():
+        assert not parallel.background_allowed()

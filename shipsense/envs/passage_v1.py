@@ -276,7 +276,7 @@ class PassageV1Core:
         explicit seed (``fresh``) drops the rest of a block first.  Returns the observations of ``envs``.
 
         ``ahead(e, j)``, optional: the seed environment ``e``'s ``j``-th reset from now will be given.  With it
-        (and :func:`~shipsense.parallel.threads` above 1), a reset that is not ``fresh`` leaves the run-ins its
+        (if :func:`~shipsense.parallel.background_allowed`), a reset that is not ``fresh`` leaves the run-ins its
         environments need later -- the rest of their blocks, and their next block, drawn from the seed the reset
         that empties the block will get -- to the process's background thread
         (:func:`~shipsense.parallel.background`), where they are done while the environments step.  Nothing
@@ -292,7 +292,7 @@ class PassageV1Core:
             if not queue:
                 block = self._next.pop(e, None)
                 queue.extend(block.result() if block is not None and block.seed == int(s) else self._block(int(s)))
-        later = ahead is not None and not fresh and parallel.threads() > 1
+        later = ahead is not None and not fresh and parallel.background_allowed()
         if fresh:      # (an evaluation's reset(seed=...) per episode would waste the rest of every block)
             now = [self._passages[e][0] for e in envs.tolist()]
         elif later:
