@@ -45,7 +45,7 @@ import numpy as np
 from numba import njit
 
 from shipsense import numba_cache
-from shipsense.parallel import in_chunks
+from shipsense.parallel import SPLIT_MIN, in_chunks
 from shipsense.trackers.filters._core import (
     LOG_2PI,
     Belief,
@@ -670,6 +670,8 @@ def _split(kernel, rows, *args):
     batch is large (:func:`shipsense.parallel.in_chunks`): the arguments at positions ``rows`` that have a row per
     element are sliced."""
     nb = args[0].shape[0]
+    if nb < SPLIT_MIN:              # (in_chunks would not split it: called here, without its machinery)
+        return bool(kernel(*args))
 
     def chunk(lo, hi):
         if lo == 0 and hi == nb:
@@ -683,6 +685,8 @@ def _split(kernel, rows, *args):
 
 def _batch(*shapes):
     """The broadcast of batch shapes (the common case, all equal, without numpy's general machinery)."""
+    if len(shapes) == 2 and shapes[0] == shapes[1]:
+        return shapes[0]
     shapes = [sh for sh in shapes if sh]      # () broadcasts to anything
     first = shapes[0] if shapes else ()
     for other in shapes[1:]:
@@ -790,7 +794,7 @@ def update(name, belief: Belief, y, model, spec, mask=None, **options):
     if out is None:
         return None
     mean_out, P_out, L_out, inn = out
-    inn = Innovation(*(_shaped(a, batch) for a in inn))
+    inn = Innovation(*inn) if len(batch) == 1 else Innovation(*(_shaped(a, batch) for a in inn))
     mean_out, P_out = _shaped(mean_out, batch), _shaped(P_out, batch)
     if not cov_form:
         return Belief(mean_out, P_out, _flag(belief.ok, batch)), inn
@@ -821,6 +825,8 @@ def _run_update(consts, X, L, P, y, mask, model, spec):
 def _constants(name, n, options):
     """The update kernel's constants of filter ``name`` on ``n`` states with keyword ``options``: ``(code,
     spread, center, Wm, Wc, h, gamma, iterations, n_pu)`` (kept for the options' last few values)."""
+    if not options:
+        return _constants_of(name, n, ())
     items = tuple(sorted(options.items()))
     try:
         hash(items)
