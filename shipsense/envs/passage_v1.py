@@ -135,6 +135,7 @@ its whole ``overrides`` dict.
 from __future__ import annotations
 
 import math
+import os
 from itertools import combinations
 
 import gymnasium as gym
@@ -184,11 +185,13 @@ def subsets(S, k):
 
 class _Later:
     """Work left to the background thread (:func:`~shipsense.parallel.background`, under
-    :func:`~shipsense.parallel.serial`): :meth:`result` waits for it, or does it here if it has not started.
-    ``seed``: what it was made from (a block's)."""
+    :func:`~shipsense.parallel.serial`): :meth:`result` waits for it, or does it here if it has not started (or
+    if this is a forked child, where the parent's background thread does not exist).  ``seed``: what it was made
+    from (a block's)."""
 
     def __init__(self, fn, seed=None):
         self.seed, self._fn, self._done, self._value = seed, fn, False, None
+        self._pid = os.getpid()
         self._future = parallel.background().submit(self._serial)
 
     def _serial(self):
@@ -197,7 +200,7 @@ class _Later:
 
     def result(self):
         if not self._done:
-            if self._future.cancel():          # not started: here, with this thread's splits
+            if self._pid != os.getpid() or self._future.cancel():   # here, with this thread's splits
                 self._value = self._fn()
             else:
                 self._value = self._future.result()
@@ -205,7 +208,8 @@ class _Later:
         return self._value
 
     def __getstate__(self):
-        return {"seed": self.seed, "_fn": None, "_done": True, "_value": self.result(), "_future": None}
+        return {"seed": self.seed, "_fn": None, "_done": True, "_value": self.result(), "_future": None,
+                "_pid": None}
 
 
 class PassageV1Core:
@@ -293,12 +297,11 @@ class PassageV1Core:
                 block = self._next.pop(e, None)
                 queue.extend(block.result() if block is not None and block.seed == int(s) else self._block(int(s)))
         later = ahead is not None and not fresh and parallel.background_allowed()
-        if fresh:      # (an evaluation's reset(seed=...) per episode would waste the rest of every block)
-            now = [self._passages[e][0] for e in envs.tolist()]
-        elif later:
-            now = [self._passages[e][0] for e in envs.tolist()]
-        else:          # with those of every passage queued in any environment, in one batch
-            now = [entry for queue in self._passages.values() for entry in queue]
+        # the run-ins these resets need now; without the background and unless the seeds are fresh (an
+        # evaluation's reset(seed=...) per episode would waste the rest of every block), with those of every
+        # passage queued in any environment, in one batch
+        now = ([self._passages[e][0] for e in envs.tolist()] if fresh or later else
+               [entry for queue in self._passages.values() for entry in queue])
         self._settle(now)
         states = []
         for e in envs.tolist():

@@ -538,3 +538,38 @@ def test_pickling_and_copying_wait_for_the_work_in_flight(monkeypatch):
         if outs[0][2]:
             for e in (env, *clones):
                 e.reset()
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "fork"), reason="needs fork")
+def test_work_in_flight_when_the_process_forks_is_done_in_the_child():
+    """A forked child (an AsyncVectorEnv worker, a multiprocessing pool) has the parent's queue entries but not
+    its background thread: work that was running there is done in the child, not waited for forever."""
+    import os
+    import threading
+    import time
+
+    from shipsense.envs.passage_v1 import _Later
+
+    parent, gate = os.getpid(), threading.Event()
+    running = _Later(lambda: os.getpid() if os.getpid() != parent else (gate.wait(30), os.getpid())[1])
+    deadline = time.monotonic() + 10
+    while not running._future.running() and time.monotonic() < deadline:
+        time.sleep(0.01)
+    pid = os.fork()
+    if pid == 0:        # the child: exit 0 if it did the work itself, never return into pytest
+        try:
+            ok = running.result() == os.getpid()
+        finally:
+            os._exit(0 if ok else 1)
+    deadline = time.monotonic() + 60
+    while True:
+        done, status = os.waitpid(pid, os.WNOHANG)
+        if done or time.monotonic() > deadline:
+            break
+        time.sleep(0.05)
+    gate.set()
+    if not done:
+        os.kill(pid, 9)
+        os.waitpid(pid, 0)
+    assert done and os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0
+    assert running.result() == parent
