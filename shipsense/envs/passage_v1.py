@@ -136,6 +136,8 @@ from __future__ import annotations
 
 import math
 import os
+import weakref
+from functools import partial
 from itertools import combinations
 
 import gymnasium as gym
@@ -207,9 +209,27 @@ class _Later:
             self._done, self._fn, self._future = True, None, None
         return self._value
 
+    def cancel(self):
+        """Drop the work if it has not started (a later :meth:`result` does it here)."""
+        if not self._done:
+            self._future.cancel()
+
     def __getstate__(self):
         return {"seed": self.seed, "_fn": None, "_done": True, "_value": self.result(), "_future": None,
                 "_pid": None}
+
+
+def _rest_of_block(core, entries):
+    """Background work: the run-ins of queue ``entries`` of the core weakly referenced by ``core`` (nothing if it
+    is gone: the queued work does not keep a dropped environment alive)."""
+    core = core()
+    return None if core is None else core._run_ins(entries)
+
+
+def _block_ahead(core, seed):
+    """Background work: a block drawn from ``seed`` with its run-ins, for the core weakly referenced by ``core``."""
+    core = core()
+    return None if core is None else core._run_ins(core._block(seed))
 
 
 class PassageV1Core:
@@ -313,12 +333,12 @@ class PassageV1Core:
                 queue = self._passages[e]
                 rest = [entry for entry in queue if entry[2] is None and entry[3] is None]
                 if rest:
-                    job = _Later(lambda rest=rest: self._run_ins(rest))
+                    job = _Later(partial(_rest_of_block, weakref.ref(self), rest))
                     for entry in rest:
                         entry[3] = job
                 if e not in self._next:
                     seed = int(ahead(e, len(queue) + 1))
-                    self._next[e] = _Later(lambda seed=seed: self._run_ins(self._block(seed)), seed)
+                    self._next[e] = _Later(partial(_block_ahead, weakref.ref(self), seed), seed)
         self.tracker.set_passage_states(envs, states)
         self.start[envs] = self.k[envs]
         self.since[envs] = 0.0
@@ -354,6 +374,14 @@ class PassageV1Core:
     def __getstate__(self):
         self.settle()
         return self.__dict__
+
+    def drop_pending(self):
+        """Cancel the run-ins left to the background that have not started (``close()`` calls it: an environment
+        closed does not keep the background thread busy); a later reset does what it needs itself."""
+        jobs = list(self._next.values()) + [entry[3] for queue in self._passages.values() for entry in queue
+                                            if entry[3] is not None]
+        for job in jobs:
+            job.cancel()
 
     def _run_ins(self, entries):
         """The observer's run-in of queued passages ``entries`` (``[y, truth, None, ...]`` lists; the run-in is put
@@ -766,6 +794,10 @@ class PassageV1Env(RebuiltOnUnpickle, ClosesItsFigure, gym.Env):
             self.render()
         return obs, float(rewards[0]), done, False, info
 
+    def close(self):
+        self.core.drop_pending()
+        super().close()
+
     def baseline(self, name, seed=None):
         """The baseline policy ``name`` (one of :attr:`BASELINES`): ``policy(obs) -> action``; ``seed`` seeds
         ``random``'s own generator (the environment's is left alone)."""
@@ -845,6 +877,9 @@ class PassageV1VectorEnv(CoreVectorEnv):
         self._prev_done = terminated.copy()
         return (self.core.observe(), rewards.astype(np.float64), terminated,
                 np.zeros(self.num_envs, dtype=bool), infos)
+
+    def close_extras(self, **kwargs):
+        self.core.drop_pending()
 
     def baseline(self, name, seed=None):
         """The batched baseline policy ``name``: ``policy(obs) -> actions`` (num_envs,)."""

@@ -14,6 +14,7 @@ checked by a chi-square goodness-of-fit test (:func:`chi2_limit`).
 from __future__ import annotations
 
 import math
+import os
 import threading
 import weakref
 from dataclasses import dataclass
@@ -111,6 +112,19 @@ _TERMS_CACHE: dict = {}
 _TERMS_CACHE_SIZE = 4
 _MADE = weakref.WeakValueDictionary()   # id -> a grid candidate_grid made (whose values cannot change)
 _CACHE_LOCK = threading.RLock()         # the caches are shared by the threads of a process
+
+
+def _new_lock_in_child():
+    """A forked child gets a lock of its own: the parent's may have been held by another thread (e.g. the
+    background thread's run-ins, :func:`shipsense.parallel.background`), which does not exist in the child, and
+    it would wait for it forever.  (The caches are consistent: the fork happens between two bytecodes.)"""
+    global _CACHE_LOCK
+    _CACHE_LOCK = threading.RLock()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_new_lock_in_child)
+
 _INVERSES: dict = {}   # id of a Gram matrix array grid_terms made -> (a weak reference to it, its ridge inverses)
 
 

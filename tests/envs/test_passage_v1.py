@@ -573,3 +573,65 @@ def test_work_in_flight_when_the_process_forks_is_done_in_the_child():
         os.waitpid(pid, 0)
     assert done and os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0
     assert running.result() == parent
+
+
+def test_closing_or_dropping_an_environment_leaves_the_background_no_work_of_its(monkeypatch):
+    """``close()`` cancels the run-ins not yet started (what was running finishes), and work still queued holds
+    its environment weakly: a dropped environment is freed."""
+    import gc
+    import threading
+    import time
+    import weakref
+
+    from shipsense import parallel
+
+    monkeypatch.setenv("SHIPSENSE_THREADS", "2")
+    gate = threading.Event()
+    blocker = parallel.background().submit(lambda: gate.wait(30))   # the background busy: the work queues
+    try:                                       # (a reset needing queued work does it itself)
+        venv, _ = _vector_rollout(400)
+        jobs = list(venv.core._next.values())
+        assert jobs and not any(job._done for job in jobs)
+        venv.close()
+    finally:
+        gate.set()
+    blocker.result(30)
+    assert all(job._future.cancelled() for job in jobs)
+    deadline = time.monotonic() + 30
+    while parallel.background().busy and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert parallel.background().busy == 0
+    ref = weakref.ref(_vector_rollout(300)[0].core)
+    gc.collect()
+    assert ref() is None
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "fork"), reason="needs fork")
+def test_a_forked_child_does_not_wait_for_a_cache_lock_another_thread_held():
+    """The grid caches' lock may be held by the background thread when the process forks: the child gets its
+    own lock (the parent's holder does not exist there)."""
+    import os
+    import threading
+
+    from shipsense.trackers import initialiser
+
+    held, release = threading.Event(), threading.Event()
+
+    def hold():
+        with initialiser._CACHE_LOCK:
+            held.set()
+            release.wait(30)
+
+    threading.Thread(target=hold, daemon=True).start()
+    assert held.wait(10)
+    pid = os.fork()
+    if pid == 0:
+        try:
+            ok = initialiser._CACHE_LOCK.acquire(timeout=5)
+        finally:
+            os._exit(0 if ok else 1)
+    status = os.waitpid(pid, 0)[1]
+    release.set()
+    assert os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0
+    with initialiser._CACHE_LOCK:             # (the parent's lock works as before)
+        pass
