@@ -310,9 +310,11 @@ class PassageV1Core:
         envs = np.asarray(envs, dtype=int)
         for e, s in zip(envs.tolist(), seeds):   # each environment draws from its own reproducible stream
             queue = self._passages.setdefault(e, [])
-            if fresh:
+            if fresh:                            # (the work left for what is dropped: cancelled if not started)
+                for job in [entry[3] for entry in queue if entry[3] is not None] + [self._next.pop(e, None)]:
+                    if job is not None:
+                        job.cancel()
                 queue.clear()
-                self._next.pop(e, None)
             if not queue:
                 block = self._next.pop(e, None)
                 queue.extend(block.result() if block is not None and block.seed == int(s) else self._block(int(s)))

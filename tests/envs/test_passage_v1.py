@@ -635,3 +635,26 @@ def test_a_forked_child_does_not_wait_for_a_cache_lock_another_thread_held():
     assert os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0
     with initialiser._CACHE_LOCK:             # (the parent's lock works as before)
         pass
+
+
+def test_a_seeded_reset_cancels_the_work_left_for_the_passages_it_drops(monkeypatch):
+    """An evaluation resets with a seed every episode: the work left to the background for the rest of the
+    blocks it drops is cancelled (not started), so no backlog builds up."""
+    import threading
+
+    from shipsense import parallel
+
+    monkeypatch.setenv("SHIPSENSE_THREADS", "2")
+    gate = threading.Event()
+    blocker = parallel.background().submit(lambda: gate.wait(30))   # the background busy: the work queues
+    try:
+        venv, _ = _vector_rollout(60)
+        jobs = list(venv.core._next.values()) + [entry[3] for queue in venv.core._passages.values()
+                                                 for entry in queue if entry[3] is not None]
+        jobs = [job for job in jobs if not job._done]     # (not done by a reset that needed it)
+        assert len(jobs) >= 4                             # (at least each environment's next block)
+        venv.reset(seed=99)
+    finally:
+        gate.set()
+    blocker.result(30)
+    assert all(job._future.cancelled() for job in jobs) and not venv.core._next
