@@ -317,7 +317,13 @@ class PassageV1Core:
                 queue.clear()
             if not queue:
                 block = self._next.pop(e, None)
-                queue.extend(block.result() if block is not None and block.seed == int(s) else self._block(int(s)))
+                entries = None
+                if block is not None and block.seed == int(s):
+                    try:
+                        entries = block.result()
+                    except Exception:        # the background's attempt failed: drawn here, as without it
+                        entries = None
+                queue.extend(entries if entries is not None else self._block(int(s)))
         later = ahead is not None and not fresh and parallel.background_allowed()
         # the run-ins these resets need now; without the background and unless the seeds are fresh (an
         # evaluation's reset(seed=...) per episode would waste the rest of every block), with those of every
@@ -362,15 +368,22 @@ class PassageV1Core:
         here), the others done here in one batch."""
         for entry in entries:
             if entry[3] is not None:
-                entry[3].result()
+                try:
+                    entry[3].result()
+                except Exception:            # the background's attempt failed: done here (raising if it fails here)
+                    pass
                 entry[3] = None
         self._run_ins([entry for entry in entries if entry[2] is None])
 
     def settle(self):
-        """Finish every run-in left to the background thread (:meth:`reset_envs`): nothing of this core is then
-        in flight (pickling calls it)."""
-        for block in self._next.values():
-            block.result()
+        """Finish every run-in left to the background thread (:meth:`reset_envs`; work the background failed
+        is done here): nothing this core will use is then in flight (pickling calls it; work for passages a
+        seeded reset dropped may still be running, for nothing)."""
+        for e, block in list(self._next.items()):
+            try:
+                block.result()
+            except Exception:                # (failed: its reset draws the block itself, from the same seed)
+                del self._next[e]
         self._settle([entry for queue in self._passages.values() for entry in queue if entry[3] is not None])
 
     def __getstate__(self):

@@ -658,3 +658,28 @@ def test_a_seeded_reset_cancels_the_work_left_for_the_passages_it_drops(monkeypa
         gate.set()
     blocker.result(30)
     assert all(job._future.cancelled() for job in jobs) and not venv.core._next
+
+
+def test_a_failure_in_the_background_is_done_again_where_the_work_is_needed(monkeypatch):
+    """Work the background thread failed is done again by the reset that needs it (which raises if it fails
+    there too), so a passing failure there changes no episode."""
+    import threading
+
+    from shipsense.envs import passage_v1
+
+    monkeypatch.setenv("SHIPSENSE_THREADS", "2")
+    _, clean = _vector_rollout(500)
+    calls, run_ins = [0], passage_v1.PassageV1Core._run_ins
+
+    def flaky(self, entries):
+        if threading.current_thread().name == "shipsense-background":
+            calls[0] += 1
+            if calls[0] % 3 == 2:
+                raise RuntimeError("a passing failure")
+        return run_ins(self, entries)
+
+    monkeypatch.setattr(passage_v1.PassageV1Core, "_run_ins", flaky)
+    _, failing = _vector_rollout(500)
+    assert calls[0] >= 3
+    for a, b in zip(clean, failing, strict=True):
+        np.testing.assert_array_equal(a, b)
