@@ -9,35 +9,10 @@ from shipsense import numba_cache
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def solve_in_place(M, x, n):
-    """``x <- M^-1 x`` for the leading ``n x n`` block by Gaussian elimination with partial pivoting (``M``
-    overwritten), as LAPACK's ``gesv``."""
-    for k in range(n):
-        piv = k
-        for i in range(k + 1, n):
-            if abs(M[i, k]) > abs(M[piv, k]):
-                piv = i
-        if piv != k:
-            for q in range(n):
-                M[k, q], M[piv, q] = M[piv, q], M[k, q]
-            x[k], x[piv] = x[piv], x[k]
-        for i in range(k + 1, n):
-            f = M[i, k] / M[k, k]
-            for q in range(k, n):
-                M[i, q] -= f * M[k, q]
-            x[i] -= f * x[k]
-    for k in range(n - 1, -1, -1):
-        t = x[k]
-        for q in range(k + 1, n):
-            t -= M[k, q] * x[q]
-        x[k] = t / M[k, k]
-
-
-@njit(cache=True, error_model="numpy", inline="always")
 def solve_many_in_place(M, X, n, c):
-    """``X[:n, :c] <- M^-1 X[:n, :c]`` for the leading ``n x n`` block of ``M`` (overwritten): one elimination
-    for ``c`` right-hand sides, each column getting the operations :func:`solve_in_place` would give it alone
-    (the same numbers)."""
+    """``X[:n, :c] <- M^-1 X[:n, :c]`` for the leading ``n x n`` block of ``M`` (overwritten) by Gaussian
+    elimination with partial pivoting, as LAPACK's ``gesv``: one elimination for ``c`` right-hand sides, each
+    column getting the operations it gets alone (the same numbers, whatever the other columns)."""
     for k in range(n):
         piv = k
         for i in range(k + 1, n):
@@ -60,6 +35,13 @@ def solve_many_in_place(M, X, n, c):
             for q in range(k + 1, n):
                 t -= M[k, q] * X[q, j]
             X[k, j] = t / M[k, k]
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def solve_in_place(M, x, n):
+    """``x <- M^-1 x`` for the leading ``n x n`` block by Gaussian elimination with partial pivoting (``M``
+    overwritten), as LAPACK's ``gesv``: :func:`solve_many_in_place` of one column (``x`` contiguous)."""
+    solve_many_in_place(M, x.reshape((x.shape[0], 1)), n, 1)
 
 
 numba_cache.key_on_sources(globals())   # the caches follow the files these kernels are compiled from
