@@ -29,7 +29,7 @@ def threads() -> int:
     """Threads a large batch is split across: 1 inside :func:`serial`; else ``SHIPSENSE_THREADS`` if set, else the
     CPUs this process may use -- one fewer (at least 1) while the :func:`background` thread has work, whose CPU
     that is (a split waiting on a chunk that shares a CPU with it leaves its own CPU idle: Passage-v1's vector
-    env, 64 envs, 16.5-18.4k env-steps/s splitting over both CPUs, 18.1-19.3k keeping the steps on one)."""
+    env, 64 envs, 16.0-16.5k env-steps/s splitting over both CPUs, 17.3-18.2k with the background's spared)."""
     if getattr(_local, "serial", False):
         return 1
     count = configured_threads()

@@ -311,19 +311,12 @@ class PassageV1Core:
         for e, s in zip(envs.tolist(), seeds):   # each environment draws from its own reproducible stream
             queue = self._passages.setdefault(e, [])
             if fresh:                            # (the work left for what is dropped: cancelled if not started)
-                for job in [entry[3] for entry in queue if entry[3] is not None] + [self._next.pop(e, None)]:
-                    if job is not None:
-                        job.cancel()
+                for job in self._jobs([e]):
+                    job.cancel()
+                self._next.pop(e, None)
                 queue.clear()
             if not queue:
-                block = self._next.pop(e, None)
-                entries = None
-                if block is not None and block.seed == int(s):
-                    try:
-                        entries = block.result()
-                    except Exception:        # the background's attempt failed: drawn here, as without it
-                        entries = None
-                queue.extend(entries if entries is not None else self._block(int(s)))
+                queue.extend(self._take_block(e, int(s)))
         later = ahead is not None and not fresh and parallel.background_allowed()
         # the run-ins these resets need now; without the background and unless the seeds are fresh (an
         # evaluation's reset(seed=...) per episode would waste the rest of every block), with those of every
@@ -363,6 +356,26 @@ class PassageV1Core:
         sim = simulate(self.scenario, runs=PASSAGE_BLOCK, seed=seed, random=True)
         return [[y, truth, None, None] for y, truth in zip(sim.measurements, self.model.state_from_truth(sim.truth))]
 
+    def _take_block(self, e, seed):
+        """Environment ``e``'s next block of queue entries: the one drawn ahead if it was drawn from ``seed`` (and
+        the background did not fail it), else drawn here."""
+        block = self._next.pop(e, None)
+        if block is not None and block.seed == seed:
+            try:
+                return block.result()
+            except Exception:                # the background's attempt failed: drawn here, as without it
+                pass
+        elif block is not None:              # drawn from another seed (a user drew from the generator): dropped
+            block.cancel()
+        return self._block(seed)
+
+    def _jobs(self, envs):
+        """The work left to the background for environments ``envs``: their queues' and next blocks'."""
+        jobs = [self._next[e] for e in envs if e in self._next]
+        for e in envs:
+            jobs += [entry[3] for entry in self._passages.get(e, ()) if entry[3] is not None]
+        return jobs
+
     def _settle(self, entries):
         """Give queue ``entries`` their run-ins: those left to the background waited for (or, not started, done
         here), the others done here in one batch."""
@@ -393,9 +406,7 @@ class PassageV1Core:
     def drop_pending(self):
         """Cancel the run-ins left to the background that have not started (``close()`` calls it: an environment
         closed does not keep the background thread busy); a later reset does what it needs itself."""
-        jobs = list(self._next.values()) + [entry[3] for queue in self._passages.values() for entry in queue
-                                            if entry[3] is not None]
-        for job in jobs:
+        for job in self._jobs(set(self._passages) | set(self._next)):
             job.cancel()
 
     def _run_ins(self, entries):

@@ -487,7 +487,7 @@ def test_run_ins_left_to_the_background_change_nothing(monkeypatch):
     venv, ahead = _vector_rollout(800)
     # every block but the first of each environment drawn ahead (by the work left to the background; by the
     # reset that needs it if the background had not started it) and used: none drawn again at its reset
-    assert drawn.count("reset_envs") == 4 and len(drawn) > 8
+    assert drawn.count("_take_block") == 4 and len(drawn) > 8      # (drawn by the reset that needs it)
     monkeypatch.setenv("SHIPSENSE_THREADS", "1")
     venv, alone = _vector_rollout(800)
     assert not venv.core._next
