@@ -84,17 +84,22 @@ from shipsense.cli import main
 t0 = time.perf_counter()
 code = main(["reproduce", sys.argv[1], "--out", sys.argv[2]])
 wall = time.perf_counter() - t0
-hwm = [line.split()[1] for line in open("/proc/self/status") if line.startswith("VmHWM:")]
-print("WALL", wall, code, int(hwm[0]) / 1024 if hwm else float("nan"))
+status = {line.split(":")[0]: int(line.split()[1]) / 1024 for line in open("/proc/self/status")
+          if line.startswith(("VmHWM:", "RssFile:"))}
+print("WALL", wall, code, status.get("VmHWM", float("nan")), status.get("RssFile", float("nan")))
 """
 
 
 def study(name):
-    """``shipsense reproduce NAME`` in a fresh process: (wall s, CPU s, peak resident MB).
+    """``shipsense reproduce NAME`` in a fresh process: (wall s, CPU s, peak resident MB, file-backed MB at exit).
 
     The peak is the process's own high-water mark (``VmHWM``: ``ru_maxrss`` of a child started from this
     process would count this process's pages, which the kernel carries across ``exec``); Dask workers that a
-    study starts are not in it.  CPU seconds include them.
+    study starts are not in it.  CPU seconds include them.  The file-backed part (``RssFile`` when the study
+    has finished, where S0 peaks) is mostly the pages of numba's LLVM library (``libllvmlite.so``): how many of
+    them are resident depends on the kernel's page cache, not on the study (S0 with numba 0.68.1 on one machine,
+    2026-11-26: 104.5 MiB of it on the day the library was installed, 72.9 MiB hours later, the peak 318 and
+    284 MiB; the heap and anonymous memory 165 MiB both times; EXPERIMENTS.md, "Performance log").
     """
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     with tempfile.TemporaryDirectory() as tmp:
@@ -107,17 +112,18 @@ def study(name):
     if out.returncode != 0 or not lines or lines[-1].split()[2] != "0":
         raise RuntimeError(f"reproduce {name} failed:\n{out.stderr[-2000:]}")
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
-    _, wall, _, mb = lines[-1].split()
-    return float(wall), cpu, float(mb)
+    _, wall, _, mb, files = lines[-1].split()
+    return float(wall), cpu, float(mb), float(files)
 
 
 def study_table(names):
     print("\n3. Studies (`shipsense reproduce NAME`, default options, each in a fresh process)")
-    print(f"{'study':<10}{'wall s':>10}{'CPU s':>10}{'peak MB':>10}")
+    print(f"{'study':<10}{'wall s':>10}{'CPU s':>10}{'peak MB':>10}{'files MB':>10}")
     for name in names:
-        wall, cpu, mb = study(name)
-        print(f"{name:<10}{wall:>10.1f}{cpu:>10.1f}{mb:>10.0f}", flush=True)
-    print("(peak MB: the study's own process; CPU s: with any worker processes it started)")
+        wall, cpu, mb, files = study(name)
+        print(f"{name:<10}{wall:>10.1f}{cpu:>10.1f}{mb:>10.0f}{files:>10.0f}", flush=True)
+    print("(peak MB: the study's own process; files MB: its file-backed pages at the end, mostly numba's LLVM\n"
+          " library, resident as the page cache holds it; CPU s: with any worker processes it started)")
 
 
 def main(argv=None):
