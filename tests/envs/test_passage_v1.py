@@ -590,7 +590,7 @@ def test_closing_or_dropping_an_environment_leaves_the_background_no_work_of_its
     blocker = parallel.background().submit(lambda: gate.wait(30))   # the background busy: the work queues
     try:                                       # (a reset needing queued work does it itself)
         venv, _ = _vector_rollout(400)
-        jobs = list(venv.core._next.values())
+        jobs = list({id(part.job): part.job for part in venv.core._next.values()}.values())   # (blocks shared)
         assert jobs and not any(job._done for job in jobs)
         venv.close()
     finally:
@@ -601,9 +601,15 @@ def test_closing_or_dropping_an_environment_leaves_the_background_no_work_of_its
     while parallel.background().busy and time.monotonic() < deadline:
         time.sleep(0.01)
     assert parallel.background().busy == 0
-    ref = weakref.ref(_vector_rollout(300)[0].core)
-    gc.collect()
-    assert ref() is None
+    gate.clear()
+    blocker = parallel.background().submit(lambda: gate.wait(30))   # (nothing of it running: all of it queued)
+    try:
+        ref = weakref.ref(_vector_rollout(300)[0].core)
+        gc.collect()
+        assert ref() is None
+    finally:
+        gate.set()
+    blocker.result(30)
 
 
 @pytest.mark.skipif(not hasattr(__import__("os"), "fork"), reason="needs fork")
@@ -649,10 +655,11 @@ def test_a_seeded_reset_cancels_the_work_left_for_the_passages_it_drops(monkeypa
     blocker = parallel.background().submit(lambda: gate.wait(30))   # the background busy: the work queues
     try:
         venv, _ = _vector_rollout(60)
-        jobs = list(venv.core._next.values()) + [entry[3] for queue in venv.core._passages.values()
-                                                 for entry in queue if entry[3] is not None]
+        assert len(venv.core._next) == 4                  # each environment's next block, left to the background
+        jobs = [part.job for part in venv.core._next.values()] + [
+            entry[3] for queue in venv.core._passages.values() for entry in queue if entry[3] is not None]
         jobs = [job for job in jobs if not job._done]     # (not done by a reset that needed it)
-        assert len(jobs) >= 4                             # (at least each environment's next block)
+        assert jobs
         venv.reset(seed=99)
     finally:
         gate.set()
@@ -682,4 +689,40 @@ def test_a_failure_in_the_background_is_done_again_where_the_work_is_needed(monk
     _, failing = _vector_rollout(500)
     assert calls[0] >= 3
     for a, b in zip(clean, failing, strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_next_blocks_of_several_environments_are_left_together_and_dropped_apart(monkeypatch):
+    """The next blocks of several environments are one piece of background work (their run-ins in one batch); a
+    seeded reset of one environment drops its block alone -- the others' are still used, and every episode is
+    the one the environments have with everything done when needed."""
+    import threading
+
+    from shipsense import parallel
+
+    def run(threads, check=False):
+        monkeypatch.setenv("SHIPSENSE_THREADS", threads)
+        gate = threading.Event()
+        blocker = parallel.background().submit(lambda: gate.wait(30))   # the background busy: the work queues
+        try:
+            venv, out = _vector_rollout(300)
+            parts = dict(venv.core._next)
+            if check:
+                assert len(parts) == 4 and len({id(part.job) for part in parts.values()}) == 1
+            mask = np.array([False, True, False, False])
+            obs, _ = venv.reset(seed=[7, 8, 9, 10], options={"reset_mask": mask})
+            if check:    # environment 1's block dropped, the work kept for the other three
+                assert 1 not in venv.core._next and set(venv.core._next) == {0, 2, 3}
+                assert not parts[0].job._future.cancelled()
+        finally:
+            gate.set()
+        blocker.result(30)
+        out.append(obs)
+        rng = np.random.default_rng(1)
+        for _ in range(600):
+            o, r, _, _, info = venv.step(rng.integers(0, venv.single_action_space.n, 4))
+            out += [o, r, info["error"], info["status"]]
+        return out
+
+    for a, b in zip(run("2", check=True), run("1"), strict=True):
         np.testing.assert_array_equal(a, b)
