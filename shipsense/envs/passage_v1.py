@@ -236,9 +236,10 @@ def _blocks_ahead(core, seeds):
 
 
 class _Part:
-    """Environment's next block in work left to the background for several environments' (:meth:`PassageV1Core.
-    _leave_ahead`): :meth:`result` is that block (waiting for the work, or doing it here if it has not started);
-    :meth:`cancel` drops it, and the work with it once every block in it is dropped.  ``seed``: the block's."""
+    """One environment's share of work left to the background for the next blocks of several environments
+    (:meth:`PassageV1Core._leave_ahead`): :meth:`result` is its block (waiting for the work, or doing it here if
+    it has not started); :meth:`cancel` drops the share, and the work once every share is dropped.  ``seed``:
+    the block's."""
 
     def __init__(self, job, index, seed, live):
         self.job, self.index, self.seed, self._live, self._block = job, index, seed, live, None
