@@ -3,11 +3,18 @@
 Run:  PYTHONPATH=. python benchmarks/where_time_goes.py stages S0|S1          # each stage's peak memory
       PYTHONPATH=. python benchmarks/where_time_goes.py passage [--steps 1500]  # cProfile of Passage-v0 steps
       PYTHONPATH=. python benchmarks/where_time_goes.py wide                    # one wide-study task of each kind
+      PYTHONPATH=. python benchmarks/where_time_goes.py v1cycles [--cycles 3]   # Passage-v1 vector: who is busy
+      PYTHONPATH=. python benchmarks/where_time_goes.py runins                  # Passage-v1 run-ins by batch size
 
 ``stages`` resets the process's peak resident memory (Linux ``/proc/self/clear_refs``) at the start of each
 stage of the study and prints the stage's starting, peak and final resident memory (MB).  ``passage`` and
 ``wide`` print the functions of most own time (``cProfile``, one thread: ``SHIPSENSE_THREADS=1``), or with
-``--sort cumulative`` (before the command) of most time with their callees.
+``--sort cumulative`` (before the command) of most time with their callees.  ``v1cycles`` steps Passage-v1's
+native vector env (64 envs, the first k-subset every step, as ``benchmarks/envs.py``) through block cycles
+after an untimed one, with its background thread, and prints per cycle the env-steps per second, the CPUs the
+process used, and the stepping thread's share of the wall time and CPU an env-step against the other threads'
+(the background's run-ins, the pool's chunks).  ``runins`` times the run-ins of 12 blocks of Passage-v1
+passages (CPU a passage, one thread) in batches of one, two and six blocks.
 """
 
 from __future__ import annotations
@@ -100,6 +107,52 @@ def wide(rows):
     print(f"({len(kinds)} tasks: {', '.join(t.name for t in kinds.values())})")
 
 
+def _v1_vector(num_envs=64):
+    import gymnasium as gym
+
+    import shipsense.envs  # noqa: F401  (registers the environments)
+
+    return gym.make_vec("shipsense/Passage-v1", num_envs=num_envs, vectorization_mode="vector_entry_point")
+
+
+def v1cycles(cycles):
+    import numpy as np
+
+    from shipsense.envs.passage_v1 import PASSAGE_BLOCK
+
+    venv = _v1_vector()
+    core = venv.unwrapped.core
+    actions, steps = np.full(venv.num_envs, core.full[0]), PASSAGE_BLOCK * int(core.K)
+    venv.reset(seed=3)
+    print(f"{'cycle':<7}{'env-steps/s':>13}{'CPUs':>7}{'stepping busy':>15}{'stepping us':>13}{'others us':>11}"
+          "   (us: CPU an env-step)")
+    for cycle in range(-1, cycles):              # cycle -1: untimed (the first blocks, compiles)
+        t0, c0, m0 = time.perf_counter(), time.process_time(), time.thread_time()
+        for _ in range(steps):
+            venv.step(actions)
+        wall, cpu, mine = time.perf_counter() - t0, time.process_time() - c0, time.thread_time() - m0
+        n = steps * venv.num_envs
+        if cycle >= 0:
+            print(f"{cycle:<7}{n / wall:>13,.0f}{cpu / wall:>7.2f}{mine / wall:>14.0%}{mine / n * 1e6:>13.1f}"
+                  f"{(cpu - mine) / n * 1e6:>11.1f}", flush=True)
+
+
+def runins():
+    venv = _v1_vector(4)
+    core = venv.unwrapped.core
+    blocks = [core._block(seed) for seed in range(100, 112)]
+    core._run_ins(core._block(99))                 # compile or load
+    for size in (1, 2, 6):
+        t0 = time.process_time()
+        for i in range(0, len(blocks), size):
+            entries = [entry for block in blocks[i:i + size] for entry in block]
+            for entry in entries:
+                entry[2] = None
+            core._run_ins(entries)
+        print(f"{size} block(s) a batch ({len(blocks[0]) * size} passages): "
+              f"{(time.process_time() - t0) / sum(map(len, blocks)) * 1e3:.2f} ms of CPU a passage", flush=True)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = ap.add_subparsers(dest="what", required=True)
@@ -108,6 +161,9 @@ def main(argv=None):
     p = sub.add_parser("passage")
     p.add_argument("--steps", type=int, default=1500)
     sub.add_parser("wide")
+    c = sub.add_parser("v1cycles")
+    c.add_argument("--cycles", type=int, default=3)
+    sub.add_parser("runins")
     ap.add_argument("--rows", type=int, default=20, help="profile rows to print")
     ap.add_argument("--sort", choices=("tottime", "cumulative"), default="tottime",
                     help="profile order: own time (default) or with callees")
@@ -119,9 +175,14 @@ def main(argv=None):
             ap.error("stages reads /proc: Linux only")
         stages(args.study)
         return
+    if args.what == "v1cycles":                      # (with the background thread: two threads at least)
+        v1cycles(args.cycles)
+        return
     os.environ["SHIPSENSE_THREADS"] = "1"
     if args.what == "passage":
         passage(args.steps, args.rows)
+    elif args.what == "runins":
+        runins()
     else:
         wide(args.rows)
 

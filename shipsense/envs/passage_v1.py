@@ -389,8 +389,8 @@ class PassageV1Core:
         """Leave the next blocks wanted (:attr:`_wanted`) to the background, the next blocks of :attr:`_group`
         environments in one piece of work: once that many want one, or at once when an environment wanting one
         has half a block or less left.  Their run-ins in one batch cost less a passage than a block's alone
-        (2.80 against 3.37 ms of CPU, Passage-v1, six blocks against one; 19.1-20.2k against 16.1-17.3k
-        env-steps/s at 64 envs; EXPERIMENTS.md, "Performance log")."""
+        (2.8-2.9 against 3.4 ms of CPU, Passage-v1, six blocks against one: ``benchmarks/where_time_goes.py
+        runins``; at 64 envs 19.1-21.3k against 16.7-19.2k env-steps/s: EXPERIMENTS.md, "Performance log")."""
         while self._wanted and (len(self._wanted) >= self._group or any(
                 len(self._passages.get(e, ())) <= PASSAGE_BLOCK // 2 for e in self._wanted)):
             envs = list(self._wanted)[:self._group]
