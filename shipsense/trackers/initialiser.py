@@ -433,7 +433,9 @@ def _project(d, G, out, j_lo, j_hi):
     ``G`` once per passage and, when other processes hold the CPUs, BLAS's threads wait on each other).
     ``G`` is read row by row, a tile of ``_PROJECT_TILE`` columns at a time, into the sums of four passages
     at once (each load of ``G`` serves four); the sums are local arrays, so the compiler vectorises the
-    loop over columns (it cannot when the sums are ``out``'s, which might alias ``G``).
+    loop over columns (it cannot when the sums are ``out``'s, which might alias ``G``).  A sample that is zero
+    (missing) in every passage of a block is skipped: its terms are zeros (of either sign), and a sum that
+    starts at +0.0 is never -0.0, so adding them changes no sum.
     """
     R, K = d.shape
     T = _PROJECT_TILE
@@ -447,6 +449,8 @@ def _project(d, G, out, j_lo, j_hi):
                 s0[j] = s1[j] = s2[j] = s3[j] = 0.0
             for k in range(K):
                 a0, a1, a2, a3 = d[r, k], d[r + 1, k], d[r + 2, k], d[r + 3, k]
+                if a0 == 0.0 and a1 == 0.0 and a2 == 0.0 and a3 == 0.0:
+                    continue                    # (missing everywhere: adds zeros)
                 g = G[k, t0:t1]
                 for j in range(w):
                     gj = g[j]
@@ -462,6 +466,8 @@ def _project(d, G, out, j_lo, j_hi):
                 s0[j] = 0.0
             for k in range(K):
                 a = d[r, k]
+                if a == 0.0:
+                    continue
                 g = G[k, t0:t1]
                 for j in range(w):
                     s0[j] += a * g[j]

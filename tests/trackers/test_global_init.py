@@ -506,7 +506,8 @@ def test_the_candidate_grid_is_kept_and_its_terms_found_by_identity_only_when_fr
 def test_the_grids_projection_is_each_passages_own_sum_whatever_its_batch_or_column_split():
     """``_project`` (``G^T d`` of every candidate): bit for bit the sums over the samples in ascending order
     from zero (so a passage's numbers are the same alone, in any batch -- blocks of four and the rest --, and
-    over any split of the columns: the threads' chunks, across the tiles, a width not a multiple of four)."""
+    over any split of the columns: the threads' chunks, across the tiles, a width not a multiple of four),
+    the zeros of missing samples (either sign; skipped where a block has nothing else) included."""
     from shipsense.trackers.initialiser import _PROJECT_TILE, _project
 
     rng = np.random.default_rng(5)
@@ -514,6 +515,7 @@ def test_the_grids_projection_is_each_passages_own_sum_whatever_its_batch_or_col
     G = rng.normal(size=(K, N))
     d = rng.normal(size=(11, K))
     d[rng.random(d.shape) < 0.2] = 0.0                                    # missing samples are zeros
+    d[:, 3], d[:8, 9], d[2, 11] = 0.0, -0.0, -0.0                        # missing in every passage; -0.0
     ascending = np.zeros((11, N))
     for k in range(K):                                                    # the documented order, in numpy
         ascending = ascending + d[:, k, None] * G[k]
