@@ -696,6 +696,9 @@ def _gains(Hm, Rinv, P, first_channel, subsets, out):
         solve_many_in_place(M, Pinv, n, n)
         before = math.log(abs(P[e, 0, 0] * P[e, 1, 1] - P[e, 0, 1] * P[e, 1, 0]))
         for t in range(subsets.shape[0]):
+            if not reads[t]:                    # (reading nothing gains nothing)
+                out[e, t] = 0.0
+                continue
             for a in range(n):                  # the first two columns of (P^-1 + J)^-1
                 for b in range(n):
                     acc = Pinv[a, b]
@@ -707,7 +710,7 @@ def _gains(Hm, Rinv, P, first_channel, subsets, out):
                 X[a, 1] = 1.0 if a == 1 else 0.0
             solve_many_in_place(M, X, n, 2)
             g = before - math.log(abs(X[0, 0] * X[1, 1] - X[0, 1] * X[1, 0]))
-            out[e, t] = max(g, 0.0) if math.isfinite(g) and reads[t] else 0.0
+            out[e, t] = max(g, 0.0) if math.isfinite(g) else 0.0
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
