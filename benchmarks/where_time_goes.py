@@ -14,7 +14,7 @@ native vector env (64 envs, the first k-subset every step, as ``benchmarks/envs.
 after an untimed one, with its background thread, and prints per cycle the env-steps per second, the CPUs the
 process used, and the stepping thread's share of the wall time and CPU an env-step against the other threads'
 (the background's run-ins, the pool's chunks).  ``runins`` times the run-ins of 12 blocks of Passage-v1
-passages (CPU a passage, one thread) in batches of one, two and six blocks.
+passages (CPU a passage, one thread) one passage at a time and in batches of one, two and six blocks.
 """
 
 from __future__ import annotations
@@ -142,15 +142,16 @@ def runins():
     core = venv.unwrapped.core
     blocks = [core._block(seed) for seed in range(100, 112)]
     core._run_ins(core._block(99))                 # compile or load
-    for size in (1, 2, 6):
+    passages = [entry for block in blocks for entry in block]
+    for size in (1, len(blocks[0]), 2 * len(blocks[0]), 6 * len(blocks[0])):
         t0 = time.process_time()
-        for i in range(0, len(blocks), size):
-            entries = [entry for block in blocks[i:i + size] for entry in block]
+        for i in range(0, len(passages), size):
+            entries = passages[i:i + size]
             for entry in entries:
                 entry[2] = None
             core._run_ins(entries)
-        print(f"{size} block(s) a batch ({len(blocks[0]) * size} passages): "
-              f"{(time.process_time() - t0) / sum(map(len, blocks)) * 1e3:.2f} ms of CPU a passage", flush=True)
+        what = "alone" if size == 1 else f"{size // len(blocks[0])} block(s) a batch ({size} passages)"
+        print(f"{what}: {(time.process_time() - t0) / len(passages) * 1e3:.2f} ms of CPU a passage", flush=True)
 
 
 def main(argv=None):

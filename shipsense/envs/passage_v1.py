@@ -460,8 +460,8 @@ class PassageV1Core:
         in their third place; returns ``entries``), in batches on a sibling of the observer
         (:meth:`~shipsense.trackers.Tracker.sibling`): a passage's run-in does not depend on the agent (every
         sensor is read) nor on the passages beside it in a batch, so it is the one it would have had in its
-        environment, at a fraction of the cost (its window fits in one batch: 1.9-2.1 ms a passage in a batch
-        of 16 or 102, 5.3 alone).  A batch holds at most
+        environment, at a fraction of the cost (its window fits in one batch: 2.8-3.3 ms of CPU a passage in a
+        batch of 16 to 96, 8.7-8.9 alone: ``benchmarks/where_time_goes.py runins``).  A batch holds at most
         :attr:`~shipsense.trackers.Tracker.independent_batch` passages (102): in a larger one the banks' starts
         move at rounding.
 
