@@ -14,7 +14,7 @@ update; Passage-v1's read the first ``k``-sensor subset (its full budget).  Auto
 Passage-v1 with its run-in: the observer reads every sensor until its first track).  Every rate is over
 three timed runs together, each from its own seed, after one untimed run (:func:`sustained_rate`); a
 Passage-v0 vector env's runs are whole episode cycles (:func:`whole_episodes`); Passage-v1's vector rate is
-one timed block cycle after an untimed one (:func:`queued_rate`).  PPO frames per second are reported by
+three timed block cycles after an untimed one (:func:`queued_rate`).  PPO frames per second are reported by
 ``shipsense train`` (see EXPERIMENTS.md).
 """
 
@@ -144,16 +144,18 @@ def _v0_on_purpose():
         yield
 
 
-def queued_rate(venv, actions):
-    """Steps per second of a Passage-v1 vector env over one block cycle (``PASSAGE_BLOCK`` x K vector steps,
-    more than 16 episodes of every sub-environment) after one untimed cycle.
+def queued_rate(venv, actions, cycles=REPEATS):
+    """Steps per second of a Passage-v1 vector env over ``cycles`` block cycles together (``PASSAGE_BLOCK`` x K
+    vector steps each, more than 16 episodes of every sub-environment) after one untimed cycle.
 
     Its observers' run-ins are done ahead, for every passage queued (a block of ``PASSAGE_BLOCK`` per
     sub-environment), in one batch (:meth:`~shipsense.envs.passage_v1.PassageV1Core._run_ins`): a run of a
     few episodes from a reset pays for the run-ins of all the queued passages and uses two of them (the
     first measure of this kind, 200 steps from each of three resets, read 5,498 env-steps/s where this one
     reads 11,246).  After a cycle the sub-environments' queues are at different points of their blocks, and
-    the timed cycle pays for the run-ins it uses, as a training run does."""
+    the timed cycles pay for the run-ins they use, as a training run does.  Cycles differ in their passages'
+    work (one machine, 2026-11-26, six cycles from the same reset: 18.7k to 20.8k env-steps/s), so more than
+    one is timed."""
     from shipsense.envs.passage_v1 import PASSAGE_BLOCK
 
     steps = PASSAGE_BLOCK * int(venv.unwrapped.core.K)
@@ -161,9 +163,9 @@ def queued_rate(venv, actions):
     for _ in range(steps):
         venv.step(actions)
     t0 = time.perf_counter()
-    for _ in range(steps):
+    for _ in range(int(cycles) * steps):
         venv.step(actions)
-    return steps * venv.num_envs / (time.perf_counter() - t0)
+    return int(cycles) * steps * venv.num_envs / (time.perf_counter() - t0)
 
 
 def whole_episodes(venv, steps):

@@ -63,7 +63,7 @@ def filter_table(steps, batches=(1, 24, 2400)):
 def env_table(steps, n=64):
     print(f"\n2. Environments: steps per second (autoresets included; {env_bench.REPEATS} runs together after an "
           f"untimed one, from seeds 0, 1, ...; Passage-v0's vector env over whole episodes, Passage-v1's over "
-          f"a block cycle after an untimed one)")
+          f"{env_bench.REPEATS} block cycles after an untimed one)")
     cart = env_bench.single_rate(gym.make("CartPole-v1"), steps, 1)
     cart_vec = env_bench.vector_rate(gym.make_vec("CartPole-v1", num_envs=n, vectorization_mode="vector_entry_point"),
                                      steps // 10, np.ones(n, dtype=np.int64))
