@@ -13,8 +13,9 @@ stage of the study and prints the stage's starting, peak and final resident memo
 native vector env (64 envs, the first k-subset every step, as ``benchmarks/envs.py``) through block cycles
 after an untimed one, with its background thread, and prints per cycle the env-steps per second, the CPUs the
 process used, and the stepping thread's share of the wall time and CPU an env-step against the other threads'
-(the background's run-ins, the pool's chunks).  ``runins`` times the run-ins of 12 blocks of Passage-v1
-passages (CPU a passage, one thread) one passage at a time and in batches of one, two and six blocks.
+(the background's run-ins, the pool's chunks), then the rate of the timed cycles together.  ``runins`` times
+the run-ins of 12 blocks of Passage-v1 passages (CPU a passage, one thread) one passage at a time and in batches
+of one, two and six blocks.
 """
 
 from __future__ import annotations
@@ -126,6 +127,7 @@ def v1cycles(cycles):
     venv.reset(seed=3)
     print(f"{'cycle':<7}{'env-steps/s':>13}{'CPUs':>7}{'stepping busy':>15}{'stepping us':>13}{'others us':>11}"
           "   (us: CPU an env-step)")
+    total = 0.0
     for cycle in range(-1, cycles):              # cycle -1: untimed (the first blocks, compiles)
         t0, c0, m0 = time.perf_counter(), time.process_time(), time.thread_time()
         for _ in range(steps):
@@ -133,8 +135,11 @@ def v1cycles(cycles):
         wall, cpu, mine = time.perf_counter() - t0, time.process_time() - c0, time.thread_time() - m0
         n = steps * venv.num_envs
         if cycle >= 0:
+            total += wall
             print(f"{cycle:<7}{n / wall:>13,.0f}{cpu / wall:>7.2f}{mine / wall:>14.0%}{mine / n * 1e6:>13.1f}"
                   f"{(cpu - mine) / n * 1e6:>11.1f}", flush=True)
+    if cycles > 1:
+        print(f"{'all':<7}{cycles * steps * venv.num_envs / total:>13,.0f}   (the timed cycles together)")
 
 
 def runins():
