@@ -328,8 +328,15 @@ class TrackerStep:
         if len(bank.idx) != bank.R * H:
             return runs                     # (a pruned bank: BankState.step says why)
         rows = (runs[:, None] * H + np.arange(H)).ravel()
-        C = bank.belief.chol[rows]
-        src = C @ np.swapaxes(C, -1, -2)
+        # the covariances the kernel predicts from: of the live rows only (the kernel reads no repeat's, 79 % of
+        # the rows in the environments), each the product it would be in a full batch (numpy multiplies a
+        # stack matrix by matrix)
+        live = bank.cum[runs] != -np.inf
+        live |= ~live.any(axis=1, keepdims=True)        # (a passage with no live hypothesis steps them all)
+        live = live.ravel()
+        C = bank.belief.chol[rows[live]]
+        src = np.zeros((rows.size,) + C.shape[1:])
+        src[live] = C @ np.swapaxes(C, -1, -2)
         A, Q = self.fixed[:2] if stepped is None else (_per_element(a, (rows.size,), bank.model.n)
                                                        for a in (stepped.A, stepped.Q))
         per_row = A.shape[0] > 1

@@ -165,24 +165,29 @@ def test_passages_stepped_in_chunks_on_threads_equal_one_chunk_and_a_failed_chun
 
 def test_a_passage_whose_every_hypothesis_is_a_repeat_is_stepped():
     """Repeats (-inf) are skipped only while their passage has another hypothesis: with every one -inf (an
-    absurd sample sends them there) the passage's hypotheses are all stepped, as by the step by step path."""
+    absurd sample sends them there) the passage's hypotheses are all stepped, as by the step by step path --
+    by the compiled step itself, every sample (an element it fails on sends its chunk to that path)."""
     pair, sim, k = _running_pair("S2", 3, 6)
     for trk in pair:
         trk.bank.cum[1] = -np.inf
+    taken = []
+    kernel = pair[0]._compiled.kernel
+    pair[0]._compiled.kernel = lambda runs, *a: taken.append(kernel(runs, *a)) or taken[-1]
     for j in range(k, k + 5):
         _assert_same_sample(*(trk.update(sim.times[j], sim.measurements[:, j]) for trk in pair))
+    assert len(taken) == 5 and all(taken)
 
 
 def test_a_large_batch_takes_the_compiled_step_with_the_same_numbers():
     """110 passages (550 hypothesis rows, beyond the filters' own thread split at 512): the compiled step
     runs (six chunks) and its samples equal the step by step path's bit for bit."""
     pair, sim, k = _running_pair("S2", 110, 8)
-    calls = []
+    calls, taken = [], []
     kernel = pair[0]._compiled.kernel
-    pair[0]._compiled.kernel = lambda runs, *a: calls.append(len(runs)) or kernel(runs, *a)
+    pair[0]._compiled.kernel = lambda runs, *a: calls.append(len(runs)) or taken.append(kernel(runs, *a)) or taken[-1]
     for j in range(k, k + 3):
         _assert_same_sample(*(trk.update(sim.times[j], sim.measurements[:, j]) for trk in pair))
-    assert sum(calls) == 3 * 110 and max(calls) == 20
+    assert sum(calls) == 3 * 110 and max(calls) == 20 and all(taken)     # (none fell back to the step by step path)
 
 
 def test_a_refused_sample_writes_nothing():
