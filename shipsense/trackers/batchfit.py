@@ -45,8 +45,20 @@ def transitions(model, taus):
     leaves the rest, so a time ``tau`` moves them by ``tau v``.
     """
     taus = np.asarray(taus, dtype=float)
-    n = model.A.shape[0]
-    return np.eye(n) + (taus[..., None, None] / model.period) * (model.A - np.eye(n))
+    A = np.ascontiguousarray(model.A, dtype=float)
+    eye, step = _identity_and_step(A.tobytes(), A.shape)
+    return eye + (taus[..., None, None] / model.period) * step
+
+
+@lru_cache(maxsize=32)
+def _identity_and_step(data, shape):
+    """``(I, A - I)`` of a transition ``A`` (by its bytes), read-only: kept for :func:`transitions`, which the
+    trackers call several times a refit (the same numbers as forming them each time, in half the time)."""
+    A = np.frombuffer(data, dtype=float).reshape(shape)
+    eye = np.eye(shape[0])
+    step = A - eye
+    eye.flags.writeable = step.flags.writeable = False
+    return eye, step
 
 
 @dataclass(frozen=True)

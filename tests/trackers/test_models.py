@@ -203,3 +203,22 @@ def test_series_hed_models_have_no_compiled_kernel():
     model = model_from_scenario("S1-P1")
     series = FieldModel(replace(model.array, electric_method="series"), model.period, model.Q, model.R)
     assert kernel_of(model) is not None and kernel_of(series) is None
+
+
+def test_transitions_are_the_constant_velocity_formula():
+    """``transitions(model, tau)`` is ``I + (tau / T)(A - I)`` to the bit (its ``I`` and ``A - I`` are kept per
+    transition, by value: models with other transitions get theirs), ``A`` itself at ``tau = T`` and ``I`` at 0,
+    a fresh writeable array every call."""
+    from shipsense.trackers.batchfit import transitions
+
+    taus = np.array([[0.0, 0.5, -1.25], [3.0, 7.5, 2.0]])
+    for name in ("S0", "S1-P1", "S2", "S0"):             # (S0 and S2: the same shape, other periods)
+        model = model_from_scenario(load_scenario(name))
+        n = model.A.shape[0]
+        want = np.eye(n) + (taus[..., None, None] / model.period) * (model.A - np.eye(n))
+        got = transitions(model, taus)
+        np.testing.assert_array_equal(got, want)
+        np.testing.assert_array_equal(transitions(model, model.period), model.A)
+        np.testing.assert_array_equal(transitions(model, 0.0), np.eye(n))
+        got[...] = 0.0                                   # (the caller's to write)
+        np.testing.assert_array_equal(transitions(model, taus), want)
