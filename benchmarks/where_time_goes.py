@@ -4,7 +4,7 @@ Run:  PYTHONPATH=. python benchmarks/where_time_goes.py stages S0|S1          # 
       PYTHONPATH=. python benchmarks/where_time_goes.py passage [--steps 1500]  # cProfile of Passage-v0 steps
       PYTHONPATH=. python benchmarks/where_time_goes.py wide                    # one wide-study task of each kind
       PYTHONPATH=. python benchmarks/where_time_goes.py v1cycles [--cycles 3]   # Passage-v1 vector: who is busy
-      PYTHONPATH=. python benchmarks/where_time_goes.py runins                  # Passage-v1 run-ins by batch size
+      PYTHONPATH=. python benchmarks/where_time_goes.py runins [--profile]      # Passage-v1 run-ins by batch size
 
 ``stages`` resets the process's peak resident memory (Linux ``/proc/self/clear_refs``) at the start of each
 stage of the study and prints the stage's starting, peak and final resident memory (MB).  ``passage`` and
@@ -15,7 +15,7 @@ after an untimed one, with its background thread, and prints per cycle the env-s
 process used, and the stepping thread's share of the wall time and CPU an env-step against the other threads'
 (the background's run-ins, the pool's chunks), then the rate of the timed cycles together.  ``runins`` times
 the run-ins of 12 blocks of Passage-v1 passages (CPU a passage, one thread) one passage at a time and in batches
-of one, two and six blocks.
+of one, two and six blocks, and with ``--profile`` profiles the batches of six.
 """
 
 from __future__ import annotations
@@ -142,21 +142,28 @@ def v1cycles(cycles):
         print(f"{'all':<7}{cycles * steps * venv.num_envs / total:>13,.0f}   (the timed cycles together)")
 
 
-def runins():
+def runins(profile_rows=None):
     venv = _v1_vector(4)
     core = venv.unwrapped.core
     blocks = [core._block(seed) for seed in range(100, 112)]
     core._run_ins(core._block(99))                 # compile or load
     passages = [entry for block in blocks for entry in block]
-    for size in (1, len(blocks[0]), 2 * len(blocks[0]), 6 * len(blocks[0])):
-        t0 = time.process_time()
+
+    def run(size):
         for i in range(0, len(passages), size):
             entries = passages[i:i + size]
             for entry in entries:
                 entry[2] = None
             core._run_ins(entries)
+
+    for size in (1, len(blocks[0]), 2 * len(blocks[0]), 6 * len(blocks[0])):
+        t0 = time.process_time()
+        run(size)
         what = "alone" if size == 1 else f"{size // len(blocks[0])} block(s) a batch ({size} passages)"
         print(f"{what}: {(time.process_time() - t0) / len(passages) * 1e3:.2f} ms of CPU a passage", flush=True)
+    if profile_rows:
+        _profile(lambda: run(6 * len(blocks[0])), profile_rows)
+        print(f"(the run-ins of {len(passages)} passages, six blocks a batch)")
 
 
 def main(argv=None):
@@ -169,7 +176,8 @@ def main(argv=None):
     sub.add_parser("wide")
     c = sub.add_parser("v1cycles")
     c.add_argument("--cycles", type=int, default=3)
-    sub.add_parser("runins")
+    r = sub.add_parser("runins")
+    r.add_argument("--profile", action="store_true", help="then profile the batches of six blocks")
     ap.add_argument("--rows", type=int, default=20, help="profile rows to print")
     ap.add_argument("--sort", choices=("tottime", "cumulative"), default="tottime",
                     help="profile order: own time (default) or with callees")
@@ -188,7 +196,7 @@ def main(argv=None):
     if args.what == "passage":
         passage(args.steps, args.rows)
     elif args.what == "runins":
-        runins()
+        runins(args.rows if args.profile else None)
     else:
         wide(args.rows)
 
