@@ -70,26 +70,17 @@ def _step_kernel_for(code):
         n = mean_all.shape[1]
         m = yi.shape[1]
         B = R * H
-        # the live hypotheses: a cumulative log-likelihood of -inf (a repeat that fills a bank: no weight) stays
-        # -inf until the bank restarts, and nothing reported reads such a hypothesis while its passage has
-        # another (selection.report selects the first maximum), so only the others are predicted and updated
-        # (in the environments 79 % of the rows are such repeats); a passage whose every hypothesis is -inf
-        # (an absurd sample) steps them all, as the step by step path does
+        live = live_rows(cum, runs, H)             # (only these are predicted and updated)
         where = np.empty(B, np.int64)               # a row's place among the live ones, -1 for a repeat
         row = np.empty(B, np.int64)                 # its row of the bank
         nl = 0
-        for p in range(R):
-            any_live = False
-            for k in range(H):
-                any_live = any_live or cum[runs[p], k] != -np.inf
-            for k in range(H):
-                b = p * H + k
-                row[b] = runs[p] * H + k
-                if any_live and cum[runs[p], k] == -np.inf:
-                    where[b] = -1
-                else:
-                    where[b] = nl
-                    nl += 1
+        for b in range(B):
+            row[b] = runs[b // H] * H + b % H
+            if live[b]:
+                where[b] = nl
+                nl += 1
+            else:
+                where[b] = -1
         X = np.empty((nl, n))
         Y = np.empty((nl, m))
         src_l = np.empty((nl, n, n))
@@ -189,6 +180,24 @@ def _step_kernel_for(code):
                           kernel.__name__, kernel.__defaults__, kernel.__closure__)
     kernel.__qualname__ = f"_tracker_step_{code}"
     return njit(cache=True, error_model="numpy", nogil=True)(kernel)
+
+
+@njit(cache=True, nogil=True)
+def live_rows(cum, runs, H):
+    """The hypothesis rows of passages ``runs`` (int64) that the compiled step predicts and updates (len(runs) * H,)
+    bool, from the banks' cumulative log-likelihoods ``cum`` (P, H): a -inf (a repeat that fills a bank: no
+    weight) stays -inf until the bank restarts, and nothing reported reads such a hypothesis while its passage
+    has another (:func:`~shipsense.trackers.selection.report` selects the first maximum), so only the others
+    are stepped; a passage whose every hypothesis is -inf (an absurd sample) steps them all, as the step by
+    step path does."""
+    out = np.empty(runs.shape[0] * H, np.bool_)
+    for p in range(runs.shape[0]):
+        any_live = False
+        for k in range(H):
+            any_live = any_live or cum[runs[p], k] != -np.inf
+        for k in range(H):
+            out[p * H + k] = not (any_live and cum[runs[p], k] == -np.inf)
+    return out
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
@@ -328,12 +337,10 @@ class TrackerStep:
         if len(bank.idx) != bank.R * H:
             return runs                     # (a pruned bank: BankState.step says why)
         rows = (runs[:, None] * H + np.arange(H)).ravel()
-        # the covariances the kernel predicts from: of the live rows only (the kernel reads no repeat's, 79 % of
-        # the rows in the environments), each the product it would be in a full batch (numpy multiplies a
-        # stack matrix by matrix)
-        live = bank.cum[runs] != -np.inf
-        live |= ~live.any(axis=1, keepdims=True)        # (a passage with no live hypothesis steps them all)
-        live = live.ravel()
+        # the covariances the kernel predicts from: of the rows it steps only (it reads no repeat's, 79 % of the
+        # rows in the environments), each the product it would be in a full batch (numpy multiplies a stack
+        # matrix by matrix)
+        live = live_rows(bank.cum, runs, H)
         C = bank.belief.chol[rows[live]]
         src = np.zeros((rows.size,) + C.shape[1:])
         src[live] = C @ np.swapaxes(C, -1, -2)
