@@ -123,10 +123,18 @@ class CoreVectorEnv(VectorEnv):
         self.core.reset_envs(envs, self._episode_seeds(envs), fresh=fresh, **ahead)
 
     def reset(self, *, seed=None, options=None):
-        fresh = seed is not None or self._rngs is None
-        if fresh:
-            self._reseed(seed)
+        """Reset every sub-environment, or those of ``options={"reset_mask": mask}``.  ``seed`` (an int: ``seed +
+        i`` for sub-environment ``i``; or a list of ``num_envs``, None entries fresh entropy) reseeds the
+        sub-environments reset, and only those, as gymnasium's ``SyncVectorEnv`` does: the others go on drawing
+        their episodes from their own streams (and the run-ins done ahead for them are still used)."""
         envs = reset_rows(options, self.num_envs)
+        fresh = seed is not None or self._rngs is None
+        if self._rngs is None:
+            self._reseed(seed)
+        elif seed is not None:
+            streams = stream_generators(seed, self.num_envs, SEED_HIGH)
+            for e in envs.tolist():
+                self._rngs[e] = streams[e]
         self._reset_core(envs, fresh)
         self._prev_done[envs] = False
         return self._observation(), {}

@@ -63,6 +63,9 @@ or the scenario's for the bank), ``max_reads`` (default: all sensors),
 ## Version history
 
 * v1 (``shipsense/Passage-v1``, another module): supersedes this one.
+* v0 (2026-11-26): the vector env's seeded partial reset reseeds only the
+  masked sub-environments (as Passage-v1's; dynamics, reward and spaces
+  unchanged).
 * v0 (revised with the one-tracker change): the observer is the project's
   tracker, its covariance and status in the observation (width ``8 + H + S``).
   ``observer="bank"`` keeps the first version's observer (the studies' bank,
@@ -327,7 +330,8 @@ class PassageVectorEnv(CoreVectorEnv):
 
     Sub-environment ``i`` reset with ``seed`` behaves exactly like a single
     :class:`PassageEnv` reset with ``seed + i``.  Autoreset mode: next step; ``reset(options={"reset_mask":
-    mask})`` resets only the masked sub-environments (gymnasium's partial reset, what SB3's adapter calls).
+    mask})`` resets only the masked sub-environments (gymnasium's partial reset, what SB3's adapter calls);
+    with a seed it reseeds only them, as gymnasium's ``SyncVectorEnv`` does (:meth:`CoreVectorEnv.reset`).
     With many environments a step makes temporaries of 0.1-1 MB; on glibc,
     call :func:`shipsense.tune_allocator` once in the training process (about
     25 % more steps per second at 64 environments; ``shipsense train`` does).

@@ -126,7 +126,11 @@ its whole ``overrides`` dict.
 
 * v1: the agent picks a subset of at most ``k`` sensors (``Discrete``, no
   trimming), uncapped log-error reward, time since each read and predicted
-  information gains observed, episode metrics and baselines.
+  information gains observed, episode metrics and baselines.  Since
+  2026-11-26 the vector env's seeded partial reset reseeds only the masked
+  sub-environments (gymnasium's ``SyncVectorEnv`` rule; it reseeded all, so
+  the others' later blocks of passages came from the new seeds): no
+  version bump, as the dynamics, reward and spaces are unchanged.
 * v0 (``shipsense/Passage-v0``, :mod:`shipsense.envs.passage`): a
   ``MultiBinary`` action trimmed to ``max_reads``, the error reward capped at
   100 m; kept registered for comparison with earlier results.
@@ -910,7 +914,9 @@ class PassageV1VectorEnv(CoreVectorEnv):
     mask of the sub-environments it is valid for (those that stepped); ``info["episode_metrics"]`` (with its
     own masks) for those that terminated.  ``reset(options={"reset_mask": mask})`` (gymnasium's partial reset)
     resets only the masked sub-environments, each from its own stream: SB3's adapter
-    (:class:`~shipsense.envs.sb3.VectorEnvAdapter`) calls it in the step an episode ends.
+    (:class:`~shipsense.envs.sb3.VectorEnvAdapter`) calls it in the step an episode ends.  With a ``seed`` it
+    reseeds only them, as gymnasium's ``SyncVectorEnv`` does; the others' streams and the run-ins done ahead
+    for them are kept.
     """
 
     BASELINES = BASELINES

@@ -10,7 +10,7 @@ from reference import odd_observer_outputs
 
 import shipsense  # noqa: F401  (registers the environments)
 from shipsense.envs import PASSAGE_V1_VARIANTS
-from shipsense.envs.passage_v1 import CHI2_2_95, PassageV1Env, PassageV1VectorEnv
+from shipsense.envs.passage_v1 import CHI2_2_95, PASSAGE_BLOCK, PassageV1Env, PassageV1VectorEnv
 
 EASY = "shipsense/PassageEasy-v1"
 KW = {"scenario": "S2", "overrides": {"steps": 50}}   # S2: the run-in ends near sample 30, ~20 agent steps
@@ -195,6 +195,37 @@ def test_an_integer_seed_is_seed_plus_index_and_a_wrong_list_is_refused():
     np.testing.assert_array_equal(a, b)
     with pytest.raises(ValueError, match="seed"):
         venv.reset(seed=[1, 2, 3])
+
+
+def test_a_seeded_partial_reset_reseeds_only_the_environments_it_resets():
+    """As gymnasium's ``SyncVectorEnv``: ``reset(seed=..., options={"reset_mask": mask})`` resets the masked
+    sub-environments from their seeds (sub-environment 1 from 8, as a single env reset with 8) and leaves the
+    others' streams alone -- through their next episodes they are what they are with an unseeded partial
+    reset."""
+    mask = np.array([False, True, False, False])
+    others = [0, 2, 3]
+
+    def run(seed):
+        venv = PassageV1VectorEnv(4, **KW)
+        venv.reset(seed=5)
+        rng = np.random.default_rng(0)
+        for _ in range(10):
+            venv.step(rng.integers(0, venv.single_action_space.n, 4))
+        obs, _ = venv.reset(seed=seed, options={"reset_mask": mask})
+        out, first, resets = [obs[others]], obs[1], np.zeros(3, dtype=int)
+        for _ in range(420):     # (episodes of ~20 agent steps: past the block of passages each environment had)
+            o, r, t, _, _ = venv.step(rng.integers(0, venv.single_action_space.n, 4))
+            out += [o[others], r[others]]
+            resets += t[others]
+        return first, out, resets
+
+    first, seeded, resets = run([7, 8, 9, 10])
+    _, unseeded, _ = run(None)
+    assert resets.min() > PASSAGE_BLOCK     # (each into its next block of passages)
+    for a, b in zip(seeded, unseeded, strict=True):
+        np.testing.assert_array_equal(a, b)
+    single = PassageV1Env(**KW)
+    np.testing.assert_allclose(first, single.reset(seed=8)[0], rtol=0, atol=1e-6)
 
 
 def _brute_force_gains(model, R, x, P, subsets, h=1e-6):
