@@ -103,7 +103,9 @@ def _lm_loop(spec, theta, Ak, y, present, w, mu, root, gamma, lo, hi, iterations
                     for q in range(n):
                         acc += N[p, q] * (tt[q] - th[q])
                     pred -= dp * acc
-            # (one call site: the measurement kernel it inlines is compiled once)
+            # (one call site; _normal is compiled on its own, not inlined here: numba copies an inlined
+            # function's IR, and copying this one, with the measurement kernel inlined in it, took 3 s of the
+            # loop's first compilation of ~13 (S0's fits); called once a step, it costs nothing at run time)
             ct = _normal(spec, tt, b, Ak, y, present, w, mu, root, gamma, cv, Nt, gt, x, row, yhat, H, r3, m3, Bf,
                          dBq, dBm)
             evaluations[b] += 1
@@ -135,7 +137,7 @@ def _lm_loop(spec, theta, Ak, y, present, w, mu, root, gamma, lo, hi, iterations
         cost[b] = c
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@_loop_jit
 def _normal(spec, th, b, Ak, y, present, w, mu, root, gamma, cv, N, g, x, row, yhat, H, r3, m3, Bf, dBq, dBm):
     """Cost (chi-square, or Huber's) of fit ``b`` at state ``th`` and its normal matrix ``N = J^T W J`` and
     gradient ``g = J^T W r`` (``W`` the Huber weights).
