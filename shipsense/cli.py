@@ -167,12 +167,13 @@ def _print_summary(sim):
         print(f"  {sid:<10} {arr.types[s]:<13} {arr.kinds[s]:<9} {closest:>11.1f} {peak:>14} {snr:>9}")
 
 
-def _first_use(command, filter_name=None):
+def _first_use(command, filter_name=None, notice=None):
     """Say on stderr, before work that runs the tracker, that its compiled kernels are about to compile (and so
-    that this run's times include compiling): :func:`~shipsense.tracking.first_use_notice`."""
+    that this run's times include compiling): :func:`~shipsense.tracking.first_use_notice`, or ``notice`` (a
+    function giving another command's notice or None)."""
     from shipsense.tracking import first_use_notice
 
-    notice = first_use_notice(filter_name)
+    notice = first_use_notice(filter_name) if notice is None else notice()
     if notice:
         print(f"{command}: {notice}", file=sys.stderr)
 
@@ -265,7 +266,7 @@ def cmd_check(args) -> int:
     from shipsense import budget
     from shipsense.atomic import atomic_write_bytes
     from shipsense.config import load_scenario
-    from shipsense.design.gate import check_layouts, junit_xml, worst
+    from shipsense.design.gate import check_layouts, first_use_notice, junit_xml, worst
 
     if args.junit is not None and Path(args.junit).suffix != ".xml":
         raise _BadInput(f"--junit must end in .xml, got {args.junit!r}")
@@ -281,6 +282,7 @@ def cmd_check(args) -> int:
     if works:
         _within_budget(args, budget.sequence(works, f"checking {len(works)} layout(s) on {args.passages} passages "
                                              "each", works[0].fewer + " or files"))
+    _first_use("check", notice=first_use_notice)
     results = check_layouts(args.layout, passages=args.passages, seed=args.seed,
                             progress=not (args.json or _QUIET["on"]), errors=(ShipsenseError, OSError))
     if args.junit is not None:
