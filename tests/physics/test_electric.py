@@ -247,3 +247,45 @@ def test_fast_path_split_across_threads_equals_one_thread_bit_for_bit(monkeypatc
     for a, b in zip(out["1"], out["3"]):
         assert a.shape == b.shape
         np.testing.assert_array_equal(a, b)
+
+
+def _series_table(kernel, rho, w, rtol):
+    """The fast path's remainder table written as the plain series: shell after shell over the whole grid,
+    stopping after the first shell whose tail bound (two images per shell per family) is within ``rtol`` of
+    the scale at every point."""
+    from shipsense.physics.electric import _integral_tail
+
+    D, eta = kernel.medium.water_depth, kernel.medium.eta
+    K = np.zeros(rho.shape + (3,))
+    s2 = rho * rho + kernel._a**2
+    for n in range(2, 1_000_000):
+        c = eta**n
+        for dz in (w + 2 * n * D, w - 2 * n * D):
+            R2 = rho * rho + dz * dz
+            inv_R3 = R2**-1.5
+            K[..., 0] += c * inv_R3
+            K[..., 1] += c * (inv_R3 / R2)
+            K[..., 2] += c * dz * (inv_R3 / R2)
+        if np.all(2.0 * _integral_tail(abs(eta), n, D, np.abs(rho), 3) <= rtol / s2**1.5):
+            break
+    return K * np.stack([s2**1.5, s2**2.5, s2**2.5 / kernel._a], axis=-1)
+
+
+@pytest.mark.parametrize("sigma2", [0.04, 40.0])
+def test_the_fast_paths_table_is_the_plain_series_bit_for_bit(monkeypatch, sigma2):
+    """The table is built from the offsets that decide the stopping shell, point by point on contiguous
+    scratch and in chunks on the CPUs: each number is still the plain series' (the same terms, added in the
+    same order), on one thread or several."""
+    medium = Medium(SIG1, sigma2, 15.0)
+    kernels = {}
+    for threads in ("1", "2"):
+        monkeypatch.setenv("SHIPSENSE_THREADS", threads)
+        kernels[threads] = FastHED(medium, rho_max=3000.0)
+    kernel = kernels["1"]
+    x = kernel._x0 + kernel._hx * np.arange(kernel._nx)
+    w = kernel._w0 + kernel._hw * np.arange(kernel._nw)
+    rho = kernel._a * np.sinh(x)[:, None] * np.ones((1, kernel._nw))
+    want = _series_table(kernel, rho, np.ones((kernel._nx, 1)) * w[None, :], 1e-13).reshape(-1, 3)
+    assert kernel._table.shape[0] > 8192     # (more points than a chunk: the build is split)
+    np.testing.assert_array_equal(kernels["1"]._table, want)
+    np.testing.assert_array_equal(kernels["2"]._table, want)
