@@ -266,7 +266,8 @@ def cmd_check(args) -> int:
     from shipsense import budget
     from shipsense.atomic import atomic_write_bytes
     from shipsense.config import load_scenario
-    from shipsense.design.gate import check_layouts, first_use_notice, junit_xml, worst
+    from shipsense.design.gate import check_layouts, junit_xml, worst
+    from shipsense.design.observability import first_use_notice
 
     if args.junit is not None and Path(args.junit).suffix != ".xml":
         raise _BadInput(f"--junit must end in .xml, got {args.junit!r}")
@@ -361,6 +362,7 @@ def cmd_design(args) -> int:
     from shipsense import budget
     from shipsense.config import load_scenario
     from shipsense.design.designer import default_candidates, design_array, summary_lines, write_design
+    from shipsense.design.observability import first_use_notice
 
     out = Path(args.out)
     if out.suffix.lower() in (".toml", ".json", ".png"):
@@ -372,6 +374,7 @@ def cmd_design(args) -> int:
     n_cands = len(cands) if cands is not None else len(default_candidates(sc))
     search = args.bb_seconds if args.k <= 3 and np.isfinite(args.bb_seconds) else 0.0   # the branch and bound
     _within_budget(args, budget.design(sc, n_cands, args.passages if sc.prior is not None else 1, search))
+    _first_use("design", notice=first_use_notice)
     try:
         result = design_array(sc, args.k, criterion=args.criterion, candidates=cands, costs=costs, budget=args.budget,
                               passages=args.passages, seed=args.seed, solver=args.solver, cuts=not args.no_cuts,

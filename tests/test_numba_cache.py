@@ -107,13 +107,12 @@ def test_the_first_use_notice_says_whether_the_tracker_will_compile(tmp_path):
 
 
 def test_the_check_notice_says_whether_its_kernels_will_compile(tmp_path):
-    """``shipsense check`` (a CI gate, often on a fresh machine) says when its kernels are about to compile: with
-    an empty cache the notice is given; once a layout has been checked, not."""
-    from shipsense.design.gate import first_use_notice
-    from shipsense.design.observability import check_scenario
+    """``shipsense check`` (a CI gate, often on a fresh machine) and ``design`` say when their kernels are about
+    to compile: with an empty cache the notice is given; once a layout has been checked, not."""
+    from shipsense.design.observability import check_scenario, first_use_notice
 
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path))
-    out = subprocess.run([sys.executable, "-c", "from shipsense.design.gate import first_use_notice; "
+    out = subprocess.run([sys.executable, "-c", "from shipsense.design.observability import first_use_notice; "
                           "print(first_use_notice())"], env=env, capture_output=True, text=True, check=True)
     assert "compiling the least-squares and measurement kernels" in out.stdout and "NUMBA_CACHE_DIR" in out.stdout
     check_scenario("S0", passages=1)

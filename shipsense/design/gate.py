@@ -16,21 +16,6 @@ from xml.etree import ElementTree as ET
 
 SEVERITY = {"observable": 0, "ambiguous": 1, "degenerate": 2, "error": 3}
 
-FIRST_USE = ("compiling the least-squares and measurement kernels on their first use on this machine (about 25 s "
-             "on two cores; cached for later runs -- in CI, keep NUMBA_CACHE_DIR between jobs: README, "
-             "\"As a CI gate\")")
-
-
-def first_use_notice():
-    """:data:`FIRST_USE` if the kernels a check runs (the Levenberg-Marquardt fits' and the measurement
-    kernel's) are not yet compiled on disk for the current sources, else None."""
-    from shipsense import numba_cache
-    from shipsense.trackers import lm_kernel, measurement
-
-    ready = numba_cache.cached(lm_kernel._lm_kernel, lm_kernel._lm_loop, lm_kernel._normal,
-                               measurement._batch_kernel, measurement._batch_loop)
-    return None if ready else FIRST_USE
-
 
 @dataclass
 class GateResult:

@@ -104,6 +104,23 @@ def track_distance(model, theta, theta_alt, steps):
     return np.linalg.norm(p - pa, axis=-1).mean(axis=-1)
 
 
+FIRST_USE = ("compiling the least-squares and measurement kernels on their first use on this machine (about 20-25 s "
+             "on two cores; cached for later runs -- in CI, keep NUMBA_CACHE_DIR between jobs: README, "
+             "\"As a CI gate\")")
+
+
+def first_use_notice():
+    """:data:`FIRST_USE` if the kernels the analysis runs (the Levenberg-Marquardt fits' and the measurement
+    kernel's: ``shipsense check`` and ``design``) are not yet compiled on disk for the current sources, else
+    None."""
+    from shipsense import numba_cache
+    from shipsense.trackers import lm_kernel, measurement
+
+    ready = numba_cache.cached(lm_kernel._lm_kernel, lm_kernel._lm_loop, lm_kernel._normal,
+                               measurement._batch_kernel, measurement._batch_loop)
+    return None if ready else FIRST_USE
+
+
 LM_STRIDE = 2
 """Every LM_STRIDE-th sample enters the refinement fits (their chi-square is then taken on every sample)."""
 LM_ITERATIONS = 40
