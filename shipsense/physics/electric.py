@@ -281,10 +281,10 @@ def magnitude_jacobian(E, dE):
 
 
 def _last_shell(eta, D, rho, target):
-    """The first shell ``n >= 2`` after which the series' tail (:func:`_integral_tail`, two images per shell
-    per family) is at most ``target`` at every offset ``rho`` (an array of the points' ``target`` shape);
-    999,999 if none.  Bound and target are functions of the offset alone, so each distinct offset is tested
-    once."""
+    """The first shell ``n >= 2`` after which the series' tail is at most ``target`` at every offset ``rho`` (an
+    array of the points' ``target`` shape); 999,999 if none.  The tail: :func:`_integral_tail` twice (two images
+    per shell per family, each term -- and rho^2 K2, rho K3 -- at most 1/R^3).  Bound and target are functions
+    of the offset alone, so each distinct offset is tested once."""
     r_abs, first = np.unique(np.abs(rho), return_index=True)
     t = np.broadcast_to(target, np.shape(rho)).reshape(-1)[first]
     for n in range(2, 1_000_000):
@@ -295,7 +295,7 @@ def _last_shell(eta, D, rho, target):
 
 def _shell_sums(eta, D, last, rho2, w, out):
     """Shells ``2..last`` of the image sums ``sum c_n (1/R^3, 1/R^5, dz/R^5)`` (both images ``w +- 2 n D`` of
-    a shell, in that order) at points ``rho2`` (horizontal offset squared) and ``w`` (n,) into ``out`` (n, 3),
+    a shell, in that order) at points ``rho2`` (horizontal offset squared) and ``w`` (N,) into ``out`` (N, 3),
     in place on contiguous scratch."""
     K0, K1, K2 = np.zeros(rho2.shape), np.zeros(rho2.shape), np.zeros(rho2.shape)
     dz, R2, inv_R3, inv_R5, t = (np.empty(rho2.shape) for _ in range(5))
