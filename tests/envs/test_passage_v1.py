@@ -228,6 +228,53 @@ def test_a_seeded_partial_reset_reseeds_only_the_environments_it_resets():
     np.testing.assert_allclose(first, single.reset(seed=8)[0], rtol=0, atol=1e-6)
 
 
+def test_announced_seeded_resets_give_the_same_episodes(monkeypatch):
+    """An evaluation announces the seeds of its resets (``expect_seeds``): their blocks and first run-ins are
+    drawn ahead, in batches, on the background thread.  Every episode is the one plain seeded resets give, also
+    when the resets depart from the announcement (an unannounced seed, then no seed) and come back; a pickled
+    core leaves the announcement behind."""
+    import pickle
+    import sys
+
+    from shipsense.envs import passage_v1
+
+    def caller():     # the function that drew a block (not a comprehension inside it)
+        frame = sys._getframe(2)
+        while frame.f_code.co_name.startswith("<"):
+            frame = frame.f_back
+        return frame.f_code.co_name
+
+    drawn, block = [], passage_v1.PassageV1Core._block
+    monkeypatch.setattr(passage_v1.PassageV1Core, "_block",
+                        lambda self, seed: drawn.append(caller()) or block(self, seed))
+    monkeypatch.setenv("SHIPSENSE_THREADS", "2")
+    seeds = [50 + i for i in range(20)]
+
+    def episodes(announce):
+        drawn.clear()
+        env = PassageV1Env(**KW)
+        if announce:
+            env.expect_seeds(seeds)
+            clone = pickle.loads(pickle.dumps(env.core))
+            assert env.core._expected and not clone._expected and not list(clone._to_expect)
+        out, rng = [], np.random.default_rng(0)
+        for seed in seeds[:5] + [999] + seeds[5:8] + [None] + seeds[8:]:
+            obs, _ = env.reset(seed=seed)
+            out.append(obs)
+            done = False
+            while not done:
+                obs, r, done, _, info = env.step(int(rng.integers(env.action_space.n)))
+                out += [obs, r, info["error"]]
+        env.close()
+        return out, list(drawn)
+
+    (announced, drawn_announced), (plain, drawn_plain) = episodes(True), episodes(False)
+    assert drawn_announced.count("_first_passages") == 20 and drawn_announced.count("_take_block") == 1
+    assert drawn_plain.count("_take_block") == 21
+    for a, b in zip(announced, plain, strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
 def _brute_force_gains(model, R, x, P, subsets, h=1e-6):
     """Position log-det drop of every subset: Kalman form on the stacked channels, numerical Jacobian."""
     n = model.n
