@@ -19,7 +19,8 @@ class RebuiltOnUnpickle:
 
     def __getstate__(self):
         getattr(self.core, "settle", lambda: None)()       # (work of the core's still in flight: finished)
-        return {"kwargs": self._kwargs, "core": self.core.__dict__, "np_random": self._np_random,
+        # (the core's own pickled state: what it leaves out, e.g. Passage-v1's announced resets, stays out)
+        return {"kwargs": self._kwargs, "core": self.core.__getstate__(), "np_random": self._np_random,
                 "started": self._started}
 
     def __setstate__(self, state):
@@ -126,7 +127,8 @@ class CoreVectorEnv(VectorEnv):
         """Reset every sub-environment, or those of ``options={"reset_mask": mask}``.  ``seed`` (an int: ``seed +
         i`` for sub-environment ``i``; or a list of ``num_envs``, None entries fresh entropy) reseeds the
         sub-environments reset, and only those, as gymnasium's ``SyncVectorEnv`` does: the others go on drawing
-        their episodes from their own streams (and the run-ins done ahead for them are still used)."""
+        their episodes from their own streams (and the run-ins done ahead for them are still used).  The first
+        reset makes every sub-environment's stream, from ``seed`` (or fresh entropy) whatever the mask."""
         envs = reset_rows(options, self.num_envs)
         fresh = seed is not None or self._rngs is None
         if self._rngs is None:

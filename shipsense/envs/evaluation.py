@@ -13,6 +13,7 @@ from __future__ import annotations
 import inspect
 import math
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -88,12 +89,14 @@ def load_policy(env, name_or_path, seed=None):
 
 
 def run_episodes(env, act, seed, episodes, progress=None):
-    """Run ``act`` on ``env`` for the episodes ``episodes`` (a sequence of indices, e.g. a range; episode ``i``
+    """Run ``act`` on ``env`` for the episodes ``episodes`` (indices, e.g. a range; episode ``i``
     reset with ``seed + i``): lists of returns and lengths, and ``{metric: list}`` of ``info["episode_metrics"]``.
 
     An environment that takes the coming seeds (``expect_seeds``, e.g. Passage-v1's: 18 % less time for 200
     greedy episodes) is told them first, so it can prepare those episodes ahead (the same episodes).
     ``progress``: keyword arguments of a tqdm bar over the episodes, or None."""
+    if not isinstance(episodes, Sequence):     # (read twice: by the announcement and by the loop)
+        episodes = list(episodes)
     expect = getattr(env.unwrapped, "expect_seeds", None)
     if expect is not None:
         expect(seed + e for e in episodes)

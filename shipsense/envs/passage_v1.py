@@ -455,8 +455,9 @@ class PassageV1Core:
             self._expect_ahead()
 
     def _expect_ahead(self):
-        """Leave announced blocks (:meth:`expect`) to the background while fewer than two batches are out."""
-        while len(self._expected) < 2 * EXPECT_BATCH:
+        """Leave announced blocks (:meth:`expect`) to the background, a batch at a time, whenever at most one batch's
+        worth is out (so at most two batches are)."""
+        while len(self._expected) <= EXPECT_BATCH:
             seeds = []
             try:
                 for seed in self._to_expect:
@@ -465,6 +466,8 @@ class PassageV1Core:
                         seeds.append(seed)
                     if len(seeds) == EXPECT_BATCH:
                         break
+                else:                # (read to its end: let it go)
+                    self._to_expect = iter(())
             except Exception:        # (a seed the announcement cannot read ends it: its reset says what is wrong)
                 self._to_expect = iter(())
             if not seeds:

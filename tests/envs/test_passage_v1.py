@@ -233,6 +233,7 @@ def test_announced_seeded_resets_give_the_same_episodes(monkeypatch):
     drawn ahead, in batches, on the background thread.  Every episode is the one plain seeded resets give, also
     when the resets depart from the announcement (an unannounced seed, then no seed) and come back; a pickled
     core leaves the announcement behind."""
+    import copy
     import pickle
     import sys
 
@@ -248,7 +249,7 @@ def test_announced_seeded_resets_give_the_same_episodes(monkeypatch):
     monkeypatch.setattr(passage_v1.PassageV1Core, "_block",
                         lambda self, seed: drawn.append(caller()) or block(self, seed))
     monkeypatch.setenv("SHIPSENSE_THREADS", "2")
-    seeds = [50 + i for i in range(20)]
+    seeds = [50 + i for i in range(40)]
 
     def episodes(announce):
         drawn.clear()
@@ -258,21 +259,41 @@ def test_announced_seeded_resets_give_the_same_episodes(monkeypatch):
             clone = pickle.loads(pickle.dumps(env.core))
             assert env.core._expected and not clone._expected and not list(clone._to_expect)
         out, rng = [], np.random.default_rng(0)
-        for seed in seeds[:5] + [999] + seeds[5:8] + [None] + seeds[8:]:
+        for seed in seeds[:5] + [999] + seeds[5:8] + [None] + seeds[8:20]:
             obs, _ = env.reset(seed=seed)
             out.append(obs)
             done = False
             while not done:
                 obs, r, done, _, info = env.step(int(rng.integers(env.action_space.n)))
                 out += [obs, r, info["error"]]
+        if announce:     # the env itself pickles and copies, the announcement used up or not
+            pickle.loads(pickle.dumps(env))
+            env.expect_seeds(seeds)
+            copy.deepcopy(env)
+            assert len(env.core._expected) == 2 * passage_v1.EXPECT_BATCH    # (two batches drawn ahead)
+            env.reset(seed=seeds[0])
+            assert len(env.core._expected) == 2 * passage_v1.EXPECT_BATCH - 1
         env.close()
         return out, list(drawn)
 
     (announced, drawn_announced), (plain, drawn_plain) = episodes(True), episodes(False)
-    assert drawn_announced.count("_first_passages") == 20 and drawn_announced.count("_take_block") == 1
+    assert drawn_announced.count("_first_passages") >= 20 and drawn_announced.count("_take_block") == 1
     assert drawn_plain.count("_take_block") == 21
     for a, b in zip(announced, plain, strict=True):
         np.testing.assert_array_equal(a, b)
+
+
+def test_run_episodes_announces_and_runs_every_episode_of_an_iterator(monkeypatch):
+    """``run_episodes`` reads its episodes twice (the announcement, the loop): a one-pass iterator of indices
+    gives the episodes a range gives."""
+    from shipsense.envs.evaluation import load_policy, run_episodes
+
+    monkeypatch.setenv("SHIPSENSE_THREADS", "2")
+    env = PassageV1Env(**KW)
+    greedy = load_policy(env, "greedy")
+    once = run_episodes(env, greedy, 7, iter(range(6)))
+    again = run_episodes(env, greedy, 7, range(6))
+    assert len(once[0]) == 6 and once == again
 
 
 def _brute_force_gains(model, R, x, P, subsets, h=1e-6):
