@@ -420,23 +420,21 @@ class PassageV1Core:
                 self._next[e] = _Part(job, i, seed, live)
 
     def _take_block(self, e, seed):
-        """Environment ``e``'s next block of queue entries: the one drawn ahead if it was drawn from ``seed`` (and
-        the background did not fail it), else drawn here (as when it was only wanted, not yet left to the
-        background)."""
+        """Environment ``e``'s next block of queue entries: the one drawn ahead if it was drawn from ``seed``, or
+        the announced one of ``seed`` (:meth:`expect`), if the background did not fail it; else drawn here (as
+        when it was only wanted, not yet left to the background)."""
         self._wanted.pop(e, None)
         block = self._next.pop(e, None)
-        if block is not None and block.seed == seed:
+        if block is not None and block.seed != seed:   # drawn from another seed (a user drew from the generator)
+            block.cancel()
+            block = None
+        if block is None:                    # announced (expect): its first passage's run-in done ahead
+            block = self._expected.pop(seed, None)
+            if block is not None:
+                self._expect_ahead()
+        if block is not None:
             try:
                 return block.result()
-            except Exception:                # the background's attempt failed: drawn here, as without it
-                pass
-        elif block is not None:              # drawn from another seed (a user drew from the generator): dropped
-            block.cancel()
-        part = self._expected.pop(seed, None)
-        if part is not None:                 # announced (expect): its first passage's run-in done ahead
-            self._expect_ahead()
-            try:
-                return part.result()
             except Exception:                # the background's attempt failed: drawn here, as without it
                 pass
         return self._block(seed)
