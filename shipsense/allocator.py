@@ -42,20 +42,43 @@ def tune_allocator(mmap_threshold: int = MMAP_THRESHOLD_MAX, trim_threshold: int
         raise ValueError(f"mmap_threshold must be in (0, {MMAP_THRESHOLD_MAX}] bytes, got {mmap_threshold}")
     if trim_threshold <= 0:
         raise ValueError(f"trim_threshold must be positive, got {trim_threshold}")
-    if not sys.platform.startswith("linux"):
+    libc = _glibc()
+    if libc is None:
         return False
-    try:
-        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
-        mallopt = libc.mallopt
-        gnu = libc.gnu_get_libc_version   # glibc only: musl's mallopt is a stub
-    except (OSError, AttributeError):
-        return False
-    del gnu
+    mallopt = libc.mallopt
     mallopt.argtypes = (ctypes.c_int, ctypes.c_int)
     mallopt.restype = ctypes.c_int
     ok = mallopt(M_MMAP_THRESHOLD, int(mmap_threshold)) == 1 and mallopt(M_TRIM_THRESHOLD, int(trim_threshold)) == 1
     _state["tuned"] = _state["tuned"] or ok
     return ok
+
+
+def release_free_memory() -> bool:
+    """Give the heap's free pages back to the system (glibc's ``malloc_trim(0)``); returns whether it could.
+
+    For a long computation followed by lighter work in the same process (a study's figures after its
+    runs): the freed temporaries of its batched steps stay resident otherwise, under the tuned trim
+    threshold or below glibc's own, and the later work's memory comes on top of them.  Returns False, doing
+    nothing, on other platforms or C libraries."""
+    libc = _glibc()
+    if libc is None:
+        return False
+    libc.malloc_trim.argtypes = (ctypes.c_size_t,)
+    libc.malloc_trim.restype = ctypes.c_int
+    libc.malloc_trim(0)
+    return True
+
+
+def _glibc():
+    """glibc as a ctypes library, or None (another platform or C library: musl's ``mallopt`` is a stub)."""
+    if not sys.platform.startswith("linux"):
+        return None
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+        libc.gnu_get_libc_version   # noqa: B018 (glibc only)
+        return libc
+    except (OSError, AttributeError):
+        return None
 
 
 def allocator_tuned() -> bool:

@@ -5,7 +5,7 @@ import sys
 import numpy as np
 import pytest
 
-from shipsense.allocator import MMAP_THRESHOLD_MAX, allocator_tuned, tune_allocator
+from shipsense.allocator import MMAP_THRESHOLD_MAX, allocator_tuned, release_free_memory, tune_allocator
 
 
 def test_bad_thresholds_are_rejected():
@@ -25,3 +25,24 @@ def test_tuning_takes_effect_on_linux_and_numpy_still_works():
     assert allocator_tuned()
     a = np.arange(10**6, dtype=float)
     assert float((a * 2.0).sum()) == 2.0 * float(a.sum())
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc malloc_trim")
+def test_releasing_free_memory_gives_freed_heap_back():
+    import platform
+
+    if platform.libc_ver()[0] != "glibc":
+        pytest.skip("not glibc")
+
+    def anon_mib():
+        with open("/proc/self/status") as fh:
+            return next(int(line.split()[1]) for line in fh if line.startswith("RssAnon:")) / 1024
+
+    tune_allocator()                      # (freed heap is then kept: a 256 MiB trim threshold)
+    blocks = [np.ones(2**17) for _ in range(96)]          # 96 MiB of 1 MiB heap blocks, touched
+    held = anon_mib()
+    del blocks
+    kept = anon_mib()
+    assert release_free_memory() is True
+    assert kept > held - 16               # kept by the allocator after the free...
+    assert anon_mib() < kept - 64         # ...and given back

@@ -1,10 +1,15 @@
-"""The studies' bank tally: run chunk by run chunk, it keeps what the full record would give."""
+"""The studies' bank tally: run chunk by run chunk, it keeps what the full record would give; their output
+folder draws the figures last."""
+
+import json
+import subprocess
+import sys
 
 import numpy as np
 import pytest
 
 from shipsense.config import load_scenario
-from shipsense.reproduce.common import LEAN, bank_summary, bank_tally, run_chunks
+from shipsense.reproduce.common import LEAN, Output, bank_summary, bank_tally, rmse_plot, run_chunks
 from shipsense.simulator import simulate
 from shipsense.trackers.bank import run_bank
 from shipsense.trackers.metrics import mrmse, trmse
@@ -60,3 +65,18 @@ def test_a_tally_takes_every_initial_covariance_shape_the_bank_takes(s0_runs):
         np.testing.assert_array_equal(got.selected_means, want.selected_means)
     with pytest.raises(ValueError, match="at least one run"):
         bank_tally("ukf", model, y[:0], seeds[:0], P0, truth[:0])
+
+
+def test_the_studies_draw_their_figures_last_and_import_matplotlib_only_then(tmp_path):
+    # (a fresh process: this one may have imported matplotlib already)
+    code = "import sys, shipsense.reproduce.s0, shipsense.reproduce.s1; print('matplotlib' in sys.modules)"
+    assert subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          check=True).stdout.strip() == "False"
+    o = Output(tmp_path / "out")
+    t = np.linspace(0.0, 10.0, 11)
+    path = rmse_plot(o, "curves.png", "a title", t, {"a": 1.0 + t, "b": 2.0 + t})
+    assert path == tmp_path / "out" / "curves.png" and not path.exists() and o.files == []
+    o.summary({"answer": 42})
+    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert o.files == [path, tmp_path / "out" / "summary.json"]
+    assert json.loads((tmp_path / "out" / "summary.json").read_text()) == {"answer": 42}

@@ -7,11 +7,12 @@ import json
 import sys
 import time
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 
-from shipsense.plotting import plt
+from shipsense.allocator import release_free_memory
 from shipsense.trackers.metrics import convergence_rate, mrmse, squared_axis_errors
 
 LEAN = ("positions", "loglik", "selected")
@@ -20,12 +21,18 @@ LEAN = ("positions", "loglik", "selected")
 
 
 class Output:
-    """An experiment's output folder: ``summary.json``, CSV tables and PNG figures."""
+    """An experiment's output folder: ``summary.json``, CSV tables and PNG figures.
+
+    Figures are drawn last, with the summary (:meth:`summary`): a study's runs hold the most memory, and
+    matplotlib (imported for the figures) and the figures' own would come on top of it.  Drawn after the runs,
+    with the heap's free pages given back first (:func:`~shipsense.allocator.release_free_memory`), they stay
+    under the runs' peak (EXPERIMENTS.md, "Performance log", 2026-11-27)."""
 
     def __init__(self, directory):
         self.dir = Path(directory)
         self.dir.mkdir(parents=True, exist_ok=True)
         self.files = []
+        self._figures = []
 
     def csv(self, name, header, rows):
         path = self.dir / name
@@ -37,14 +44,25 @@ class Output:
         self.files.append(path)
         return path
 
-    def figure(self, fig, name):
-        path = self.dir / name
-        fig.savefig(path, dpi=110)
-        plt.close(fig)
-        self.files.append(path)
-        return path
+    def figure(self, name, draw, *args, **kwargs):
+        """Save the figure ``draw(*args, **kwargs)`` makes (matplotlib's) as ``name`` with the summary: its
+        arguments are kept until then, so give it what it plots, not the study's arrays."""
+        self._figures.append((name, partial(draw, *args, **kwargs)))
+        return self.dir / name
 
     def summary(self, data):
+        """Write ``summary.json``, after the figures (:meth:`figure`)."""
+        if self._figures:
+            release_free_memory()
+            from shipsense.plotting import plt
+
+            for name, draw in self._figures:
+                fig = draw()
+                path = self.dir / name
+                fig.savefig(path, dpi=110)
+                plt.close(fig)
+                self.files.append(path)
+            self._figures.clear()
         path = self.dir / "summary.json"
         path.write_text(json.dumps(_jsonable(data), indent=2) + "\n")
         self.files.append(path)
@@ -203,7 +221,13 @@ def bank_summary(bank, truth, centre=(0.0, 0.0)):
 
 
 def bar_charts(out, name, title, hyp, labels=None):
-    """Bar charts of per-hypothesis TRMSE and mean cumulative log-likelihood."""
+    """Bar charts of per-hypothesis TRMSE and mean cumulative log-likelihood (:meth:`Output.figure`)."""
+    return out.figure(name, _bar_charts, title, hyp, labels)
+
+
+def _bar_charts(title, hyp, labels):
+    from shipsense.plotting import plt
+
     fig, ax = plt.subplots(1, 2, figsize=(12, 4), layout="constrained")
     x = np.arange(len(hyp))
     ax[0].bar(x, [h["trmse_m"] for h in hyp], color="tab:blue")
@@ -218,11 +242,17 @@ def bar_charts(out, name, title, hyp, labels=None):
         a.set_xlabel("hypothesis")
         a.grid(alpha=0.3, axis="y")
     fig.suptitle(title)
-    return out.figure(fig, name)
+    return fig
 
 
 def rmse_plot(out, name, title, times, curves, ylabel="RMSE_k [m]"):
-    """Line plot of RMSE_k curves {label: (K,)}."""
+    """Line plot of RMSE_k curves {label: (K,)} (:meth:`Output.figure`)."""
+    return out.figure(name, _rmse_plot, title, times, curves, ylabel)
+
+
+def _rmse_plot(title, times, curves, ylabel):
+    from shipsense.plotting import plt
+
     fig, ax = plt.subplots(figsize=(8, 4.5), layout="constrained")
     for label, c in curves.items():
         ax.plot(times, c, label=label)
@@ -232,7 +262,7 @@ def rmse_plot(out, name, title, times, curves, ylabel="RMSE_k [m]"):
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8)
     ax.set_title(title)
-    return out.figure(fig, name)
+    return fig
 
 
 def prior_grid(sc):

@@ -7,7 +7,6 @@ import time
 import numpy as np
 
 from shipsense.config import load_scenario
-from shipsense.plotting import draw_array, plt
 from shipsense.reproduce.common import (
     Output,
     Stages,
@@ -33,8 +32,15 @@ DENSE_BEARINGS = tuple(float(b) for b in np.arange(0.0, 360.0, 30.0))
 
 def run(runs=200, out="results/S0", seed=0, progress=True):
     """Run the S0 experiment set; returns the summary dictionary (also written to ``out/summary.json``)."""
-    sc = load_scenario("S0")
     o = Output(out)
+    summary = _study(o, runs, seed, progress)
+    o.summary(summary)     # (with the figures: drawn once the study's arrays are gone, see Output)
+    return summary
+
+
+def _study(o, runs, seed, progress):
+    """The study's runs, tables and figures to draw (``o``); returns the summary."""
+    sc = load_scenario("S0")
     st = Stages(["simulate", "basin", "seeding", "selection", "units", "dense", "global"], "S0", progress)
     st.step("simulate")
     sim = simulate(sc, runs=runs, seed=seed)
@@ -77,19 +83,8 @@ def run(runs=200, out="results/S0", seed=0, progress=True):
     dist = np.linalg.norm(seeds[:, :, :2] - truth[:, None, 0, :2], axis=-1)     # (R, H)
     o.csv("seeding.csv", ["level_Am2", "seed_range_m", "seed_horizontal_range_m", "true_range_m"],
           [[lv, slant[0, i], horiz[0, i], true_range] for i, lv in enumerate(bank.levels)])
-    fig, ax = plt.subplots(figsize=(6.5, 6), layout="constrained")
-    draw_array(ax, model.array)
-    ax.plot(*truth[0, :, :2].T, "-", color="tab:red", label="true passage")
-    ax.scatter(*seeds[0, :, :2].T, color="k", marker="x", label="12 seeds (run 0)")
-    for h in range(seeds.shape[1]):
-        ax.annotate(str(h), seeds[0, h, :2], textcoords="offset points", xytext=(4, 4), fontsize=7)
-    ax.add_patch(plt.Circle(truth[0, 0, :2], max(basin_radius, 1.0), fill=False, color="tab:red", ls="--",
-                            label=f"basin radius {basin_radius:g} m"))
-    ax.set_aspect("equal")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
-    ax.set_title(f"S0 exp. 2: seeds vs truth (nearest seed {dist[0].min():.0f} m away)")
-    o.figure(fig, "seeding.png")
+    o.figure("seeding.png", _seeding_figure, model.array, truth[0, :, :2].copy(), seeds[0, :, :2].copy(),
+             basin_radius, dist[0].min())
     st.done()
 
     # 3. selection with the scenario's bank (SRCDKF, 12 hypotheses), under both readings of its bearings
@@ -159,8 +154,26 @@ def run(runs=200, out="results/S0", seed=0, progress=True):
         **summ, **main, "bearing_conventions": {conv: rd for conv, (_, _, _, rd) in readings.items()},
         "filter_units": units, "dense_bank": dense, "global_init": gi,
     }
-    o.summary(summary)
     return summary
+
+
+def _seeding_figure(array, track, seeds, basin_radius, nearest):
+    """Exp. 2's figure: run 0's seeds against its true passage, and the basin around its start."""
+    from shipsense.plotting import draw_array, plt
+
+    fig, ax = plt.subplots(figsize=(6.5, 6), layout="constrained")
+    draw_array(ax, array)
+    ax.plot(*track.T, "-", color="tab:red", label="true passage")
+    ax.scatter(*seeds.T, color="k", marker="x", label=f"{len(seeds)} seeds (run 0)")
+    for h, seed in enumerate(seeds):
+        ax.annotate(str(h), seed, textcoords="offset points", xytext=(4, 4), fontsize=7)
+    ax.add_patch(plt.Circle(track[0], max(basin_radius, 1.0), fill=False, color="tab:red", ls="--",
+                            label=f"basin radius {basin_radius:g} m"))
+    ax.set_aspect("equal")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    ax.set_title(f"S0 exp. 2: seeds vs truth (nearest seed {nearest:.0f} m away)")
+    return fig
 
 
 def _reading(convention, bank, seeds, truth, basin_radius):

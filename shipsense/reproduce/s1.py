@@ -7,7 +7,6 @@ import numpy as np
 from shipsense.config import load_scenario
 from shipsense.physics.array import SensorArray
 from shipsense.physics.motion import cv_positions
-from shipsense.plotting import draw_array, plt
 from shipsense.reproduce.common import LEAN, Output, Stages, bank_summary, bar_charts, global_init_summary, rmse_plot
 from shipsense.simulator import simulate
 from shipsense.trackers.bank import run_bank
@@ -74,19 +73,39 @@ def symmetry_table(sc, o):
         table.append({"sensor": sid, "channel": ch, "identical_passages": groups})
     o.csv("symmetry_table.csv", ["sensor", "channel", "passages with identical envelopes (1..4 = bearings "
                                  "pi/4, 3pi/4, 5pi/4, 7pi/4)"], rows)
+    o.figure("symmetry.png", _symmetry_figure, t, env, [f"sensor {sid} |{ch}|" for sid, ch in array.channels])
+    return table
+
+
+def _symmetry_figure(t, env, titles):
+    """Exp. 1's figure: each channel's envelope (``env``: passage, time, channel) of the four passages."""
+    from shipsense.plotting import plt
+
     fig, ax = plt.subplots(3, 3, figsize=(12, 8), layout="constrained", sharex=True)
     for c in range(9):
         a = ax[c // 3, c % 3]
         for i in range(4):
             a.plot(t, 1e6 * env[i, :, c], ls=["-", "--", ":", "-."][i], label=f"passage {i + 1}")
-        a.set_title(f"sensor {array.channels[c][0]} |{array.channels[c][1]}|", fontsize=9)
+        a.set_title(titles[c], fontsize=9)
         a.grid(alpha=0.3)
     ax[0, 0].legend(fontsize=7)
     ax[2, 1].set_xlabel("time [s]")
     ax[1, 0].set_ylabel("envelope [uV/m]")
     fig.suptitle("S1 exp. 1: envelopes of four passages through the array centre")
-    o.figure(fig, "symmetry.png")
-    return table
+    return fig
+
+
+def _arrays_figure(arrays):
+    """The two arrays (tag -> (array, fraction of ambiguous runs)) side by side."""
+    from shipsense.plotting import draw_array, plt
+
+    fig, ax = plt.subplots(1, 2, figsize=(11, 5), layout="constrained")
+    for a, (tag, (array, ambiguous)) in zip(ax, arrays.items()):
+        draw_array(a, array)
+        a.set_title(f"{tag}: ambiguous in {100 * ambiguous:.0f} % of runs")
+        a.set_aspect("equal")
+        a.grid(alpha=0.3)
+    return fig
 
 
 def bank_for(sc, runs, seed, unit, o=None, tag=None, chain=None):
@@ -164,13 +183,8 @@ def run(runs=100, out="results/S1", seed=0, progress=True):
     model = model_from_scenario(p2)
     gi = global_init_summary(unit, model, sim.measurements, model.state_from_truth(sim.truth), p2, snr_start=50.0)
     st.done()
-    fig, ax = plt.subplots(1, 2, figsize=(11, 5), layout="constrained")
-    for a, tag, sc in ((ax[0], "P1", p1), (ax[1], "P2", p2)):
-        draw_array(a, sc.array())
-        a.set_title(f"{tag}: ambiguous in {100 * result[tag]['ambiguous_run_fraction']:.0f} % of runs")
-        a.set_aspect("equal")
-        a.grid(alpha=0.3)
-    o.figure(fig, "arrays.png")
+    o.figure("arrays.png", _arrays_figure, {tag: (sc.array(), result[tag]["ambiguous_run_fraction"])
+                                            for tag, sc in (("P1", p1), ("P2", p2))})
     elapsed = st.close()
     summary = {"scenario": "S1", "runs": runs, "seed": seed, "seconds": elapsed, "filter": unit.name,
                "n_pu": p2.tracker.n_pu, **result, "symmetry_table": sym, "raw_chain": raw_chain,
