@@ -165,8 +165,8 @@ def _seeding_figure(array, track, seeds, basin_radius, nearest):
     draw_array(ax, array)
     ax.plot(*track.T, "-", color="tab:red", label="true passage")
     ax.scatter(*seeds.T, color="k", marker="x", label=f"{len(seeds)} seeds (run 0)")
-    for h, seed in enumerate(seeds):
-        ax.annotate(str(h), seed, textcoords="offset points", xytext=(4, 4), fontsize=7)
+    for h, seed in enumerate(seeds):       # (numbered from 1, as the study's tables and summary number them)
+        ax.annotate(str(h + 1), seed, textcoords="offset points", xytext=(4, 4), fontsize=7)
     ax.add_patch(plt.Circle(track[0], max(basin_radius, 1.0), fill=False, color="tab:red", ls="--",
                             label=f"basin radius {basin_radius:g} m"))
     ax.set_aspect("equal")
