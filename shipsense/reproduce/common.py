@@ -221,7 +221,8 @@ def bank_summary(bank, truth, centre=(0.0, 0.0)):
 
 
 def bar_charts(out, name, title, hyp, labels=None):
-    """Bar charts of per-hypothesis TRMSE and mean cumulative log-likelihood (:meth:`Output.figure`)."""
+    """Bar charts of per-hypothesis TRMSE and mean cumulative log-likelihood (:meth:`Output.figure`); the
+    hypotheses labelled from 1 unless ``labels`` are given, as the studies' tables number them."""
     return out.figure(name, _bar_charts, title, hyp, labels)
 
 
@@ -238,7 +239,7 @@ def _bar_charts(title, hyp, labels):
     ax[1].set_yscale("symlog")
     ax[1].set_ylabel("mean final log-likelihood - best [nats]")
     for a in ax:
-        a.set_xticks(x, labels if labels is not None else [str(i) for i in x], fontsize=7)
+        a.set_xticks(x, labels if labels is not None else [str(i + 1) for i in x], fontsize=7)
         a.set_xlabel("hypothesis")
         a.grid(alpha=0.3, axis="y")
     fig.suptitle(title)

@@ -97,7 +97,7 @@ def _study(o, runs, seed, progress):
         readings[conv] = (cb.selected_means, *bank_summary(cb, truth), _reading(conv, cb, cseeds, truth, basin_radius))
     selected, summ, tr, main = readings[bank.bearing_convention]
     bar_charts(o, "selection_bars.png", f"S0 exp. 3: {seeds.shape[1]} hypotheses, {runs} runs, bearings from "
-               f"{bank.bearing_convention}", summ["hypotheses"], labels=[str(h + 1) for h in range(seeds.shape[1])])
+               f"{bank.bearing_convention}", summ["hypotheses"])
     o.csv("top3_mrmse.csv", ["bearing_convention", "rank", "hypothesis", "mrmse_x_m", "mrmse_y_m", "mrmse_r_m",
                              "mean_loglik"],
           [[conv, i + 1, t["hypothesis"], t["x"], t["y"], t["r"], t["mean_loglik"]]
