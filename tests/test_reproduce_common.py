@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from shipsense.config import load_scenario
-from shipsense.reproduce.common import LEAN, Output, bank_summary, bank_tally, rmse_plot, run_chunks
+from shipsense.reproduce import common
+from shipsense.reproduce.common import LEAN, Output, Stages, bank_summary, bank_tally, finish, rmse_plot, run_chunks
 from shipsense.simulator import simulate
 from shipsense.trackers.bank import run_bank
 from shipsense.trackers.metrics import mrmse, trmse
@@ -67,16 +68,25 @@ def test_a_tally_takes_every_initial_covariance_shape_the_bank_takes(s0_runs):
         bank_tally("ukf", model, y[:0], seeds[:0], P0, truth[:0])
 
 
-def test_the_studies_draw_their_figures_last_and_import_matplotlib_only_then(tmp_path):
+def test_the_studies_draw_their_figures_last_and_import_matplotlib_only_then(tmp_path, monkeypatch):
     # (a fresh process: this one may have imported matplotlib already)
-    code = "import sys, shipsense.reproduce.s0, shipsense.reproduce.s1; print('matplotlib' in sys.modules)"
+    code = ("import sys, shipsense.reproduce, shipsense.reproduce.s0, shipsense.reproduce.s1, "
+            "shipsense.reproduce.s2, shipsense.reproduce.wide; print('matplotlib' in sys.modules)")
     assert subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                           check=True).stdout.strip() == "False"
+    events = []
+    monkeypatch.setattr(common, "release_free_memory", lambda: events.append("heap given back"))
     o = Output(tmp_path / "out")
     t = np.linspace(0.0, 10.0, 11)
     path = rmse_plot(o, "curves.png", "a title", t, {"a": 1.0 + t, "b": 2.0 + t})
     assert path == tmp_path / "out" / "curves.png" and not path.exists() and o.files == []
-    o.summary({"answer": 42})
+    o.figure("other.png", lambda: events.append("drawn") or common._rmse_plot("b", t, {"c": t + 1.0}, "m"))
+    assert events == []
+    summary = finish(o, Stages(["runs", "figures"], "test", enabled=False), {"answer": 42, "seconds": None})
+    assert events == ["heap given back", "drawn"]                   # the heap given back first
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    assert o.files == [path, tmp_path / "out" / "summary.json"]
-    assert json.loads((tmp_path / "out" / "summary.json").read_text()) == {"answer": 42}
+    assert o.files == [path, tmp_path / "out" / "other.png", tmp_path / "out" / "summary.json"]
+    written = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert written == summary and written["answer"] == 42 and written["seconds"] > 0.0
+    o.summary({"again": True})                                      # (drawn once)
+    assert events == ["heap given back", "drawn"] and len(o.files) == 4

@@ -23,10 +23,12 @@ LEAN = ("positions", "loglik", "selected")
 class Output:
     """An experiment's output folder: ``summary.json``, CSV tables and PNG figures.
 
-    Figures are drawn last, with the summary (:meth:`summary`): a study's runs hold the most memory, and
-    matplotlib (imported for the figures) and the figures' own would come on top of it.  Drawn after the runs,
-    with the heap's free pages given back first (:func:`~shipsense.allocator.release_free_memory`), they stay
-    under the runs' peak (EXPERIMENTS.md, "Performance log", 2026-11-27)."""
+    Figures are drawn last (:meth:`draw`, or with the summary): a study's runs hold the most memory, and
+    matplotlib (imported for the figures) and the figures' own memory came on top of the runs' arrays and the
+    heap they had grown.  Drawn once the runs' arrays are gone (:func:`finish`), after the heap's free pages
+    are given back (:func:`~shipsense.allocator.release_free_memory`), they come on top of much less:
+    ``reproduce S0`` peaked at 321 MiB, now at 284-287, still while its figures are drawn (EXPERIMENTS.md,
+    "Performance log", 2026-11-27)."""
 
     def __init__(self, directory):
         self.dir = Path(directory)
@@ -50,19 +52,26 @@ class Output:
         self._figures.append((name, partial(draw, *args, **kwargs)))
         return self.dir / name
 
-    def summary(self, data):
-        """Write ``summary.json``, after the figures (:meth:`figure`)."""
-        if self._figures:
-            release_free_memory()
-            from shipsense.plotting import plt
+    def draw(self):
+        """Draw and save the figures recorded (:meth:`figure`), after giving the heap's free pages back."""
+        figures, self._figures = self._figures, []
+        if not figures:
+            return
+        release_free_memory()
+        from shipsense.plotting import plt
 
-            for name, draw in self._figures:
-                fig = draw()
-                path = self.dir / name
+        for name, draw in figures:
+            fig = draw()
+            path = self.dir / name
+            try:
                 fig.savefig(path, dpi=110)
+            finally:
                 plt.close(fig)
-                self.files.append(path)
-            self._figures.clear()
+            self.files.append(path)
+
+    def summary(self, data):
+        """Write ``summary.json``, after any figures not drawn yet (:meth:`draw`)."""
+        self.draw()
         path = self.dir / "summary.json"
         path.write_text(json.dumps(_jsonable(data), indent=2) + "\n")
         self.files.append(path)
@@ -110,6 +119,18 @@ class Stages:
     def close(self):
         self.bar.close()
         return time.perf_counter() - self.t0
+
+
+def finish(out, stages, summary):
+    """A study's end: its figures (``out``'s, :meth:`Output.draw`) as the last of its ``stages``
+    (:class:`Stages`, the last one named "figures"), then its ``summary`` written with ``"seconds"`` set to
+    the time of every stage.  Call it once the runs' arrays are gone (the runs a function of their own)."""
+    stages.step("figures")
+    out.draw()
+    stages.done()
+    summary["seconds"] = stages.close()
+    out.summary(summary)
+    return summary
 
 
 RUN_CHUNK = 50

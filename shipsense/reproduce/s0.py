@@ -13,6 +13,7 @@ from shipsense.reproduce.common import (
     bank_summary,
     bank_tally,
     bar_charts,
+    finish,
     global_init_summary,
     rmse_plot,
 )
@@ -33,15 +34,14 @@ DENSE_BEARINGS = tuple(float(b) for b in np.arange(0.0, 360.0, 30.0))
 def run(runs=200, out="results/S0", seed=0, progress=True):
     """Run the S0 experiment set; returns the summary dictionary (also written to ``out/summary.json``)."""
     o = Output(out)
-    summary = _study(o, runs, seed, progress)
-    o.summary(summary)     # (with the figures: drawn once the study's arrays are gone, see Output)
-    return summary
+    st = Stages(["simulate", "basin", "seeding", "selection", "units", "dense", "global", "figures"], "S0", progress)
+    return finish(o, st, _study(o, st, runs, seed))     # (the figures once the runs' arrays are gone)
 
 
-def _study(o, runs, seed, progress):
-    """The study's runs, tables and figures to draw (``o``); returns the summary."""
+def _study(o, st, runs, seed):
+    """The study's runs, tables and figures to draw (``o``), its stages ``st`` but the figures; returns the
+    summary."""
     sc = load_scenario("S0")
-    st = Stages(["simulate", "basin", "seeding", "selection", "units", "dense", "global"], "S0", progress)
     st.step("simulate")
     sim = simulate(sc, runs=runs, seed=seed)
     model = model_from_scenario(sc)
@@ -143,10 +143,9 @@ def _study(o, runs, seed, progress):
     st.step("global initialiser")
     gi = global_init_summary(get_filter(sc.tracker.filter), model, sim.measurements, truth, sc)
     st.done()
-    elapsed = st.close()
 
     summary = {
-        "scenario": "S0", "runs": runs, "seed": seed, "seconds": elapsed,
+        "scenario": "S0", "runs": runs, "seed": seed, "seconds": None,      # (finish: every stage's)
         "seed_ranges_m": slant[0].tolist(), "seed_horizontal_ranges_m": horiz[0].tolist(),
         "true_range_m": true_range, "basin_radius_m": basin_radius,
         "nearest_seed_m": float(np.median(dist.min(axis=1))),

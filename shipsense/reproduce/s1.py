@@ -7,7 +7,16 @@ import numpy as np
 from shipsense.config import load_scenario
 from shipsense.physics.array import SensorArray
 from shipsense.physics.motion import cv_positions
-from shipsense.reproduce.common import LEAN, Output, Stages, bank_summary, bar_charts, global_init_summary, rmse_plot
+from shipsense.reproduce.common import (
+    LEAN,
+    Output,
+    Stages,
+    bank_summary,
+    bar_charts,
+    finish,
+    global_init_summary,
+    rmse_plot,
+)
 from shipsense.simulator import simulate
 from shipsense.trackers.bank import run_bank
 from shipsense.trackers.filters import get_filter
@@ -140,7 +149,13 @@ def bank_for(sc, runs, seed, unit, o=None, tag=None, chain=None):
 def run(runs=100, out="results/S1", seed=0, progress=True):
     """Run the S1 experiment set; returns the summary dictionary (also written to ``out/summary.json``)."""
     o = Output(out)
-    st = Stages(["symmetry", "P1", "P2", "filters", "raw", "global"], "S1", progress)
+    st = Stages(["symmetry", "P1", "P2", "filters", "raw", "global", "figures"], "S1", progress)
+    return finish(o, st, _study(o, st, runs, seed))     # (the figures once the runs' arrays are gone)
+
+
+def _study(o, st, runs, seed):
+    """The study's runs, tables and figures to draw (``o``), its stages ``st`` but the figures; returns the
+    summary."""
     p1, p2 = load_scenario("S1-P1"), load_scenario("S1-P2")
     unit = get_filter(p2.tracker.filter, n_pu=p2.tracker.n_pu)
     st.step("symmetry")
@@ -185,9 +200,6 @@ def run(runs=100, out="results/S1", seed=0, progress=True):
     st.done()
     o.figure("arrays.png", _arrays_figure, {tag: (sc.array(), result[tag]["ambiguous_run_fraction"])
                                             for tag, sc in (("P1", p1), ("P2", p2))})
-    elapsed = st.close()
-    summary = {"scenario": "S1", "runs": runs, "seed": seed, "seconds": elapsed, "filter": unit.name,
-               "n_pu": p2.tracker.n_pu, **result, "symmetry_table": sym, "raw_chain": raw_chain,
-               "P2_filters": compare, "P2_global_init": gi}
-    o.summary(summary)
-    return summary
+    return {"scenario": "S1", "runs": runs, "seed": seed, "seconds": None,     # (finish: every stage's)
+            "filter": unit.name, "n_pu": p2.tracker.n_pu, **result, "symmetry_table": sym, "raw_chain": raw_chain,
+            "P2_filters": compare, "P2_global_init": gi}

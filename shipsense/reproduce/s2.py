@@ -7,7 +7,7 @@ import warnings
 import numpy as np
 
 from shipsense.config import load_scenario
-from shipsense.reproduce.common import Output, Stages, rmse_plot
+from shipsense.reproduce.common import Output, Stages, finish, rmse_plot
 from shipsense.simulator import simulate
 from shipsense.trackers.driver import run_filter
 from shipsense.trackers.metrics import convergence_rate, mrmse, nees, rmse_k
@@ -98,8 +98,14 @@ def mirror_discrepancy(sc, sensors, kind=None):
 def run(runs=100, out="results/S2", seed=0, progress=True):
     """Run the S2 experiment set; returns the summary dictionary (also written to ``out/summary.json``)."""
     o = Output(out)
+    st = Stages(["one vs two", "outliers", "seismic", "field trial", "figures"], "S2", progress)
+    return finish(o, st, _study(o, st, runs, seed))     # (the figures once the runs' arrays are gone)
+
+
+def _study(o, st, runs, seed):
+    """The study's runs, tables and figures to draw (``o``), its stages ``st`` but the figures; returns the
+    summary."""
     sc = load_scenario("S2")
-    st = Stages(["one vs two", "outliers", "seismic", "field trial"], "S2", progress)
 
     st.step("one vs two")
     sim = simulate(sc, runs=runs, seed=seed)
@@ -184,12 +190,9 @@ def run(runs=100, out="results/S2", seed=0, progress=True):
               curves.pop("x"), curves, ylabel="RMS position error [m]")
     trial_summary = _trial_summary(tracking)
     st.done()
-    elapsed = st.close()
-    summary = {"scenario": "S2", "runs": runs, "seed": seed, "seconds": elapsed,
-               "reference_offset_m": REFERENCE_OFFSET, "one_vs_two": one_vs_two, "outliers": outliers,
-               "seismic_low_snr": seismic, "field_trial_geometry": field_trial, "field_trial": trial_summary}
-    o.summary(summary)
-    return summary
+    return {"scenario": "S2", "runs": runs, "seed": seed, "seconds": None,     # (finish: every stage's)
+            "reference_offset_m": REFERENCE_OFFSET, "one_vs_two": one_vs_two, "outliers": outliers,
+            "seismic_low_snr": seismic, "field_trial_geometry": field_trial, "field_trial": trial_summary}
 
 
 def _low_snr(by_scale, unit):
