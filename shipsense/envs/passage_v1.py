@@ -231,25 +231,15 @@ def _rest_of_block(core, entries):
     return None if core is None else core._run_ins(entries)
 
 
-def _blocks_ahead(core, seeds):
-    """Background work: blocks drawn from ``seeds``, their run-ins in one batch (a passage's run-in does not depend
-    on the passages beside it), for the core weakly referenced by ``core``."""
+def _blocks_ahead(core, seeds, first_only=False):
+    """Background work: blocks drawn from ``seeds``, the run-ins of their passages in one batch (a passage's run-in
+    does not depend on the passages beside it) -- with ``first_only``, of their first passages only (what seeded
+    resets use of a block, :meth:`PassageV1Core.expect`) -- for the core weakly referenced by ``core``."""
     core = core()
     if core is None:
         return None
     blocks = [core._block(seed) for seed in seeds]
-    core._run_ins([entry for block in blocks for entry in block])
-    return blocks
-
-
-def _first_passages(core, seeds):
-    """Background work: blocks drawn from ``seeds``, the run-ins of their first passages in one batch (what
-    seeded resets use of a block), for the core weakly referenced by ``core``."""
-    core = core()
-    if core is None:
-        return None
-    blocks = [core._block(seed) for seed in seeds]
-    core._run_ins([block[0] for block in blocks])
+    core._run_ins([entry for block in blocks for entry in (block[:1] if first_only else block)])
     return blocks
 
 
@@ -470,7 +460,7 @@ class PassageV1Core:
                 self._to_expect = iter(())
             if not seeds:
                 return
-            job, live = _Later(partial(_first_passages, weakref.ref(self), seeds)), [True] * len(seeds)
+            job, live = _Later(partial(_blocks_ahead, weakref.ref(self), seeds, first_only=True)), [True] * len(seeds)
             for i, seed in enumerate(seeds):
                 self._expected[seed] = _Part(job, i, seed, live)
 

@@ -277,7 +277,7 @@ def test_announced_seeded_resets_give_the_same_episodes(monkeypatch):
         return out, list(drawn)
 
     (announced, drawn_announced), (plain, drawn_plain) = episodes(True), episodes(False)
-    assert drawn_announced.count("_first_passages") >= 20 and drawn_announced.count("_take_block") == 1
+    assert drawn_announced.count("_blocks_ahead") >= 20 and drawn_announced.count("_take_block") == 1
     assert drawn_plain.count("_take_block") == 21
     for a, b in zip(announced, plain, strict=True):
         np.testing.assert_array_equal(a, b)
