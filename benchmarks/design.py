@@ -24,8 +24,8 @@ import numpy as np
 from shipsense import load_scenario, tune_allocator
 from shipsense.design import placement as pl
 from shipsense.design.designer import design_array, write_design
+from shipsense.models.field_model import candidate_model
 from shipsense.simulator import sample_passages
-from shipsense.trackers.models import candidate_model
 
 
 def grid(side, half=60.0, z=-15.0):

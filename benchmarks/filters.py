@@ -30,8 +30,8 @@ import numpy as np
 from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
 
 from shipsense import simulate, tune_allocator
+from shipsense.models.field_model import model_from_scenario
 from shipsense.trackers.filters import FILTER_NAMES, UPDATES, Belief, get_filter, predict
-from shipsense.trackers.models import model_from_scenario
 
 
 def setup(batch):
@@ -106,7 +106,7 @@ import time
 t0 = time.perf_counter()
 import numpy as np
 from shipsense.trackers.filters import FILTER_NAMES, Belief, get_filter
-from shipsense.trackers.models import model_from_scenario
+from shipsense.models.field_model import model_from_scenario
 model = model_from_scenario("S0")
 t1 = time.perf_counter()
 b = Belief.from_cov(np.ones((2, 7)), np.eye(7))

@@ -20,10 +20,10 @@ import time
 import numpy as np
 
 from shipsense.config import load_scenario
+from shipsense.models.field_model import model_from_scenario
 from shipsense.parallel import in_chunks
 from shipsense.reproduce.common import prior_grid
-from shipsense.trackers.initialiser import _project, candidate_grid, grid_terms
-from shipsense.trackers.models import model_from_scenario
+from shipsense.trackers.init.grid import _project, candidate_grid, grid_terms
 
 
 def main(argv=None):

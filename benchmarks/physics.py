@@ -76,11 +76,11 @@ def main(argv=None):
 
 def measurement_models(batch):
     """Microseconds per state of the models' readings with their Jacobian (``FieldModel.h_and_H``, the compiled
-    kernel of :mod:`shipsense.trackers.measurement`) against the numpy kernels it replaces (``_h_and_H_numpy``),
+    kernel of :mod:`shipsense.models.measurement`) against the numpy kernels it replaces (``_h_and_H_numpy``),
     for the shipped scenarios' models; one thread."""
     import os
 
-    from shipsense.trackers.models import model_from_scenario
+    from shipsense.models.field_model import model_from_scenario
 
     print(f"\nmeasurement models, h and its Jacobian, batch {batch}, one thread: microseconds per state")
     print(f"{'model':<8}{'compiled':>10}{'numpy':>10}{'speed-up':>10}")

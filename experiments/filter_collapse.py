@@ -22,16 +22,16 @@ import argparse
 import numpy as np
 
 from shipsense.config import load_scenario
+from shipsense.models.field_model import model_from_scenario
 from shipsense.reproduce.common import prior_grid
+from shipsense.reproduce.studies import track_with_global_init
 from shipsense.reproduce.wide import init_options
 from shipsense.simulator import simulate
-from shipsense.trackers.bank import run_bank
+from shipsense.trackers.bank.bank import run_bank
+from shipsense.trackers.bank.selection import mixture_mse
 from shipsense.trackers.filters import get_filter
-from shipsense.trackers.initialiser import global_init
-from shipsense.trackers.models import model_from_scenario
-from shipsense.trackers.restarts import refit_at
-from shipsense.trackers.selection import mixture_mse
-from shipsense.trackers.studies import track_with_global_init
+from shipsense.trackers.init.global_init import global_init
+from shipsense.trackers.tracker.restarts import refit_at
 
 
 def fit_at_last(model, gi, inv_A, mixture):

@@ -23,10 +23,10 @@ from scipy import stats
 
 from shipsense import load_scenario, simulate
 from shipsense.config import ProcessNoiseConfig
-from shipsense.trackers.driver import run_filter
+from shipsense.models.field_model import model_from_scenario
 from shipsense.trackers.filters import FILTER_NAMES
+from shipsense.trackers.filters.run import run_filter
 from shipsense.trackers.metrics import nees, position_error
-from shipsense.trackers.models import model_from_scenario
 
 SETTINGS = {
     "study: Q = 0.1 I": ProcessNoiseConfig(model="identity", sigma_q=0.1),

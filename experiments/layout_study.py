@@ -25,9 +25,9 @@ import numpy as np
 from shipsense import load_scenario
 from shipsense.config import to_toml
 from shipsense.design import placement as pl
+from shipsense.models.field_model import candidate_model
 from shipsense.simulator import sample_passages
 from shipsense.sweep import parse_sweep, run_sweep
-from shipsense.trackers.models import candidate_model
 
 FAMILIES = {
     "envelope": ("S1-P2", 30.0, [30.0, 30.0, 2.0, 2.0, 1.0, 50.0]),
@@ -53,7 +53,7 @@ def layouts_for(name, half, prior_std, seed=0):
         "convex": pl.place(problem, "D").chosen,
         "convex + cuts": pl.place_with_cuts(problem, model, thetas, sc.steps).chosen,
     }
-    values = {m: float(pl._value_of_sets(problem, np.sort(c)[None], "D")[0]) for m, c in out.items()}
+    values = {m: float(pl.value_of_sets(problem, np.sort(c)[None], "D")[0]) for m, c in out.items()}
     return sc, cands, out, values
 
 

@@ -16,7 +16,7 @@ import numpy as np
 
 from shipsense.reproduce import wide
 from shipsense.reproduce.common import track_global
-from shipsense.trackers.initialiser import global_init
+from shipsense.trackers.init.global_init import global_init
 
 
 def main(argv=None):

@@ -13,8 +13,8 @@ import time
 
 from shipsense.reproduce import wide
 from shipsense.reproduce.common import track_global
-from shipsense.trackers.bank import run_bank
-from shipsense.trackers.seeding import seed_hypotheses
+from shipsense.trackers.bank.bank import run_bank
+from shipsense.trackers.bank.seeding import seed_hypotheses
 
 
 def main(argv=None):

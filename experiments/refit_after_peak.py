@@ -25,11 +25,11 @@ import numpy as np
 
 from shipsense.reproduce import wide
 from shipsense.reproduce.common import refit_stage, track_global, track_restarting
-from shipsense.trackers.initialiser import depth_prior
+from shipsense.reproduce.studies import refit_after_peak
+from shipsense.trackers.bank.seeding import seed_hypotheses
+from shipsense.trackers.init.window_fits import depth_prior
 from shipsense.trackers.metrics import nees
-from shipsense.trackers.restarts import peak_refit_sample
-from shipsense.trackers.seeding import seed_hypotheses
-from shipsense.trackers.studies import refit_after_peak
+from shipsense.trackers.tracker.restarts import peak_refit_sample
 
 
 def main(argv=None):

@@ -24,11 +24,11 @@ import time
 import numpy as np
 
 from shipsense.config import load_scenario
+from shipsense.models.field_model import model_from_scenario
 from shipsense.simulator import simulate
-from shipsense.trackers.batchfit import fit_passages
-from shipsense.trackers.initialiser import global_init
+from shipsense.trackers.fit.least_squares import fit_passages
+from shipsense.trackers.init.global_init import global_init
 from shipsense.trackers.metrics import nees
-from shipsense.trackers.models import model_from_scenario
 
 
 def main(argv=None):

@@ -26,7 +26,7 @@ import tracker_consistency as tc  # noqa: E402
 from shipsense import simulate  # noqa: E402
 from shipsense.trackers import Tracker  # noqa: E402
 from shipsense.trackers.metrics import converged_until, passage_ends  # noqa: E402
-from shipsense.trackers.tracker import RESTARTED, STATUSES, TRACKING  # noqa: E402
+from shipsense.trackers.tracker.results import RESTARTED, STATUSES, TRACKING  # noqa: E402
 
 
 def main(argv=None):

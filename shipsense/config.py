@@ -433,7 +433,7 @@ class Scenario(_Model):
 
     def with_updates(self, **changes) -> Scenario:
         """A validated copy with top-level fields replaced (e.g. ``runs=10``)."""
-        return _validate({**self.model_dump(), **changes}, source=f"scenario {self.name!r}")
+        return validate_scenario({**self.model_dump(), **changes}, source=f"scenario {self.name!r}")
 
 
 def to_toml(scenario: Scenario) -> str:
@@ -517,7 +517,7 @@ def _format_error(err: ValidationError, source: str) -> str:
     return f"{source}: " + "; ".join(lines)
 
 
-def _validate(data: dict, source: str, strict: bool = False) -> Scenario:
+def validate_scenario(data: dict, source: str, strict: bool = False) -> Scenario:
     """A validated scenario from ``data``; ``strict`` (a TOML file, whose values carry their own types): no
     coercion -- a string is not a number, a boolean not a count, a float not an integer."""
     try:
@@ -576,4 +576,4 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
         raise ScenarioError(f"{source}: not valid TOML ({err})") from None
-    return _validate(data, source, strict=True)
+    return validate_scenario(data, source, strict=True)

@@ -2,7 +2,7 @@
 
 numba caches a compiled function (``cache=True``) under a stamp of the file that defines it (a hash of its
 contents), not of the files whose functions it inlines or whose constants it freezes (numba issue #8396):
-after an edit of only ``shipsense/trackers/measurement.py``, or an upgrade that changed it, the filter steps
+after an edit of only ``shipsense/models/measurement.py``, or an upgrade that changed it, the filter steps
 in ``fused.py`` that inline its measurement function would load stale machine code.  Each module with
 compiled kernels ends with :func:`key_on_sources`, which replaces its kernels' stamp by a hash of the module
 and of every package file it takes code or constants from (:data:`DEPENDS`, transitively), so that a change
@@ -19,22 +19,29 @@ from pathlib import Path
 DEPENDS = {
     "envs/features.py": (),
     "envs/passage.py": ("config.py", "envs/arguments.py", "envs/core_env.py", "envs/features.py", "simulator.py"),
-    "envs/passage_v1.py": ("config.py", "envs/arguments.py", "envs/core_env.py", "envs/features.py", "simulator.py",
-                           "trackers/compiled_linalg.py", "trackers/measurement.py", "trackers/tracker.py"),
-    "physics/kernels.py": ("physics/magnetic.py",),
+    "envs/passage_v1.py": ("config.py", "envs/arguments.py", "envs/core_env.py", "envs/features.py",
+                           "models/measurement.py", "simulator.py", "trackers/fit/linalg.py",
+                           "trackers/tracker/results.py"),
+    "models/measurement.py": ("parallel.py", "physics/hed_kernel.py", "physics/kernels.py"),
     "physics/hed_kernel.py": (),
-    "trackers/measurement.py": ("parallel.py", "physics/hed_kernel.py", "physics/kernels.py"),
-    "trackers/filters/fused.py": ("parallel.py", "trackers/filters/_core.py", "trackers/filters/cdkf.py",
-                                  "trackers/filters/huber_ukf.py", "trackers/filters/ukf.py",
-                                  "trackers/measurement.py"),
-    "trackers/lm_kernel.py": ("parallel.py", "trackers/compiled_linalg.py", "trackers/measurement.py"),
-    "trackers/initialiser.py": ("trackers/batchfit.py", "trackers/compiled_linalg.py", "trackers/measurement.py"),
-    "trackers/compiled_linalg.py": (),
-    "trackers/selection.py": (),
-    "trackers/consistency.py": (),
-    "trackers/restarts.py": ("trackers/batchfit.py", "trackers/initialiser.py"),
-    "trackers/tracker_step.py": ("parallel.py", "trackers/consistency.py", "trackers/filters/fused.py",
-                                 "trackers/initialiser.py", "trackers/measurement.py", "trackers/selection.py"),
+    "physics/kernels.py": ("physics/magnetic.py",),
+    "trackers/bank/selection.py": (),
+    "trackers/filters/fused.py": ("models/measurement.py", "parallel.py", "trackers/filters/cdkf.py",
+                                  "trackers/filters/core.py", "trackers/filters/huber_ukf.py",
+                                  "trackers/filters/ukf.py"),
+    "trackers/fit/linalg.py": (),
+    "trackers/fit/lm.py": ("models/measurement.py", "parallel.py", "trackers/fit/linalg.py"),
+    "trackers/init/detection.py": (),
+    "trackers/init/distinct.py": (),
+    "trackers/init/grid.py": ("models/measurement.py", "models/transitions.py", "trackers/fit/least_squares.py",
+                              "trackers/fit/linalg.py", "trackers/init/distinct.py"),
+    "trackers/tracker/consistency.py": (),
+    "trackers/tracker/restarts.py": ("models/transitions.py", "trackers/fit/least_squares.py",
+                                     "trackers/init/detection.py", "trackers/init/distinct.py",
+                                     "trackers/init/global_init.py", "trackers/init/window_fits.py"),
+    "trackers/tracker/step.py": ("models/measurement.py", "parallel.py", "trackers/bank/selection.py",
+                                 "trackers/filters/fused.py", "trackers/init/detection.py",
+                                 "trackers/tracker/consistency.py"),
 }
 """Each file with compiled kernels (relative to the package) and the package modules it imports at module
 level (tests/test_numba_cache.py checks this against the sources)."""

@@ -89,10 +89,10 @@ def _ellipse(ax, mean, cov, color, nsig=2.0):
 
 
 def plot_track(summary, times, path, truth=None, title=None, ellipses=8):
-    """A tracked passage (:class:`~shipsense.tracking.TrackSummary`) to a PNG: the array, the truth (if known)
+    """A tracked passage (:class:`~shipsense.cli.track.TrackSummary`) to a PNG: the array, the truth (if known)
     and the estimated track with 2-sigma ellipses, coloured by status; and over time the position error
     against the reported 2-sigma (or the 2-sigma alone)."""
-    from shipsense.trackers.tracker import INITIALISING, STATUSES
+    from shipsense.trackers.tracker.results import INITIALISING, STATUSES
 
     pl = summary.plot
     k, est, cov, status = pl["k"], pl["estimate"], pl["cov"][:, :2, :2], pl["status"]

@@ -8,7 +8,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from shipsense.config import ScenarioError, _shipped_dir, _validate
+from shipsense.config import ScenarioError, _shipped_dir, validate_scenario
 
 BASES = {name: tomllib.loads((_shipped_dir() / f"{name}.toml").read_text()) for name in ("S2", "S1-P2", "demo")}
 
@@ -48,7 +48,7 @@ def _set(data, path, value):
 def test_a_mutated_scenario_loads_or_names_the_field(leaf, value):
     name, path = leaf
     try:
-        _validate(_set(BASES[name], path, value), "fuzz.toml", strict=True)
+        validate_scenario(_set(BASES[name], path, value), "fuzz.toml", strict=True)
     except ScenarioError as err:
         msg = str(err)
         assert msg.startswith("fuzz.toml: ") and "\n" not in msg
@@ -66,4 +66,4 @@ def test_a_mutated_scenario_loads_or_names_the_field(leaf, value):
 ])
 def test_the_messages_name_the_field_and_the_range(path, value, words):
     with pytest.raises(ScenarioError, match=words):
-        _validate(_set(BASES["S1-P2"], path, value), "bad.toml", strict=True)
+        validate_scenario(_set(BASES["S1-P2"], path, value), "bad.toml", strict=True)

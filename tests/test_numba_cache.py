@@ -23,7 +23,7 @@ def test_the_dependency_table_lists_every_kernel_file_and_its_imports():
     """Every package file that compiles with numba is in DEPENDS, with exactly the package modules it imports at
     module level (a new kernel file, or a new import in one, must be added), and keys its caches."""
     kernels = {p.relative_to(PACKAGE).as_posix() for p in PACKAGE.rglob("*.py")
-               if "njit(" in p.read_text() or "@_loop_jit" in p.read_text()}
+               if "njit(" in p.read_text() or "@loop_jit" in p.read_text()}
     assert kernels == set(numba_cache.DEPENDS)
     for name in kernels:
         text = (PACKAGE / name).read_text()
@@ -35,13 +35,13 @@ def test_the_dependency_table_lists_every_kernel_file_and_its_imports():
 
 
 def test_the_package_kernels_are_keyed_on_their_sources():
-    from shipsense.trackers import measurement
+    from shipsense.models import measurement
     from shipsense.trackers.filters import fused
 
     digest = numba_cache.sources_digest("trackers/filters/fused.py")
-    kernels = [*fused._UPDATE_KERNELS.values(), *fused._UPDATE_LOOPS.values()]      # one per filter, and loops
+    kernels = [*fused.UPDATE_KERNELS.values(), *fused.UPDATE_LOOPS.values()]      # one per filter, and loops
     assert len(kernels) == 12 and all(k._cache._cache_file._source_stamp == digest for k in kernels)
-    assert measurement._batch_kernel._cache._cache_file._source_stamp != digest      # its own sources
+    assert measurement.batch_kernel._cache._cache_file._source_stamp != digest      # its own sources
 
 
 USER = """
@@ -93,11 +93,11 @@ def test_the_first_use_notice_says_whether_the_tracker_will_compile(tmp_path):
     """``shipsense demo`` and ``track`` say when the tracker's kernels are about to compile: with an empty
     cache the notice is given; once a passage has been tracked (compiled or loaded), not."""
     from shipsense import simulate
+    from shipsense.cli.track import first_use_notice
     from shipsense.trackers import Tracker
-    from shipsense.tracking import first_use_notice
 
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path))
-    out = subprocess.run([sys.executable, "-c", "from shipsense.tracking import first_use_notice; "
+    out = subprocess.run([sys.executable, "-c", "from shipsense.cli.track import first_use_notice; "
                           "print(first_use_notice()); print(first_use_notice('ekf'))"], env=env, capture_output=True,
                          text=True, check=True)
     assert out.stdout.count("compiling the numerical kernels") == 2     # the tracker's UKF, and a --filter's

@@ -9,13 +9,13 @@ import numpy as np
 import pytest
 
 from shipsense.config import load_scenario
+from shipsense.models.field_model import model_from_scenario
 from shipsense.reproduce import common
 from shipsense.reproduce.common import LEAN, Output, Stages, bank_summary, bank_tally, finish, rmse_plot, run_chunks
 from shipsense.simulator import simulate
-from shipsense.trackers.bank import run_bank
+from shipsense.trackers.bank.bank import run_bank
+from shipsense.trackers.bank.seeding import seed_hypotheses
 from shipsense.trackers.metrics import mrmse, trmse
-from shipsense.trackers.models import model_from_scenario
-from shipsense.trackers.seeding import seed_hypotheses
 
 
 @pytest.fixture(scope="module")

@@ -131,7 +131,7 @@ def test_prior_closest_approach_range():
 
 def test_default_moment_walk_is_relative_to_the_ship():
     from shipsense.config import ProcessNoiseConfig
-    from shipsense.trackers.models import model_from_scenario
+    from shipsense.models.field_model import model_from_scenario
 
     small = model_from_scenario(load_scenario("S2").with_updates(prior=None), process_noise=ProcessNoiseConfig())
     big = model_from_scenario(load_scenario("S0").with_updates(prior=None), process_noise=ProcessNoiseConfig())

@@ -114,14 +114,14 @@ def score_baselines(problem, candidates, placement, criterion, seed=0, random_la
     sets = baseline_layouts(candidates, problem.k, np.random.default_rng(seed), random_layouts)
     out = {}
     rand = sets["random"]
-    ok = pl._feasible(rand, None, problem)
+    ok = pl.feasible(rand, None, problem)
     vals = np.full(len(rand), -np.inf)
     if ok.any():
-        vals[ok] = pl._value_of_sets(problem, rand[ok], criterion)
+        vals[ok] = pl.value_of_sets(problem, rand[ok], criterion)
     best = int(np.argmax(vals))
     named = {f"best_of_{len(rand)}_random": rand[best], "line": sets["line"], "triangle": sets["triangle"]}
     for name, idx in named.items():
-        v = float(pl._value_of_sets(problem, np.asarray(idx)[None], criterion)[0])
+        v = float(pl.value_of_sets(problem, np.asarray(idx)[None], criterion)[0])
         eff = _efficiency(criterion, v, placement.value, problem.n)
         out[name] = {"value": v, "efficiency_vs_design": eff, "sensors": [list(map(float, p)) for p in candidates[idx]]}
     return out
@@ -180,9 +180,9 @@ def design_array(scenario, k, *, criterion="D", candidates=None, costs=None, bud
     from tqdm import tqdm
 
     from shipsense.design.observability import check_array
+    from shipsense.models.field_model import candidate_model, subset_model
     from shipsense.simulator import sample_passages
-    from shipsense.trackers.bank import study_bank
-    from shipsense.trackers.models import candidate_model, subset_model
+    from shipsense.trackers.bank.bank import study_bank
 
     t_start = time.perf_counter()
     if criterion not in pl.CRITERIA:
@@ -257,8 +257,8 @@ def design_files(result):
     layout TOML, the report, the candidates-and-weights plot and the map of the design's position bound."""
     from shipsense.config import to_toml
     from shipsense.design.fisher import bound_map
+    from shipsense.models.field_model import subset_model
     from shipsense.plotting import plot_bound_map, plot_design
-    from shipsense.trackers.models import subset_model
 
     r = result.placement
     files = {DESIGN_FILES["layout"]: to_toml(result.layout).encode(),

@@ -19,10 +19,10 @@ import numpy as np
 
 from shipsense.design.fisher import pcrlb
 from shipsense.design.observability import check_array
-from shipsense.trackers.bank import run_bank
+from shipsense.models.field_model import model_from_scenario
+from shipsense.trackers.bank.bank import run_bank
+from shipsense.trackers.bank.seeding import seed_hypotheses
 from shipsense.trackers.metrics import convergence_rate, position_error, trmse
-from shipsense.trackers.models import model_from_scenario
-from shipsense.trackers.seeding import seed_hypotheses
 
 HELD_OUT_SEED = 10_000
 
@@ -53,7 +53,7 @@ def evaluate_layout(scenario, passages=50, seed=HELD_OUT_SEED, filter_name=None,
     ``filter_name``).  The bound's prior is the bank's initial spread in both cases."""
     from shipsense.config import load_scenario
     from shipsense.simulator import simulate
-    from shipsense.trackers.bank import study_bank
+    from shipsense.trackers.bank.bank import study_bank
 
     sc = load_scenario(scenario)
     if sc.prior is None:
@@ -71,7 +71,7 @@ def evaluate_layout(scenario, passages=50, seed=HELD_OUT_SEED, filter_name=None,
         tracked = np.ones(est.shape[:2], dtype=bool)
     else:
         from shipsense.trackers import Tracker
-        from shipsense.trackers.tracker import RESTARTED, TRACKING
+        from shipsense.trackers.tracker.results import RESTARTED, TRACKING
 
         res = Tracker(sc, passages=passages).track(sim.times, sim.measurements)
         est, tracked = res.estimates, np.isin(res.status, (TRACKING, RESTARTED))

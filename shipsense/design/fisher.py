@@ -22,12 +22,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from shipsense.trackers.batchfit import powers as _powers
+from shipsense.models.transitions import powers
 
 
 def trajectory(model, theta, steps):
     """States ``A^k theta`` (..., K, n) of passages with initial states ``theta`` (..., n) (internal units)."""
-    return np.einsum("kij,...j->...ki", _powers(model.A, steps), np.asarray(theta, dtype=float))
+    return np.einsum("kij,...j->...ki", powers(model.A, steps), np.asarray(theta, dtype=float))
 
 
 def passage_fim(model, theta, steps, per_sensor=False, stride=1, block=10_000, progress=None):
@@ -58,7 +58,7 @@ def passage_fim(model, theta, steps, per_sensor=False, stride=1, block=10_000, p
     J : ndarray, shape (..., n, n) or (..., S, n, n)
     """
     theta = np.asarray(theta, dtype=float)
-    Ak = _powers(model.A, steps)[::stride]                     # (K, n, n)
+    Ak = powers(model.A, steps)[::stride]                     # (K, n, n)
     batch, n = theta.shape[:-1], theta.shape[-1]
     flat = theta.reshape(-1, n)
     sensor = model.array.channel_sensor
@@ -199,7 +199,7 @@ def bound_map(model, xs, ys, velocity, params, steps=21, per_sensor=True):
     theta[..., 2:4] = v
     theta[..., 4:] = params
     Js = passage_fim(model, theta, steps, per_sensor=per_sensor)     # (ny, nx, [S,] n, n)
-    centre = _powers(model.A, steps)[(steps - 1) // 2]
+    centre = powers(model.A, steps)[(steps - 1) // 2]
 
     def pos_bound(J):
         C = centre @ crlb(J) @ centre.T

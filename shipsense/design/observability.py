@@ -33,8 +33,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from shipsense.design.fisher import _powers, passage_fim
-from shipsense.trackers.batchfit import fit_passages
+from shipsense.design.fisher import passage_fim
+from shipsense.models.transitions import powers
+from shipsense.trackers.fit.least_squares import fit_passages
 
 DEFAULT_CHI2 = 25.0
 """A far-apart passage closer than this (chi-square units, ~5 sigma) is an ambiguity."""
@@ -89,7 +90,7 @@ def _whitened(model, y, ref):
 
 def discrepancy(model, theta, theta_alt, steps, stride=1):
     """``d(theta, theta')`` in chi-square units, batched over leading axes (internal units)."""
-    Ak = _powers(model.A, steps)[::stride]
+    Ak = powers(model.A, steps)[::stride]
     x = np.einsum("kij,...j->...ki", Ak, theta)
     xa = np.einsum("kij,...j->...ki", Ak, theta_alt)
     r = _whitened(model, model.h(xa), model.h(x))
@@ -98,7 +99,7 @@ def discrepancy(model, theta, theta_alt, steps, stride=1):
 
 def track_distance(model, theta, theta_alt, steps):
     """Mean distance (m) between the positions of two passages over the passage."""
-    Ak = _powers(model.A, steps)
+    Ak = powers(model.A, steps)
     p = np.einsum("kij,...j->...ki", Ak[:, :2], theta)
     pa = np.einsum("kij,...j->...ki", Ak[:, :2], theta_alt)
     return np.linalg.norm(p - pa, axis=-1).mean(axis=-1)
@@ -114,10 +115,11 @@ def first_use_notice():
     kernel's: ``shipsense check`` and ``design``) are not yet compiled on disk for the current sources, else
     None."""
     from shipsense import numba_cache
-    from shipsense.trackers import lm_kernel, measurement
+    from shipsense.models import measurement
+    from shipsense.trackers.fit import lm
 
-    ready = numba_cache.cached(lm_kernel._lm_kernel, lm_kernel._lm_loop, lm_kernel._normal,
-                               measurement._batch_kernel, measurement._batch_loop)
+    ready = numba_cache.cached(lm.lm_kernel, lm.lm_loop, lm.normal_equations,
+                               measurement.batch_kernel, measurement.batch_loop)
     return None if ready else FIRST_USE
 
 
@@ -242,7 +244,7 @@ def _search(model, thetas, steps, *, far, starts, seeds, refine=True, progress=F
     init, chi2, fitted = np.concatenate(inits), np.concatenate(directs), np.concatenate(fitted)
     ref = np.array(ref)
     alt = init.copy()
-    Ak = _powers(model.A, steps)[::LM_STRIDE]
+    Ak = powers(model.A, steps)[::LM_STRIDE]
     y_ref = model.h(np.einsum("kij,pj->pki", Ak, thetas))                   # (P, K', m)
     # rows per chunk: the fit's Jacobian (rows, K', m, n) kept to about FIT_CHUNK numbers
     chunk = max(8, int(FIT_CHUNK // (len(Ak) * model.m * model.n)))
@@ -328,8 +330,8 @@ def _ambiguity(model, theta, alt, chi2, dist, source):
 def check_scenario(scenario, passages=8, seed=0, progress=False, **kwargs):
     """Verdict for a scenario's array: passages from its ``[prior]`` (or its nominal passage)."""
     from shipsense.config import load_scenario
+    from shipsense.models.field_model import model_from_scenario
     from shipsense.simulator import sample_passages
-    from shipsense.trackers.models import model_from_scenario
 
     sc = load_scenario(scenario)
     model = model_from_scenario(sc)

@@ -42,8 +42,9 @@ from itertools import combinations
 
 import numpy as np
 
-from shipsense.design.fisher import _powers, passage_fim
+from shipsense.design.fisher import passage_fim
 from shipsense.design.observability import DEFAULT_CHI2, check_array
+from shipsense.models.transitions import powers
 
 CRITERIA = ("D", "A", "E")
 
@@ -393,7 +394,7 @@ def solve_frank_wolfe(problem, criterion="D", cuts=None, iterations=300, tol=1e-
 
 
 # -- rounding ----------------------------------------------------------------------------
-def _value_of_sets(problem, sets, criterion, chunk=None):
+def value_of_sets(problem, sets, criterion, chunk=None):
     """Criterion of 0/1 designs given as index arrays (B, k): the chosen matrices are gathered, not weighted."""
     sets = np.asarray(sets)
     out = np.empty(len(sets))
@@ -407,7 +408,7 @@ def _value_of_sets(problem, sets, criterion, chunk=None):
     return out
 
 
-def _feasible(sets, cuts, problem=None):
+def feasible(sets, cuts, problem=None):
     sets = np.asarray(sets)
     ok = np.ones(len(sets), dtype=bool)
     if cuts:
@@ -472,8 +473,8 @@ def swap_refine(problem, chosen, criterion="D", cuts=None, max_rounds=50, shortl
     value : float
     """
     chosen = np.array(chosen, dtype=int)
-    best = float(_value_of_sets(problem, chosen[None], criterion)[0])
-    if not _feasible(chosen[None], cuts, problem)[0]:
+    best = float(value_of_sets(problem, chosen[None], criterion)[0])
+    if not feasible(chosen[None], cuts, problem)[0]:
         best = -np.inf                      # any feasible swap is an improvement
     C = None if not cuts else np.asarray(cuts)
     M = problem.eps * np.eye(problem.n) + problem.J[:, chosen].sum(axis=1)          # (S, n, n)
@@ -500,7 +501,7 @@ def swap_refine(problem, chosen, criterion="D", cuts=None, max_rounds=50, shortl
             subset = None                   # the shortlist is exhausted: a round over every candidate
     chosen = np.sort(chosen)
     if np.isfinite(best):   # re-evaluate from scratch (the running M accumulates round-off)
-        best = float(_value_of_sets(problem, chosen[None], criterion)[0])
+        best = float(value_of_sets(problem, chosen[None], criterion)[0])
     return chosen, best
 
 
@@ -518,7 +519,7 @@ def round_design(problem, w, criterion="D", cuts=None):
         g = gradient(problem, np.clip(w, 0.0, 1.0), criterion)
         shortlist = np.union1d(np.argsort(w)[::-1][: 4 * problem.k], np.argsort(g)[::-1][: 4 * problem.k])
     top = np.argsort(w)[::-1][: problem.k]
-    if not _feasible(top[None], cuts, problem)[0]:
+    if not feasible(top[None], cuts, problem)[0]:
         top = greedy(problem, criterion, cuts)
     if shortlist is None:
         a = swap_refine(problem, top, criterion, cuts)
@@ -595,7 +596,7 @@ def branch_and_bound(problem, criterion="D", incumbent=None, time_limit=20.0, w0
     if incumbent is None:
         incumbent = greedy(problem, criterion)
     best_set = np.sort(np.asarray(incumbent))
-    best = float(_value_of_sets(problem, best_set[None], criterion)[0])
+    best = float(value_of_sets(problem, best_set[None], criterion)[0])
     lo, hi = np.zeros(N), np.ones(N)
     w0 = np.full(N, k / N) if w0 is None else np.asarray(w0, dtype=float)
     bound, w = _node_bound(problem, criterion, lo, hi, w0)
@@ -611,7 +612,7 @@ def branch_and_bound(problem, criterion="D", incumbent=None, time_limit=20.0, w0
         free = np.flatnonzero(lo < hi)
         if len(fixed_in) == k or len(fixed_in) + len(free) == k:
             leaf = np.sort(np.concatenate([fixed_in, free]) if len(fixed_in) < k else fixed_in)
-            v = float(_value_of_sets(problem, leaf[None], criterion)[0])
+            v = float(value_of_sets(problem, leaf[None], criterion)[0])
             if v > best:
                 best, best_set = v, leaf
             continue
@@ -743,7 +744,7 @@ def solve_relaxation(problem, criterion="D", solver="auto", cuts=None, first_ord
 
 def pair_discrepancy(model, theta, theta_alt, steps):
     """Per-sensor discrepancy d_i (chi-square units) of two passages (internal units) for a candidate model."""
-    Ak = _powers(model.A, steps)
+    Ak = powers(model.A, steps)
     r = model.residual(model.h(np.einsum("kij,j->ki", Ak, theta_alt)), model.h(np.einsum("kij,j->ki", Ak, theta)))
     per_channel = np.sum((r / np.sqrt(model.R)) ** 2, axis=0)
     S = len(model.array.ids)
@@ -792,7 +793,7 @@ def place_with_cuts(problem, candidate_model, thetas, steps, criterion="D", tau=
     finds becomes one cut, with the pair's per-candidate discrepancy computed
     for all candidates in one batch (:func:`pair_discrepancy`).
     """
-    from shipsense.trackers.models import subset_model
+    from shipsense.models.field_model import subset_model
 
     cuts = []
     result = None
@@ -827,5 +828,5 @@ def place_with_cuts(problem, candidate_model, thetas, steps, criterion="D", tau=
 def enumerate_designs(problem, criterion="D"):
     """Every feasible k-subset and its value (for small candidate sets: tests and checks)."""
     sets = np.array(list(combinations(range(problem.N), problem.k)))
-    sets = sets[_feasible(sets, None, problem)]
-    return sets, _value_of_sets(problem, sets, criterion)
+    sets = sets[feasible(sets, None, problem)]
+    return sets, value_of_sets(problem, sets, criterion)

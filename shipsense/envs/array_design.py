@@ -60,10 +60,10 @@ from shipsense.design.fisher import passage_fim
 from shipsense.design.observability import check_array
 from shipsense.design.placement import grid_candidates
 from shipsense.envs.arguments import number
+from shipsense.models.field_model import candidate_model, subset_model
 from shipsense.simulator import keel_dipole, sample_passages, simulate
 from shipsense.trackers import Tracker
 from shipsense.trackers.metrics import convergence_rate, trmse
-from shipsense.trackers.models import candidate_model, subset_model
 
 
 class ArrayDesignEnv(gym.Env):

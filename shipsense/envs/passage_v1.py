@@ -154,11 +154,11 @@ from shipsense.config import load_scenario
 from shipsense.envs.arguments import number
 from shipsense.envs.core_env import SEED_HIGH, ClosesItsFigure, CoreVectorEnv, RebuiltOnUnpickle, seed_ahead
 from shipsense.envs.features import at_least, error_and_nees, track_features
+from shipsense.models.measurement import FIELD, batch_kernel, kernel_of
 from shipsense.simulator import simulate
 from shipsense.trackers import Tracker
-from shipsense.trackers.compiled_linalg import solve_many_in_place
-from shipsense.trackers.measurement import FIELD, _batch_kernel, kernel_of
-from shipsense.trackers.tracker import INITIALISING, NO_DATA
+from shipsense.trackers.fit.linalg import solve_many_in_place
+from shipsense.trackers.tracker.results import INITIALISING, NO_DATA
 
 PASSAGE_BLOCK = 16
 """Passages simulated per simulator call and environment (see :meth:`PassageV1Core.reset_envs`)."""
@@ -170,8 +170,9 @@ _RECORDED = ("estimate", "cov", "status", "selected")
 
 
 def _copy_outputs(sample, rows, into):
-    """What the environment keeps of an observer's output ``sample`` (a :class:`~shipsense.trackers.tracker.Sample`
-    or a dict of its fields) written into rows ``rows`` of the Sample ``into``."""
+    """What the environment keeps of an observer's output ``sample`` (a
+    :class:`~shipsense.trackers.tracker.results.Sample` or a dict of its fields) written into rows ``rows`` of the
+    Sample ``into``."""
     for name in _RECORDED:
         getattr(into, name)[rows] = sample[name] if isinstance(sample, dict) else getattr(sample, name)
 
@@ -724,11 +725,11 @@ def information_gains_at(model, x, Rinv, P, first_channel, subsets):
 @njit(cache=True, error_model="numpy", nogil=True)
 def _gains_at(X, spec, Rinv, P, first_channel, subsets, out):
     """:func:`information_gains_at`: the states' Jacobians from the measurement kernel's batch
-    (:func:`~shipsense.trackers.measurement._batch_kernel`, as ``model.H``), then :func:`_gains`."""
+    (:func:`~shipsense.models.measurement.batch_kernel`, as ``model.H``), then :func:`_gains`."""
     E, n = X.shape
     m = Rinv.shape[0]
     Hm = np.empty((E, m, n))
-    _batch_kernel(X, spec, np.empty((E, m)), Hm, True)
+    batch_kernel(X, spec, np.empty((E, m)), Hm, True)
     _gains(Hm, Rinv, P, first_channel, subsets, out)
 
 

@@ -180,7 +180,7 @@ class DesignCore:
         self.incremental = reward == "incremental"
         self.E, self.N = int(num_envs), len(self.xy)
         self.half_width, self.ambiguity = float(half_width), ambiguity
-        from shipsense.trackers.models import model_from_scenario
+        from shipsense.models.field_model import model_from_scenario
 
         self.n = model_from_scenario(self.base).n
         E, N, P, n = self.E, self.N, self.P, self.n
@@ -208,9 +208,9 @@ class DesignCore:
     def reset_envs(self, envs, rngs):
         """Draw a site (and its passages) for each environment in ``envs`` with the generators ``rngs``."""
         from shipsense.design.placement import build_problem
+        from shipsense.models.field_model import candidate_model
         from shipsense.simulator import sample_passages
-        from shipsense.trackers.bank import study_bank
-        from shipsense.trackers.models import candidate_model
+        from shipsense.trackers.bank.bank import study_bank
 
         for e, rng in zip(envs, rngs):
             site = self.fixed_site if self.fixed_site is not None else sample_site(rng, self.half_width, self.xy,
@@ -282,7 +282,7 @@ class DesignCore:
 
     def _ambiguous(self, e):
         from shipsense.design.observability import DEFAULT_CHI2, check_array, mirror_screen
-        from shipsense.trackers.models import subset_model
+        from shipsense.models.field_model import subset_model
 
         chosen = np.flatnonzero(self.placed[e])
         if len(chosen) < self.k:

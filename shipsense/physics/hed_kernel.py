@@ -146,7 +146,7 @@ def hed_field_point(x, y, zs, zt, mx, my, table, nx, nw, a, x0, hx, w0, hw, rho_
     ``(mx, my)`` the moment, ``c`` = 1 / (4 pi sigma1) times the unit of the result; the rest is the medium's
     table (:class:`~shipsense.physics.electric.FastHED`).  With :func:`hed_point`, the one implementation of the
     fast HED field: :func:`hed_points` (the numpy-facing batch) and the compiled measurement functions of
-    :mod:`shipsense.trackers.measurement` call them.
+    :mod:`shipsense.models.measurement` call them.
     """
     K1, K2, K3 = _sums(np.hypot(x, y), zs, zt, table, nx, nw, a, x0, hx, w0, hw, rho_max, D, eta)[:3]
     g01 = 3.0 * x * y * K2      # E = c g p, as :func:`hed_point` forms it (the same rounding)

@@ -165,7 +165,7 @@ class BankTally:
 
     @classmethod
     def of(cls, bank, truth):
-        """The tally of a :class:`~shipsense.trackers.bank.BankRun` (positions, likelihoods and the selected
+        """The tally of a :class:`~shipsense.trackers.bank.bank.BankRun` (positions, likelihoods and the selected
         track kept: :data:`LEAN`) against ``truth`` (R, K, n).  The same numbers as
         :func:`~shipsense.trackers.metrics.trmse` (formed in place: two arrays of the record's (R, H, K) size
         at a time) and ``bank.final_loglik``."""
@@ -201,10 +201,10 @@ class BankTally:
 
 
 def bank_tally(unit, model, y, seeds, P0, truth, chunk=RUN_CHUNK):
-    """:func:`~shipsense.trackers.bank.run_bank` on passages ``y`` (R >= 1, K, m) from ``seeds`` (R, H, n) and
+    """:func:`~shipsense.trackers.bank.bank.run_bank` on passages ``y`` (R >= 1, K, m) from ``seeds`` (R, H, n) and
     ``P0`` (any shape ``run_bank`` takes), run chunk of runs by chunk (:data:`RUN_CHUNK`), without pruning or
     prior likelihoods, tallied against ``truth`` (:class:`BankTally`)."""
-    from shipsense.trackers.bank import run_bank
+    from shipsense.trackers.bank.bank import run_bank
 
     if len(y) == 0:
         raise ValueError("bank_tally needs at least one run")
@@ -220,7 +220,7 @@ def bank_tally(unit, model, y, seeds, P0, truth, chunk=RUN_CHUNK):
 def bank_summary(bank, truth, centre=(0.0, 0.0)):
     """Per-hypothesis table and selection figures of a bank over runs (truth (R, K, n)).
 
-    ``bank``: a :class:`~shipsense.trackers.bank.BankRun` or its :class:`BankTally`.  Seed ranges and
+    ``bank``: a :class:`~shipsense.trackers.bank.bank.BankRun` or its :class:`BankTally`.  Seed ranges and
     bearings are taken from ``centre`` (the array centroid).  Returns the figures and the TRMSE (R, H)."""
     t = bank if isinstance(bank, BankTally) else BankTally.of(bank, truth)
     tr, final_ll, seeds = t.trmse, t.final_loglik, t.seeds
@@ -299,13 +299,13 @@ def track_global(unit, model, y, sc, *, refit_peak=None, return_init=False, **op
     Returns estimates (R, K, n) SI, position covariances (R, K, 2, 2) (NaN
     inside the fitted stretch, before the bank starts: NEES assesses the
     bank) and the seconds spent in the initialiser itself (and, with
-    ``return_init``, the :class:`~shipsense.trackers.initialiser.GlobalInit`).
+    ``return_init``, the :class:`~shipsense.trackers.init.global_init.GlobalInit`).
     ``options`` (e.g. ``snr_start``, ``z_std``, ``refine``, ``through_peak``)
-    go to :func:`~shipsense.trackers.initialiser.global_init`.  With ``refit_peak``
+    go to :func:`~shipsense.trackers.init.global_init.global_init`.  With ``refit_peak``
     the tracker continues with :func:`refit_stage`.
     """
-    from shipsense.trackers.initialiser import global_init, unalign
-    from shipsense.trackers.studies import track_with_global_init
+    from shipsense.reproduce.studies import track_with_global_init
+    from shipsense.trackers.init.global_init import global_init, unalign
 
     t1 = time.perf_counter()
     gi = global_init(model, y, **prior_grid(sc), **options)
@@ -322,7 +322,7 @@ def track_restarting(unit, model, y, sc, **options):
     ``sc`` (the sensors of ``model``), with the filter ``unit`` (None: the tracker's own, as users get it) and
     initialiser ``options`` (``snr_start``, ``refine``, ``explore_samples``, ``z_std``).
 
-    Returns the :class:`~shipsense.trackers.tracker.TrackResult` (estimates, covariances and status per
+    Returns the :class:`~shipsense.trackers.tracker.results.TrackResult` (estimates, covariances and status per
     sample, SI), the seconds per passage spent in the initialiser's window fits, the restarts per passage
     (R,) and the tracker (its state after the last sample: e.g. ``k0``, the detection of each passage).
     """
@@ -336,11 +336,11 @@ def track_restarting(unit, model, y, sc, **options):
 
 def refit_stage(unit, model, y, gi, est, cov, refit_peak, z_std=None):
     """After the closest approach: each passage re-fitted once its signal has fallen to ``refit_peak`` of
-    its peak (:func:`~shipsense.trackers.studies.refit_after_peak`, with the depth prior ``z_std``), then a
+    its peak (:func:`~shipsense.reproduce.studies.refit_after_peak`, with the depth prior ``z_std``), then a
     bank without process noise from the fit.  Returns the estimates and position covariances with the
     samples from the refit on replaced."""
-    from shipsense.trackers.initialiser import depth_prior
-    from shipsense.trackers.studies import continue_from, refit_after_peak
+    from shipsense.reproduce.studies import continue_from, refit_after_peak
+    from shipsense.trackers.init.window_fits import depth_prior
 
     again = refit_after_peak(model, y, gi, est, refit_peak, prior=depth_prior(model, z_std))
     est, cov, _ = continue_from(unit, model.without_process_noise(), y, again, est, cov)

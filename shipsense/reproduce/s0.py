@@ -7,6 +7,7 @@ import time
 import numpy as np
 
 from shipsense.config import load_scenario
+from shipsense.models.field_model import model_from_scenario
 from shipsense.reproduce.common import (
     Output,
     Stages,
@@ -18,12 +19,11 @@ from shipsense.reproduce.common import (
     rmse_plot,
 )
 from shipsense.simulator import simulate
-from shipsense.trackers.bank import run_bank
-from shipsense.trackers.driver import run_filter
+from shipsense.trackers.bank.bank import run_bank
+from shipsense.trackers.bank.seeding import seed_hypotheses, seed_ranges
 from shipsense.trackers.filters import get_filter
+from shipsense.trackers.filters.run import run_filter
 from shipsense.trackers.metrics import convergence_rate, mrmse, position_error, rmse_k
-from shipsense.trackers.models import model_from_scenario
-from shipsense.trackers.seeding import seed_hypotheses, seed_ranges
 
 OFFSETS = (10.0, 30.0, 50.0, 100.0, 200.0)
 UNITS = ("ekf", "ukf", "ckf", "cdkf", "srcdkf")

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from shipsense.config import load_scenario
+from shipsense.models.field_model import model_from_scenario
 from shipsense.physics.array import SensorArray
 from shipsense.physics.motion import cv_positions
 from shipsense.reproduce.common import (
@@ -18,11 +19,10 @@ from shipsense.reproduce.common import (
     rmse_plot,
 )
 from shipsense.simulator import simulate
-from shipsense.trackers.bank import run_bank
+from shipsense.trackers.bank.bank import run_bank
+from shipsense.trackers.bank.seeding import seed_hypotheses
 from shipsense.trackers.filters import get_filter
 from shipsense.trackers.metrics import converged, rmse_k
-from shipsense.trackers.models import model_from_scenario
-from shipsense.trackers.seeding import seed_hypotheses
 
 SYMMETRY_SENSORS = ((0.0, 5.0), (0.0, 0.0), (5.0, 0.0))
 SYMMETRY_BEARINGS = (np.pi / 4, 3 * np.pi / 4, 5 * np.pi / 4, 7 * np.pi / 4)

@@ -7,11 +7,11 @@ import warnings
 import numpy as np
 
 from shipsense.config import load_scenario
+from shipsense.models.field_model import model_from_scenario
 from shipsense.reproduce.common import Output, Stages, finish, rmse_plot
 from shipsense.simulator import simulate
-from shipsense.trackers.driver import run_filter
+from shipsense.trackers.filters.run import run_filter
 from shipsense.trackers.metrics import convergence_rate, mrmse, nees, rmse_k
-from shipsense.trackers.models import model_from_scenario
 
 OFFSETS = (5.0, 10.0, 20.0, 40.0)
 REFERENCE_OFFSET = 10.0
@@ -234,7 +234,7 @@ def field_trial_tracking(trial, runs, seed):
     reported 95 % ellipse) and the RMS error curves by along-road position (``"x"``).
     """
     from shipsense.trackers import Tracker
-    from shipsense.trackers.tracker import INCONSISTENT, INITIALISING, NO_DATA
+    from shipsense.trackers.tracker.results import INCONSISTENT, INITIALISING, NO_DATA
 
     mags, accs = ["M1", "M2", "M3"], ["A1", "A2", "A3"]
     steps = int(round(400.0 / TRIAL_SPEED / trial.period))

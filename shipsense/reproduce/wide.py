@@ -78,12 +78,12 @@ from pathlib import Path
 import numpy as np
 
 from shipsense.config import BankConfig, load_scenario
+from shipsense.models.field_model import model_from_scenario
 from shipsense.reproduce.common import Output, refit_stage, track_global, track_restarting
 from shipsense.simulator import simulate
-from shipsense.trackers.bank import run_bank, study_bank
+from shipsense.trackers.bank.bank import run_bank, study_bank
+from shipsense.trackers.bank.seeding import seed_hypotheses
 from shipsense.trackers.metrics import converged_until, passage_ends
-from shipsense.trackers.models import model_from_scenario
-from shipsense.trackers.seeding import seed_hypotheses
 
 PERIOD, STEPS = 0.5, 330
 SIGMA_A = 0.02
@@ -200,7 +200,7 @@ def passage_figures(est, covs_pos, truth, ends, status=None):
     end), ``valid`` (its samples), ``q`` (position NEES, NaN where no covariance is given) and ``track``
     (the method reports a track: for the Tracker, ``status`` `tracking` or `restarted`; the studies'
     methods always do)."""
-    from shipsense.trackers.tracker import RESTARTED, TRACKING
+    from shipsense.trackers.tracker.results import RESTARTED, TRACKING
 
     conv, err, valid = converged(est, truth, ends)
     d = est[..., :2] - truth[..., :2]

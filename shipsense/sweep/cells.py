@@ -158,7 +158,7 @@ def _scaled(v, f):
 
 def build_cells(spec: SweepSpec, base_dir: Path) -> list[Cell]:
     """Every (layout, condition) cell of a sweep, as a validated scenario; raises :class:`SweepError`."""
-    from shipsense.config import ScenarioError, _validate, load_scenario
+    from shipsense.config import ScenarioError, load_scenario, validate_scenario
 
     try:
         base = load_scenario(_resolve(spec.scenario, base_dir))
@@ -174,7 +174,7 @@ def build_cells(spec: SweepSpec, base_dir: Path) -> list[Cell]:
         for cond in conditions:
             where = f"layout {layout.name!r}" + (f" under {cond}" if cond else "")
             try:
-                sc = _validate(_apply(data, sensors, cond), f"{where}: the cell's scenario")
+                sc = validate_scenario(_apply(data, sensors, cond), f"{where}: the cell's scenario")
             except ScenarioError as err:
                 raise SweepError(str(err)) from None
             scenario = sc.model_dump(mode="json")

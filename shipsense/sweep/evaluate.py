@@ -80,9 +80,9 @@ def _ambiguity(task):
 
 
 def _chunk(task):
+    from shipsense.models.field_model import model_from_scenario
     from shipsense.simulator import simulate
     from shipsense.trackers.metrics import converged_until, passage_ends
-    from shipsense.trackers.models import model_from_scenario
 
     sc = _scenario(task)
     model = model_from_scenario(sc)
@@ -125,7 +125,7 @@ def crlb_position_trace(sc, model, truth):
     """Trace (R, K) of the position block of each passage's constant-velocity CRLB, m², with the prior
     information of the tracker's bank (its initial standard deviations)."""
     from shipsense.design.fisher import pcrlb
-    from shipsense.trackers.bank import study_bank
+    from shipsense.trackers.bank.bank import study_bank
 
     _, bank = study_bank(sc)
     J0 = np.diag((bank.state_std(model.labels) / model.x_scale) ** -2.0)

@@ -11,9 +11,9 @@ from shipsense.cli import main
 from shipsense.design import designer
 from shipsense.design import placement as pl
 from shipsense.design.fisher import passage_fim
+from shipsense.models.field_model import candidate_model, subset_model
 from shipsense.simulator import sample_passages
-from shipsense.trackers.bank import study_bank
-from shipsense.trackers.models import candidate_model, subset_model
+from shipsense.trackers.bank.bank import study_bank
 
 
 @pytest.fixture(scope="module")
@@ -44,7 +44,7 @@ def test_a_clarabel_failure_falls_back_with_a_message(small, monkeypatch):
     assert res.solver == "frank-wolfe" and "CLARABEL failed" in res.message
     assert np.any(np.isin(res.chosen, [0, 1, 2]))
     sets, values = pl.enumerate_designs(problem, "D")
-    ok = pl._feasible(sets, [cut], problem)
+    ok = pl.feasible(sets, [cut], problem)
     assert res.upper_bound >= values[ok].max() - 1e-9 and res.value == pytest.approx(values[ok].max(), abs=1e-9)
 
 

@@ -6,7 +6,7 @@ import pytest
 from shipsense import load_scenario
 from shipsense.design.fisher import bound_map, crlb, passage_fim, pcrlb, trajectory
 from shipsense.design.observability import fit_passages
-from shipsense.trackers.models import LinearModel, model_from_scenario
+from shipsense.models.field_model import LinearModel, model_from_scenario
 
 
 def test_fim_matches_the_covariance_of_maximum_likelihood_estimates():

@@ -12,7 +12,7 @@ from shipsense.design.observability import (
     mirror,
     mirror_lines,
 )
-from shipsense.trackers.models import model_from_scenario
+from shipsense.models.field_model import model_from_scenario
 
 
 def test_collinear_envelope_array_is_ambiguous_with_mirror_pairs():

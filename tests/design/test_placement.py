@@ -6,8 +6,8 @@ import pytest
 from shipsense import load_scenario
 from shipsense.design import placement as pl
 from shipsense.design.observability import check_array
+from shipsense.models.field_model import candidate_model, subset_model
 from shipsense.simulator import sample_passages
-from shipsense.trackers.models import candidate_model, subset_model
 
 
 @pytest.fixture(scope="module")
@@ -101,10 +101,10 @@ def test_exchange_search_never_worsens_and_reaches_the_optimum(small):
     reached = 0
     for _ in range(12):
         start = rng.choice(problem.N, problem.k, replace=False)
-        before = pl._value_of_sets(problem, start[None], "D")[0]
+        before = pl.value_of_sets(problem, start[None], "D")[0]
         chosen, value = pl.swap_refine(problem, start, "D")
         assert value >= before - 1e-12
-        assert value == pytest.approx(pl._value_of_sets(problem, chosen[None], "D")[0], abs=1e-12)
+        assert value == pytest.approx(pl.value_of_sets(problem, chosen[None], "D")[0], abs=1e-12)
         reached += value >= values.max() - 1e-9
     assert reached >= 1
     assert pl.round_design(problem, pl.solve_first_order(problem), "D")[1] == pytest.approx(values.max(), abs=1e-9)

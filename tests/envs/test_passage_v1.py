@@ -349,13 +349,13 @@ def test_the_gains_at_states_equal_the_gains_of_the_models_jacobians():
     through model.H."""
     from shipsense import load_scenario
     from shipsense.envs.passage_v1 import information_gains, information_gains_at, subsets
-    from shipsense.trackers.models import model_from_scenario
+    from shipsense.models.field_model import model_from_scenario
 
     rng = np.random.default_rng(5)
     from dataclasses import replace
 
-    from shipsense.trackers.measurement import kernel_of
-    from shipsense.trackers.models import FieldModel
+    from shipsense.models.field_model import FieldModel
+    from shipsense.models.measurement import kernel_of
 
     for name, series in (("S2", False), ("S1-P2", False), ("S1-P2", True)):
         model = model_from_scenario(load_scenario(name))
@@ -718,7 +718,7 @@ def test_a_forked_child_does_not_wait_for_a_cache_lock_another_thread_held():
     import os
     import threading
 
-    from shipsense.trackers import initialiser
+    from shipsense.trackers.init import grid as initialiser
 
     held, release = threading.Event(), threading.Event()
 

@@ -199,8 +199,8 @@ def test_train_names_the_flag_of_a_bad_value(args, flag, tmp_path, capsys):
 def test_train_and_evaluate_say_when_the_tracker_will_compile(monkeypatch, capsys, tmp_path):
     """The Passage environments run the tracker: with its kernels not yet on disk, ``train`` (scheduling) and
     ``evaluate`` say so first (their times then include compiling); ArrayDesign's do not."""
-    from shipsense import tracking
     from shipsense.cli import main
+    from shipsense.cli import track as tracking
 
     monkeypatch.setattr(tracking, "first_use_notice", lambda filter_name=None: "compiling the numerical kernels")
     assert main(["--quiet", "evaluate", "shipsense/PassageEasy-v1", "--policy", "random", "--episodes", "1"]) == 0

@@ -4,7 +4,7 @@
 >>> ukf = get_filter("ukf")
 >>> # belief = ukf.predict(belief, model); belief, innovation = ukf.update(belief, y, model, mask)
 
-Every unit shares :func:`~shipsense.trackers.filters._core.predict` (the
+Every unit shares :func:`~shipsense.trackers.filters.core.predict` (the
 motion models are linear) and differs in its measurement update:
 
 ========== ===========================================================
@@ -23,9 +23,9 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+from shipsense.models.measurement import kernel_of
 from shipsense.trackers.filters import cdkf, ckf, ekf, fused, huber_ukf, puekf, srcdkf, ukf
-from shipsense.trackers.filters._core import Belief, Innovation, predict, safe_cholesky, tria
-from shipsense.trackers.measurement import kernel_of
+from shipsense.trackers.filters.core import Belief, Innovation, predict, safe_cholesky, tria
 
 UPDATES: dict[str, Callable] = {
     "ekf": ekf.update, "ukf": ukf.update, "ckf": ckf.update, "cdkf": cdkf.update,

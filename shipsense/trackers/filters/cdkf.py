@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from shipsense.trackers.filters._core import Belief, add_noise, gain_update, prepare, transposed
+from shipsense.trackers.filters.core import Belief, add_noise, gain_update, prepare, transposed
 from shipsense.trackers.filters.ukf import sigma_points
 
 H_STIRLING = float(np.sqrt(3.0))

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from shipsense.trackers.filters._core import Belief, add_noise, gain_update, prepare
+from shipsense.trackers.filters.core import Belief, add_noise, gain_update, prepare
 from shipsense.trackers.filters.ukf import sigma_statistics
 
 

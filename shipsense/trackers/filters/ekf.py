@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from shipsense.trackers.filters._core import Belief, add_noise, gain_update, prepare, transposed
+from shipsense.trackers.filters.core import Belief, add_noise, gain_update, prepare, transposed
 
 
 def linearised_terms(belief: Belief, y, model, present):

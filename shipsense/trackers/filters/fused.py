@@ -1,16 +1,16 @@
 r"""Compiled filter steps: each filter's predict and update fused into one numba loop over the batch.
 
 Who gets which implementation.  :class:`~shipsense.trackers.filters.FilterUnit`
-(what :func:`~shipsense.trackers.driver.run_filter`, the bank and the tracker
+(what :func:`~shipsense.trackers.filters.run.run_filter`, the bank and the tracker
 call) runs these compiled steps whenever the model has a compiled measurement
-kernel (:func:`shipsense.trackers.measurement.kernel_of`):
+kernel (:func:`shipsense.models.measurement.kernel_of`):
 
-* a :class:`~shipsense.trackers.models.FieldModel` on the fast HED path:
+* a :class:`~shipsense.models.field_model.FieldModel` on the fast HED path:
   magnetometers (vector, magnitude or tmi readings; the S0 model), seismic
   bearings (S2) and electrodes (vector, envelope or magnitude readings of the
   HED field; S1, the demo), also with per-element transitions
-  (:meth:`~shipsense.trackers.models.FieldModel.stepped`);
-* a :class:`~shipsense.trackers.models.LinearModel`.
+  (:meth:`~shipsense.models.field_model.FieldModel.stepped`);
+* a :class:`~shipsense.models.field_model.LinearModel`.
 
 Every other model (the series HED path; user models with a Python ``h``)
 runs the generic numpy steps of the filter modules (``ukf.update`` and so on),
@@ -19,7 +19,7 @@ An element whose step fails numerically here (an innovation or posterior
 covariance that is not positive definite, a non-finite result) makes the whole step rerun on the
 numpy path, which flags and repairs such elements.
 
-The results equal the numpy steps' to rounding (tests/trackers/test_fused.py), with one difference by
+The results equal the numpy steps' to rounding (tests/trackers/filters/test_fused.py), with one difference by
 design: the Huber update's reweighting stops for each element when its weights settle, where the numpy
 update iterates until the whole batch has settled (an element that settled moves by less than 1e-9 of
 its noise variances per further iteration), so a compiled element equals the numpy update of that
@@ -45,26 +45,19 @@ import numpy as np
 from numba import njit
 
 from shipsense import numba_cache
+from shipsense.models.measurement import loop_jit, measure, measure_jacobian, wrap_angle
 from shipsense.parallel import SPLIT_MIN, in_chunks
-from shipsense.trackers.filters._core import (
-    LOG_2PI,
-    Belief,
-    Innovation,
-    _BeliefWithCov,
-    _sqrt_psd,
-    prior_health,
-)
 from shipsense.trackers.filters.cdkf import H_STIRLING
+from shipsense.trackers.filters.core import LOG_2PI, Belief, BeliefWithCov, Innovation, prior_health, sqrt_psd
 from shipsense.trackers.filters.huber_ukf import GAMMA
 from shipsense.trackers.filters.ukf import merwe_weights
-from shipsense.trackers.measurement import _h, _h_jac, _loop_jit, _wrap
 
 # -- small dense linear algebra, one element at a time ----------------------------------------------------------
 
 @njit(cache=True, error_model="numpy", inline="always")
 def _residual(a, b, axial):
     """``a - b``, wrapped modulo pi on an axial channel."""
-    return _wrap(a - b) if axial else a - b
+    return wrap_angle(a - b) if axial else a - b
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -234,13 +227,13 @@ def _sigma_stats(x, L, present, spec, spread, Wm, Wc, center, pt, Y, yhat, dY, P
             sg = 1.0 if p - center < n else -1.0
             for a in range(n):
                 pt[a] = x[a] + sg * spread * L[a, i]
-        _h(pt, spec, Y[p], B)
+        measure(pt, spec, Y[p], B)
     axial = spec[9]
     for j in range(m):
         t = 0.0
         if axial[j]:    # angles averaged as residuals about the first point's prediction
             for p in range(N):
-                t += Wm[p] * _wrap(Y[p, j] - Y[0, j])
+                t += Wm[p] * wrap_angle(Y[p, j] - Y[0, j])
             yhat[j] = Y[0, j] + t
         else:
             for p in range(N):
@@ -249,7 +242,7 @@ def _sigma_stats(x, L, present, spec, spread, Wm, Wc, center, pt, Y, yhat, dY, P
     for p in range(N):
         for j in range(m):
             d = Y[p, j] - yhat[j]
-            dY[p, j] = (_wrap(d) if axial[j] else d) if present[j] else 0.0
+            dY[p, j] = (wrap_angle(d) if axial[j] else d) if present[j] else 0.0
     for i in range(m):
         for j in range(i + 1):
             t = 0.0
@@ -279,7 +272,7 @@ def _difference_stats(x, L, present, spec, h, pt, Y, yhat, Y1, Y2, Pxy, B):
             sg = 1.0 if p - 1 < n else -1.0
             for a in range(n):
                 pt[a] = x[a] + sg * h * L[a, i]
-        _h(pt, spec, Y[p], B)
+        measure(pt, spec, Y[p], B)
     c1 = 1.0 / (2.0 * h)
     c2 = math.sqrt(h * h - 1.0) / (2.0 * h * h)
     axial = spec[9]
@@ -289,8 +282,8 @@ def _difference_stats(x, L, present, spec, h, pt, Y, yhat, Y1, Y2, Pxy, B):
             dp = Y[1 + i, j] - Y[0, j]
             dm = Y[1 + n + i, j] - Y[0, j]
             if axial[j]:
-                dp = _wrap(dp)
-                dm = _wrap(dm)
+                dp = wrap_angle(dp)
+                dm = wrap_angle(dm)
             t += dp + dm
             keep = 1.0 if present[j] else 0.0
             Y1[i, j] = (dp - dm) * c1 * keep
@@ -431,7 +424,7 @@ def _ekf_gain(subs, x, P0, present, y, R, spec, sc, mean, Pout, eps_out, S_out):
             P[a, c] = P0[a, c]
     ok, nis, logdet = True, 0.0, 0.0
     for sub in range(subs):
-        _h_jac(xc, spec, yhat, H, r3, m3, B, dBq, dBm)
+        measure_jacobian(xc, spec, yhat, H, r3, m3, B, dBq, dBm)
         for j in range(m):
             eps[j] = _residual(y[j], yhat[j], axial[j]) if present[j] else 0.0
             if not present[j]:
@@ -569,7 +562,7 @@ def _update_kernel_for(code):
     # keys a cached function on its bytecode and closure, and a loop in the closure (a dispatcher, pickled
     # with a per-process id) would never match the cache.
     loop.__qualname__ = f"_update_loop_{code}"
-    loop = _loop_jit(loop)
+    loop = loop_jit(loop)
     kernel = FunctionType(kernel.__code__, {**globals(), "_LOOP": loop}, kernel.__name__, kernel.__defaults__,
                           kernel.__closure__)
     kernel.__qualname__ = f"_update_kernel_{code}"
@@ -577,14 +570,14 @@ def _update_kernel_for(code):
 
 
 _UPDATE_PAIRS = {code: _update_kernel_for(code) for code in (UKF, CDKF, HUBER, EKF, PUEKF, SRCDKF)}
-_UPDATE_KERNELS = {code: kernel for code, (kernel, _) in _UPDATE_PAIRS.items()}
-_UPDATE_LOOPS = {code: loop for code, (_, loop) in _UPDATE_PAIRS.items()}
+UPDATE_KERNELS = {code: kernel for code, (kernel, _) in _UPDATE_PAIRS.items()}
+UPDATE_LOOPS = {code: loop for code, (_, loop) in _UPDATE_PAIRS.items()}
 """Each filter's compiled update and its loop (:func:`_update_kernel_for`), by the filter's code (the loops
 are here so that :func:`shipsense.numba_cache.key_on_sources` stamps them too)."""
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
-def _predict_kernel(X, P_in, A, Q, sqQ, square_root, mean_out, P_out, L_out, ok_out):
+def predict_kernel(X, P_in, A, Q, sqQ, square_root, mean_out, P_out, L_out, ok_out):
     """``x = A x``; ``P = A P A^T + Q`` and its factor, or (``square_root``) the factor ``tria([A L, Q^(1/2)])``.
 
     ``A``, ``Q`` and ``sqQ`` have a leading axis of 1 (shared) or of the batch.  ``P_in`` is the covariance, or
@@ -606,10 +599,10 @@ def _predict_kernel(X, P_in, A, Q, sqQ, square_root, mean_out, P_out, L_out, ok_
     return ok_out.all()
 
 
-@_loop_jit
+@loop_jit
 def _predict_loop(X, P_in, A, Q, sqQ, square_root, mean_out, P_out, L_out, ok_out, AP, M, Asc, vsc, nzs, nz_count,
                   nz_cols):
-    """:func:`_predict_kernel`'s loop over the batch, on its scratch.  ``A P A^T`` visits only ``A``'s nonzero
+    """:func:`predict_kernel`'s loop over the batch, on its scratch.  ``A P A^T`` visits only ``A``'s nonzero
     entries (a transition matrix is sparse: n + 2 of n^2 for constant velocity), listed once per transition,
     in the order of a dense sum, so the sums are the same."""
     nb, n = X.shape
@@ -728,7 +721,7 @@ def _per_element(a, batch, n):
 
 
 def predict(belief: Belief, model, square_root: bool = False):
-    """The compiled time update (same result as :func:`~shipsense.trackers.filters._core.predict`); None if an
+    """The compiled time update (same result as :func:`~shipsense.trackers.filters.core.predict`); None if an
     element failed (the caller then runs the numpy step)."""
     mean = np.asarray(belief.mean, dtype=float)
     n = mean.shape[-1]
@@ -754,13 +747,13 @@ def predict(belief: Belief, model, square_root: bool = False):
     P_out = np.empty((B, n, n)) if not square_root else np.empty((1, n, n))
     L_out = np.zeros((B, n, n))
     ok = np.empty(B, dtype=bool)
-    if not _split(_predict_kernel, _PREDICT_ROWS, X, _flat(src, batch, (n, n)), _per_element(A, batch, n), Qf, sqQ,
+    if not _split(predict_kernel, _PREDICT_ROWS, X, _flat(src, batch, (n, n)), _per_element(A, batch, n), Qf, sqQ,
                   square_root, mean_out, P_out, L_out, ok):
         return None
     mean_out, L_out = _shaped(mean_out, batch), _shaped(L_out, batch)
     if square_root:
         return Belief(mean_out, L_out, _flag(belief.ok, batch))
-    return _BeliefWithCov.with_cov(mean_out, L_out, _flag(prior_health(belief), batch), _shaped(P_out, batch))
+    return BeliefWithCov.with_cov(mean_out, L_out, _flag(prior_health(belief), batch), _shaped(P_out, batch))
 
 
 _FILTER_CODES = {"ukf": UKF, "ckf": UKF, "huber_ukf": HUBER, "cdkf": CDKF, "srcdkf": SRCDKF, "ekf": EKF,
@@ -798,7 +791,7 @@ def update(name, belief: Belief, y, model, spec, mask=None, **options):
     mean_out, P_out = _shaped(mean_out, batch), _shaped(P_out, batch)
     if not cov_form:
         return Belief(mean_out, P_out, _flag(belief.ok, batch)), inn
-    return _BeliefWithCov.with_cov(mean_out, _shaped(L_out, batch), _flag(prior_health(belief), batch), P_out), inn
+    return BeliefWithCov.with_cov(mean_out, _shaped(L_out, batch), _flag(prior_health(belief), batch), P_out), inn
 
 
 def _run_update(consts, X, L, P, y, mask, model, spec):
@@ -816,7 +809,7 @@ def _run_update(consts, X, L, P, y, mask, model, spec):
     nis = np.empty(nb)
     cnt = np.empty(nb, dtype=np.int64)
     ok = np.empty(nb, dtype=bool)
-    if not _split(_UPDATE_KERNELS[filt], _UPDATE_ROWS, X, L, P, y, mask, _noise(model), spec, spread, center, Wm, Wc,
+    if not _split(UPDATE_KERNELS[filt], _UPDATE_ROWS, X, L, P, y, mask, _noise(model), spec, spread, center, Wm, Wc,
                   h, gamma, iterations, n_pu, mean_out, P_out, L_out, eps, S, loglik, nis, cnt, ok):
         return None
     return mean_out, P_out, L_out, (eps, S, loglik, nis, cnt)
@@ -881,8 +874,8 @@ def _no_sqrt(n):
 
 @lru_cache(maxsize=64)
 def _shared_sqrt(n, data):
-    """The square root of a shared Q (the columns of :func:`_sqrt_psd` that are not zero) as (1, n, k)."""
-    sq = _sqrt_psd(np.frombuffer(data, dtype=float).reshape(n, n))
+    """The square root of a shared Q (the columns of :func:`sqrt_psd` that are not zero) as (1, n, k)."""
+    sq = sqrt_psd(np.frombuffer(data, dtype=float).reshape(n, n))
     return np.ascontiguousarray(sq[:, np.abs(sq).max(axis=0) > 0]).reshape(1, n, -1)
 
 

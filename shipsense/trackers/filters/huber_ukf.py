@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from shipsense.trackers.filters._core import Belief, _chol_solve, gain_update, prepare, safe_cholesky
+from shipsense.trackers.filters.core import Belief, chol_solve, gain_update, prepare, safe_cholesky
 from shipsense.trackers.filters.ukf import merwe_weights, sigma_statistics
 
 GAMMA = 1.345
@@ -36,11 +36,11 @@ def update(belief: Belief, y, model, mask=None, gamma=GAMMA, iterations=10, alph
     eps, Pxy, Pyy = sigma_statistics(belief, y, model, present, spread, Wm, Wc)
     eye = np.eye(R.shape[-1])
     T = np.swapaxes
-    Ht = _chol_solve(belief.chol, Pxy)                 # H^T = P^-1 Pxy, (..., n, m)
+    Ht = chol_solve(belief.chol, Pxy)                 # H^T = P^-1 Pxy, (..., n, m)
     R_eff = R
     for _ in range(int(iterations)):
         Ls, _ = safe_cholesky(Pyy + R_eff[..., :, None] * eye)
-        Kt = _chol_solve(Ls, T(Pxy, -1, -2))           # K^T
+        Kt = chol_solve(Ls, T(Pxy, -1, -2))           # K^T
         dx = np.einsum("...mn,...m->...n", Kt, eps)
         r = eps - np.einsum("...nm,...n->...m", Ht, dx)
         e = np.abs(r) / np.sqrt(R)

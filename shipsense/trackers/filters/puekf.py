@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from shipsense.trackers.filters._core import Belief, gain_update, innovation, prepare, safe_cholesky
+from shipsense.trackers.filters.core import Belief, gain_update, innovation, prepare, safe_cholesky
 from shipsense.trackers.filters.ekf import linearised_terms
 
 

@@ -19,8 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from shipsense.trackers.filters._core import Belief, innovation, prepare, solve_lower, solve_upper_t, tria
 from shipsense.trackers.filters.cdkf import H_STIRLING, difference_terms
+from shipsense.trackers.filters.core import Belief, innovation, prepare, solve_lower, solve_upper_t, tria
 
 
 def update(belief: Belief, y, model, mask=None, h=H_STIRLING):

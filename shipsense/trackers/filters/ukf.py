@@ -17,7 +17,7 @@ from functools import lru_cache
 import numpy as np
 
 from shipsense.physics.seismic import wrap_axial
-from shipsense.trackers.filters._core import Belief, add_noise, gain_update, prepare, transposed
+from shipsense.trackers.filters.core import Belief, add_noise, gain_update, prepare, transposed
 
 
 @lru_cache(maxsize=32)

@@ -1,0 +1,725 @@
+"""The project's passage tracker: one public tracker behind ``shipsense track``, ``demo``, the environments and
+the Python API.
+
+:class:`Tracker` is built from a scenario and runs, for every passage of a
+batch, the pipeline of this package one sample at a time:
+
+1. **no data** until the passage's first sample with a field value;
+2. **initialising**: detection (the strongest field channel above
+   ``snr_start`` noise standard deviations), then a window of ``window_s``
+   seconds (or less, once the signal has passed its peak: a late detection
+   still gets a fit across the closest approach), then the global
+   initialiser's fits of that window
+   (:func:`~shipsense.trackers.init.window_fits.window_fits`: grid search with the
+   moment eliminated, Levenberg-Marquardt refinement, a chi-square test);
+   until then the reported belief is the prior's (the array centroid with the
+   passage prior's spread: honest, not informative); a bank starts from a
+   fit's information plus that prior's, so never wider than the prior;
+3. **tracking**: a bank of the distinct fits (filter unit ``ukf``, or the
+   Huber UKF when ``robust``), without process noise -- the passages are
+   straight and constant-velocity -- restarted from batch refits of its
+   recent samples (:func:`~shipsense.trackers.tracker.restarts.refit_window`): every
+   ``refit_every`` samples until the closest approach, once when the signal
+   has fallen to ``through_peak`` of its peak, when the selected hypothesis's
+   innovations say it has diverged, when its covariance collapses (see
+   :mod:`~shipsense.trackers.tracker.restarts`), and when the windowed innovation
+   consistency test fails (:mod:`~shipsense.trackers.tracker.consistency`: the
+   innovations of the last ``consistency_window`` samples have a mean the
+   filter's covariance does not allow, at level ``consistency_level``; that
+   sample is **inconsistent**, with the refit's covariance).  At a refit the status is
+   **restarted**; a fit that fails its goodness-of-fit test makes the status
+   **inconsistent** and its covariance is inflated by the ratio of its
+   chi-square to the expected (never NaN), and it is re-fitted every
+   ``nis_window`` samples until one passes; while a passage is inconsistent
+   its reported covariance also holds the passage prior's spread (the model
+   does not explain its data, so its estimate may be anywhere the prior
+   allows).  A refit after an alarm (divergence
+   or a failed fit) also starts from the global initialiser's fits of every
+   sample since the detection, so it can leave a wrong track that a local
+   refit would stay near (measured with 20 % outliers on two magnetometers:
+   convergence 0.933 -> 0.999 over the same 1,000 passages, EXPERIMENTS.md).
+   With ``rescan`` (one magnetometer's default) the global initialiser also
+   runs every ``refit_every`` samples until the closest approach, counted
+   from the last such rescan rather than from the last restart (the collapse
+   alarm restarts one magnetometer's bank every few samples early in a
+   passage): far out, one magnetometer's samples fit a wrong track hundreds
+   of metres off as well as the true one, and refits started from the bank's
+   hypotheses stayed on it after the data had told the two apart
+   (EXPERIMENTS.md).
+
+The reported estimate is the maximum-likelihood hypothesis, the reported
+covariance its mean-square-error matrix under the mixture of the bank's
+hypotheses (when a passage 20 m away explains the data almost as well, the
+covariance says so).  Everything is causal: the output at sample ``k`` uses
+samples ``<= k`` only.  Time comes from the timestamps (irregular sampling
+works: each prediction and each fit uses the samples' times); a gap longer
+than ``gap_limit_s`` is predicted through and reported once.  A refit uses
+at most the last ``history`` samples, so the cost per sample is bounded.
+
+``method="bank"`` runs the source studies' multiple-initial-value bank
+instead (the scenario's filter, process noise and ``[tracker.bank]``),
+seeded per passage from its own first sample with a field value; it is kept
+to reproduce the studies.
+
+The streaming form, :meth:`Tracker.update`, takes one sample of every passage;
+the batch form, :meth:`Tracker.track`, is the same loop over samples, so the
+two agree exactly.
+"""
+
+from __future__ import annotations
+
+import copy
+import time
+from dataclasses import replace
+
+import numpy as np
+
+from shipsense.models.measurement import FIELD, kernel_of
+from shipsense.models.transitions import transitions
+from shipsense.trackers.bank.bank import BankState
+from shipsense.trackers.bank.seeding import seed_hypotheses
+from shipsense.trackers.bank.selection import report
+from shipsense.trackers.filters import get_filter
+from shipsense.trackers.filters.core import UNROLL_MIN_BATCH, Belief, symmetrize
+from shipsense.trackers.fit.robust import Huber
+from shipsense.trackers.init.window_fits import depth_prior, window_fits
+from shipsense.trackers.tracker.consistency import quantile_table, window_test
+from shipsense.trackers.tracker.options import TrackerOptions, family_options, initial_grid, prior_belief
+from shipsense.trackers.tracker.restarts import due, refit_window
+from shipsense.trackers.tracker.results import (
+    INCONSISTENT,
+    INITIALISING,
+    NO_DATA,
+    RESTARTED,
+    TRACKING,
+    Gap,
+    PassageState,
+    Sample,
+    TrackResult,
+)
+from shipsense.trackers.tracker.step import TrackerStep, prepare_sample
+
+_WAITING, _STARTING, _RUNNING, _PENDING = 0, 1, 2, 3   # phases of a passage (_PENDING: its window fits deferred)
+_PHASES = (_WAITING, _STARTING, _RUNNING, _PENDING)
+BANK_INFLATION_MAX = 100.0   # largest chi-square inflation a failed fit's bank starts from (the rest is reported)
+
+
+_HISTORY = ("y_hist", "t_hist")
+"""The per-passage sample history (:meth:`Tracker.passage_states` keeps its written rows only)."""
+
+
+class Tracker:
+    """The project's passage tracker (see the module docstring), built from a scenario.
+
+    Parameters
+    ----------
+    scenario : Scenario or str
+        The array, medium, noise, passage prior and ``[tracker]`` options.
+    passages : int
+        Passages tracked side by side (the batch).
+    sensors : list of str, optional
+        The sensor ids to use (default: all).
+    **options
+        :class:`TrackerOptions`.
+
+    Examples
+    --------
+    >>> import shipsense
+    >>> from shipsense.trackers import Tracker
+    >>> sim = shipsense.simulate("S2", runs=2, seed=1, random=True)
+    >>> result = Tracker("S2", passages=2, sensors=["M1", "M2"]).track(sim.times, sim.measurements[..., :6])
+    >>> result.estimates.shape, result.covs.shape, result.status.shape
+    ((2, 80, 7), (2, 80, 7, 7), (2, 80))
+    """
+
+    def __init__(self, scenario, *, passages=1, sensors=None, **options):
+        from shipsense.config import load_scenario
+        from shipsense.models.field_model import model_from_scenario
+        from shipsense.trackers.bank.bank import study_bank
+
+        self.scenario = sc = load_scenario(scenario)
+        opts = TrackerOptions(**options)
+        model = model_from_scenario(sc, sensors=sensors)
+        cfg = sc.tracker
+        if opts.robust is None:
+            robust = cfg.robust if cfg is not None and cfg.robust is not None else sc.noise.model == "contaminated"
+            opts = replace(opts, robust=bool(robust))
+        if opts.gap_limit_s is None:
+            gap = cfg.gap_limit_s if cfg is not None and cfg.gap_limit_s is not None else 10.0 * sc.period
+            opts = replace(opts, gap_limit_s=float(gap))
+        fam = family_options(model, sc)
+        opts = replace(opts, **{k: v for k, v in fam.items() if getattr(opts, k) is None})
+        study_unit, self.bank_config = study_bank(sc, opts.unit if opts.method == "bank" else None)
+        if opts.method == "bank":
+            self.unit, self.model = study_unit, model
+        else:
+            self.unit = get_filter(opts.unit or ("huber_ukf" if opts.robust else "ukf"))
+            self.model = model.without_process_noise()
+        self.options = opts
+        self.huber = None
+        if opts.robust:
+            contaminated = sc.noise.model == "contaminated"
+            self.huber = Huber(eps=sc.noise.eps, scale=sc.noise.outlier_scale) if contaminated else Huber()
+        # the bank's noise: with Huber updates the estimate's variance is kappa times the nominal one
+        kappa = self.huber.variance_factor if self.huber is not None else 1.0
+        self.filter_model = replace(self.model, R=self.model.R * kappa)
+        self.kappa = kappa
+        self.window = max(4, int(round(opts.window_s / sc.period)))
+        self._snr_field = np.ascontiguousarray(~self.model.axial)                  # (update's SNR: strongest_snr)
+        self._snr_std = np.ascontiguousarray(np.sqrt(self.model.R), dtype=float)
+        self._grid = initial_grid(sc)
+        self._prior = prior_belief(self.model, sc, self.bank_config)
+        self._prior_info = np.diag(self.model.x_scale ** 2 / np.diag(self._prior[1]))   # internal units
+        self._compiled = TrackerStep.of(self.unit, self.filter_model, self._H)
+        spec = kernel_of(self.model)
+        self._pads_exactly = self.huber is None and spec is not None and spec[0] == FIELD   # (_restart's refits)
+        self._R_used = np.ascontiguousarray(self.filter_model.R[None], dtype=float)
+        self.reset(passages)
+
+    labels = property(lambda self: self.model.labels, doc="State component names.")
+
+    # -- state ------------------------------------------------------------------------------------------------
+    def reset(self, passages=None):
+        """Start over with ``passages`` passages (default: as many as before)."""
+        P = int(passages if passages is not None else self.P)
+        if P < 1:
+            raise ValueError(f"passages must be at least 1, got {passages}")
+        n, H = self.model.n, self._H
+        self.P = P
+        for name, (shape, dtype, value) in self._state_fields().items():
+            setattr(self, name, np.full((P, *shape), value, dtype=dtype))
+        self.gaps = []
+        self.seconds = {"initialiser": 0.0, "refits": 0.0}   # time spent in window fits and in refits
+        self._blank = None                                    # the prior Sample of P passages (_prior_sample)
+        self.bank = BankState(self.unit, self.filter_model, np.broadcast_to(self._prior[0], (P, H, n)),
+                              self._prior[1])
+        return self
+
+    def reset_passages(self, passages):
+        """Start passages ``passages`` (indices) over, leaving the others as they are."""
+        idx = np.asarray(passages, dtype=int)
+        for name, (_, _, value) in self._state_fields().items():
+            getattr(self, name)[idx] = value
+        H, n = self._H, self.model.n
+        self.bank.reset_runs(idx, np.broadcast_to(self._prior[0], (idx.size, H, n)), self._prior[1])
+        return self
+
+    def sibling(self, passages):
+        """A tracker of this one's model and options over ``passages`` passages of its own, sharing this one's
+        compiled kernels and caches: passages run side by side there and are carried on here
+        (:meth:`passage_states`, :meth:`set_passage_states`), e.g. the run-ins of an environment's next
+        passages in one batch."""
+        return copy.copy(self).reset(passages)
+
+    @property
+    def independent_batch(self):
+        """The most passages whose banks may start in one call with the numbers each would have alone: a
+        bank's start factorises its hypotheses' covariances (``safe_cholesky``), which from 512 matrices on
+        takes an unrolled form equal to LAPACK's only to rounding (e.g. run-ins side by side,
+        :meth:`sibling`)."""
+        return max(1, (UNROLL_MIN_BATCH - 1) // self._H)
+
+    def passage_states(self, passages):
+        """The :class:`PassageState` of each of ``passages`` (indices): copies, for :meth:`set_passage_states`
+        of this tracker or a sibling (:meth:`sibling`)."""
+        idx = self._passage_indices(passages)
+        self._check_unpruned()
+        H, size, names = self._H, self.y_hist.shape[1], list(self._state_fields())
+        out = []
+        for p in idx.tolist():
+            hist = int(min(self.n[p], size))
+            fields = {name: np.array(getattr(self, name)[p][:hist] if name in _HISTORY else getattr(self, name)[p])
+                      for name in names}
+            rows = slice(p * H, (p + 1) * H)
+            b = self.bank.belief
+            out.append(PassageState(self.model, hist, fields, b.mean[rows].copy(), b.chol[rows].copy(),
+                                    b.ok[rows].copy(), self.bank.cum[p].copy(),
+                                    tuple((g.start_s, g.end_s) for g in self.gaps if g.passage == p)))
+        return out
+
+    def set_passage_states(self, passages, states):
+        """Carry on ``states`` (:meth:`passage_states` of this tracker or a sibling) as passages ``passages``
+        (indices, distinct): everything of theirs is replaced, as if they had run here (their gaps in
+        :attr:`gaps` too)."""
+        idx = self._passage_indices(passages)
+        states = list(states)
+        if idx.size != len(states) or np.unique(idx).size != idx.size:
+            raise ValueError(f"give one state for each of distinct passages, got {len(states)} states for "
+                             f"passages {idx.tolist()}")
+        if any(not isinstance(st, PassageState) or st.model is not self.model for st in states):
+            raise ValueError("passage states must come from this tracker or a sibling (Tracker.sibling)")
+        self._check_unpruned()
+        H, b, fresh = self._H, self.bank.belief, self._state_fields()
+        moved = set(idx.tolist())
+        self.gaps = [g for g in self.gaps if g.passage not in moved]      # (a previous occupant's)
+        for p, st in zip(idx.tolist(), states):
+            for name, (_, _, value) in fresh.items():
+                arr = getattr(self, name)
+                if name in _HISTORY:
+                    arr[p] = value
+                    arr[p][:st.hist] = st.fields[name]
+                else:
+                    arr[p] = st.fields[name]
+            rows = slice(p * H, (p + 1) * H)
+            b.mean[rows], b.chol[rows], b.ok[rows] = st.mean, st.chol, st.ok
+            self.bank.cum[p] = st.loglik
+            self.gaps.extend(Gap(p, start, end) for start, end in st.gaps)
+        self.bank.belief = Belief(*b)       # written in place: drop a filter's covariance cache
+        return self
+
+    def _passage_indices(self, passages):
+        """``passages`` as an int64 vector of indices in range (not booleans, not fractions)."""
+        idx = np.asarray(passages)
+        if idx.size == 0:
+            return np.zeros(0, dtype=np.int64)
+        if idx.ndim != 1 or idx.dtype.kind not in "iu":
+            raise ValueError(f"passages must be a sequence of passage indices (integers), got {passages!r}")
+        if idx.min() < 0 or idx.max() >= self.P:
+            raise IndexError(f"passages {idx.tolist()} out of range for {self.P} passages")
+        return idx.astype(np.int64)
+
+    def _check_unpruned(self):
+        if len(self.bank.idx) != self.bank.R * self.bank.H:
+            raise ValueError("passage states need a bank without pruning (the tracker method's)")
+
+    def _state_fields(self):
+        """Per-passage state: name -> (shape after the passage axis, dtype, value at a passage's start)."""
+        m, n = self.model.m, self.model.n
+        hist = self.options.history if self.options.method == "tracker" else 1
+        return {
+            "n": ((), int, 0),                      # samples seen: the index of the next one
+            "phase": ((), np.int8, _WAITING),
+            "last_t": ((), float, np.nan),
+            "k0": ((), int, -1),                    # detection sample (-1: none yet)
+            "peak": ((), float, 0.0),
+            "start": ((), int, 0),                  # sample the bank (re)started at
+            "scan": ((), int, 0),                   # sample of the last scheduled refit (or the first window fit)
+            "trusted": ((), bool, True),            # the last fit passed its test
+            "excess": ((), float, 1.0),             # reported / bank covariance of a failed fit (_start_banks)
+            "alarms": ((), int, 0),
+            "restarts": ((), int, 0),
+            "peak_done": ((), bool, False),
+            "ref": ((), float, np.nan),             # position covariance trace at the last (re)start
+            "nis": ((self.options.nis_window,), float, np.nan),
+            "snr": ((3,), float, np.nan),
+            "win": ((self.options.keep_init, n), float, np.nan),   # window fits at k0 (internal)
+            "win_t0": ((), float, np.nan),
+            "y_hist": ((hist, m), float, np.nan),
+            "t_hist": ((hist,), float, np.nan),
+            "own": ((), float, np.nan),             # trace of the selected hypothesis's own position covariance
+            # the consistency test's window (consistency.terms of the selected hypothesis), its length, the
+            # samples it failed on, and whether it failed on this one
+            "cons": ((self.options.consistency_window or 1, 2, m), float, 0.0),
+            "cons_n": ((), int, 0),
+            "cons_tests": ((), int, 0),
+            "cons_fails": ((), int, 0),
+            "cons_now": ((), bool, False),
+        }
+
+    @property
+    def _H(self):
+        return self.options.keep_init if self.options.method == "tracker" else (
+            len(self.bank_config.levels) * len(self.bank_config.bearings_deg))
+
+    # -- one sample ---------------------------------------------------------------------------------------------
+    def update(self, t, y, passages=None, defer_fits=False) -> Sample:
+        """Process one sample: times ``t`` (P,) s and measurements ``y`` (P, m) SI of every passage (NaN =
+        missing: a dropout, or a sensor not read), or of the passages ``passages`` (distinct indices) only, the
+        others left as they are.  Returns the :class:`Sample` of those passages at this time.
+
+        With ``defer_fits``, a passage whose initialisation window completes at this sample is not fitted
+        yet: it is left pending (:meth:`pending`, still initialising here) and takes no further samples
+        until :meth:`fit_pending` fits every pending passage in one batch, as this call would have."""
+        act = np.arange(self.P) if passages is None else np.asarray(passages, dtype=np.int64)
+        if act.ndim != 1:
+            raise ValueError(f"passages must be a sequence of passage indices, got an array of shape {act.shape}")
+        t = np.asarray(t, dtype=float)
+        if t.shape != act.shape:
+            t = np.broadcast_to(t, act.shape)
+        y = np.asarray(y, dtype=float)
+        if y.shape != (act.size, self.model.m):
+            raise ValueError(f"y must be (passages, channels) = ({act.size}, {self.model.m}), got {y.shape}")
+        code, i, yi, dt, snr, starting, running, gap = prepare_sample(
+            act, np.ascontiguousarray(t), np.ascontiguousarray(y), self.model.y_scale, self.phase, self.last_t,
+            self.n, self.y_hist, self.t_hist, self.cons_now, self._snr_field, self._snr_std,
+            float(self.options.gap_limit_s), _PHASES)
+        if code == 4:
+            raise IndexError(f"index {int(act[i])} is out of bounds for {self.P} passages")
+        if code == 5:
+            raise ValueError(f"passage {int(act[i])} is given twice: one sample per passage")
+        if code == 1:
+            raise ValueError(f"passage {int(act[i])} has its window fits deferred: call fit_pending() before "
+                             f"giving it another sample")
+        if code == 2:
+            raise ValueError("times must be finite numbers")
+        if code == 3:
+            p = int(act[i])
+            raise ValueError(f"time must increase: passage {p} goes from {self.last_t[p]:.9g} s to {t[i]:.9g} s")
+        if gap:
+            step = dt[act]
+            for p in act[step > self.options.gap_limit_s]:
+                self.gaps.append(Gap(int(p), float(self.last_t[p]), float(t[act == p][0])))
+        if self.options.robust:
+            snr = self._robust_snr(snr, yi, act)
+        out = self._prior_sample()
+        out.status[starting] = INITIALISING
+        if running.size:
+            self._step(running, yi, dt, out)
+        if self.options.method == "bank":
+            if starting.size:
+                self._seed_bank(starting, yi * self.model.y_scale, out)
+        else:
+            self._initialise(starting, snr, out, defer_fits)
+            if running.size:
+                self._restart(running, snr, out)
+        self._widen_inconsistent(act, out)
+        self.last_t[act] = t
+        self.n[act] += 1
+        if passages is None or (act.size == self.P and (act[0] == 0 if self.P == 1 else
+                                                        np.array_equal(act, np.arange(self.P)))):
+            return out                                              # (a fresh Sample: no copy needed)
+        return out.take(act)
+
+    def _widen_inconsistent(self, act, out):
+        """A failed fit or a diverged bank among passages ``act``: the model does not explain the data, so the
+        estimate is located no better than the passage prior says (its spread is added to ``out.cov``: an
+        inconsistent track's own covariance was centimetres to metres while it was 20-150 m off,
+        EXPERIMENTS.md); not a failed consistency test whose refit passed its own (that sample has the
+        refit's covariance)."""
+        bad = act[(out.status[act] == INCONSISTENT) & ~self.cons_now[act]]
+        if bad.size:
+            out.cov[bad] += self._prior[1]
+
+    def track(self, times, measurements, progress=False) -> TrackResult:
+        """Track a batch: ``times`` (K,) or (P, K) s, ``measurements`` (P, K, m) SI (NaN = missing).
+
+        The tracker is reset to the batch; the result is what :meth:`update` gives sample by sample.
+        """
+        y = np.asarray(measurements, dtype=float)
+        if y.ndim != 3 or y.shape[2] != self.model.m:
+            raise ValueError(f"measurements must be (passages, samples, {self.model.m}), got {y.shape}")
+        P, K, _ = y.shape
+        times = np.broadcast_to(np.asarray(times, dtype=float), (P, K))
+        self.reset(P)
+        n = self.model.n
+        est, cov = np.empty((P, K, n)), np.empty((P, K, n, n))
+        status, gap_nats = np.empty((P, K), dtype=np.int8), np.empty((P, K))
+        amb, hyps = np.empty((P, K), dtype=bool), np.empty((P, K), dtype=np.int16)
+        steps = range(K)
+        if progress:
+            from tqdm import tqdm
+
+            steps = tqdm(steps, desc=f"tracking {P} passage(s)", unit="sample", leave=False, disable=None)
+        for k in steps:
+            s = self.update(times[:, k], y[:, k])
+            est[:, k], cov[:, k], status[:, k] = s.estimate, s.cov, s.status
+            gap_nats[:, k], amb[:, k], hyps[:, k] = s.gap_nats, s.ambiguous, s.hypotheses
+        return TrackResult(tuple(self.labels), np.array(times), est, cov, status, gap_nats, amb, hyps,
+                           list(self.gaps))
+
+    # -- parts --------------------------------------------------------------------------------------------------
+    def _robust_snr(self, snr, yi, act):
+        """The SNR (P,) of the passages ``act`` with ``robust``: the median of the strongest field channel's
+        SNR ``snr`` over their last three samples (an outlier alone neither starts a window nor moves the
+        peak)."""
+        ring = np.roll(self.snr[act], -1, axis=1)
+        ring[:, -1] = np.where(np.isfinite(yi[act]).any(axis=1), snr[act], np.nan)
+        self.snr[act] = ring
+        with np.errstate(all="ignore"):
+            med = np.nanmedian(np.where(np.isfinite(ring).sum(axis=1, keepdims=True) >= 2, ring, 0.0), axis=1)
+        snr[act] = np.nan_to_num(med)
+        return snr
+
+    def _prior_sample(self):
+        """A fresh :class:`Sample` of every passage at the prior (copies of one kept until the next reset)."""
+        P = self.P
+        if self._blank is None:
+            mean, cov = self._prior
+            self._blank = Sample(np.repeat(mean[None], P, axis=0), np.repeat(cov[None], P, axis=0),
+                                 np.full(P, NO_DATA, dtype=np.int8), np.full(P, np.inf), np.zeros(P, dtype=bool),
+                                 np.zeros(P, dtype=np.int16), np.full(P, -1, dtype=np.int16))
+        b = self._blank
+        return Sample(b.estimate.copy(), b.cov.copy(), b.status.copy(), b.gap_nats.copy(), b.ambiguous.copy(),
+                      b.hypotheses.copy(), b.selected.copy())
+
+    def _step(self, runs, yi, dt, out):
+        """Predict (time steps ``dt``) and update the banks of passages ``runs``; write their output (one
+        compiled call where the model has a compiled step, :mod:`~shipsense.trackers.tracker.step`: the same
+        numbers)."""
+        H = self._H
+        d, T = dt[runs], self.model.period
+        regular = all(abs(step - T) <= 1e-9 * T for step in d.tolist())
+        model = None if regular else self.filter_model.stepped(np.repeat(d, H))
+        if self._compiled is not None:
+            runs = self._compiled_step(runs, yi, out, model)          # (those it did not step)
+            if runs.size == 0:
+                return
+            if model is not None:
+                model = self.filter_model.stepped(np.repeat(dt[runs], H))
+        ysi = yi * self.model.y_scale
+        inn = self.bank.step(ysi, predict=True, runs=runs, model=model)
+        sel = np.argmax(self.bank.cum[runs], axis=1)              # (the bank's selected(), of these runs)
+        pick = np.arange(runs.size) * H + sel                     # the selected hypotheses' rows of inn
+        m_sel = inn.m.reshape(-1)[pick]
+        self.nis[runs, :-1] = self.nis[runs, 1:]                  # the window moves on by one sample
+        self.nis[runs, -1] = np.where(m_sel > 0, inn.nis.reshape(-1)[pick] / np.maximum(m_sel, 1), np.nan)
+        test = self.options.consistency_window and self.options.method == "tracker"   # (the bank is the studies')
+        failed = self._consistency(runs, yi, inn, sel) if test else runs[:0]
+        self._report(runs, out)
+        out.status[failed] = INCONSISTENT
+
+    def _compiled_step(self, runs, yi, out, stepped=None):
+        """:meth:`_step` of passages ``runs`` in compiled calls (``stepped``: the filter model with their
+        transitions, irregular sampling); returns the passages it did not step (an element's update failed:
+        nothing of theirs written)."""
+        o, h = self.options, self.huber
+        runs = np.asarray(runs, dtype=np.int64)
+        test = bool(o.consistency_window and o.method == "tracker")
+        consistency = (self._R_used, self.model.R,
+                       *((float(h.gamma), float(h.eps), float(h.scale)) if h is not None else (np.inf, 0.0, 1.0)),
+                       quantile_table(o.consistency_level, self.model.m), self.cons, self.cons_n, self.cons_tests,
+                       self.cons_fails, self.cons_now)
+        selection = (self.model.x_scale, o.method == "tracker", float(o.report_nats), float(o.report_distance_m),
+                     self.excess, out.estimate, out.cov, self.own, out.gap_nats, out.ambiguous, out.hypotheses,
+                     out.selected)
+        left = self._compiled(runs, yi, self.model.y_scale, self.bank, self.nis, test, consistency, selection,
+                              out.status, self.trusted, (TRACKING, INCONSISTENT), stepped)
+        if left.size < runs.size:
+            self.bank.belief = Belief(*self.bank.belief)   # (as BankState.step leaves it)
+        if left.size == 0:
+            self.bank.steps += 1                           # (else the step by step path counts the sample)
+        return left
+
+    def _consistency(self, runs, yi, inn, sel):
+        """The windowed innovation test (:mod:`~shipsense.trackers.tracker.consistency`) of passages ``runs`` with the
+        innovations ``inn`` of this sample (selected hypotheses ``sel``).  Returns the passages it failed on
+        (their window starts over; :meth:`_restart` refits them)."""
+        h = self.huber
+        R_used = self.filter_model.R[None] if inn.R is None else inn.R
+        failed = np.empty(runs.size, dtype=bool)
+        window_test(np.asarray(runs, dtype=np.int64), np.asarray(sel, dtype=np.int64), self._H, inn.eps, inn.S,
+                    np.asarray(R_used, dtype=float), self.model.R, np.isfinite(yi[runs]),
+                    *((float(h.gamma), float(h.eps), float(h.scale)) if h is not None else (np.inf, 0.0, 1.0)),
+                    quantile_table(self.options.consistency_level, self.model.m), self.cons, self.cons_n,
+                    self.cons_tests, self.cons_fails, self.cons_now, failed)
+        return runs[failed]
+
+    def _report(self, runs, out):
+        """Selected estimate, its mixture mean-square error (tracker) or own covariance (bank), and the
+        selection figures of passages ``runs`` (:func:`~shipsense.trackers.bank.selection.report`)."""
+        o, belief = self.options, self.bank.belief
+        report(belief.mean, belief.chol, np.asarray(runs, dtype=np.int64), self._H, self.model.x_scale,
+               self.bank.cum[runs], o.method == "tracker", float(o.report_nats), float(o.report_distance_m),
+               self.excess, out.estimate, out.cov, self.own, out.gap_nats, out.ambiguous, out.hypotheses,
+               out.selected)
+        out.status[runs] = np.where(self.trusted[runs], TRACKING, INCONSISTENT)
+
+    def _seed_bank(self, fresh, y, out):
+        """The studies' bank: seed passages ``fresh`` from this sample (their first with a field value) and
+        update with it."""
+        seeds, P0 = seed_hypotheses(self.model, y[fresh], self.bank_config)
+        self.bank.reset_runs(fresh, seeds, P0)
+        self.bank.step(np.nan_to_num(y), mask=np.isfinite(y), predict=False, runs=fresh)
+        self.phase[fresh] = _RUNNING
+        self._report(fresh, out)
+
+    def _window(self, runs, first):
+        """Samples ``first .. k`` (R,) of passages ``runs`` from the history: y (R, W, m) internal and the times
+        after each first sample (R, W); W is the longest, shorter windows padded with missing samples."""
+        hist = self.y_hist.shape[1]
+        cur = self.n[runs]
+        W = int((cur - first).max()) + 1
+        ks = first[:, None] + np.arange(W)[None, :]
+        inside = ks <= cur[:, None]
+        slots = np.where(inside, ks, cur[:, None]) % hist
+        yw = np.where(inside[..., None], self.y_hist[runs[:, None], slots], np.nan)
+        tw = self.t_hist[runs[:, None], slots]
+        taus = np.where(inside, tw - tw[:, :1], tw[:, -1:] - tw[:, :1])
+        return yw, taus
+
+    def pending(self, passages=None):
+        """Whether the passages (indices; default all) have window fits deferred by ``update(...,
+        defer_fits=True)``."""
+        return self.phase[slice(None) if passages is None else np.asarray(passages, dtype=int)] == _PENDING
+
+    def fit_pending(self):
+        """Fit the deferred windows of every pending passage in one batch (a passage's fits do not depend on
+        the passages beside it in a batch) and start their banks as :meth:`update` would have at the sample
+        their windows completed.  Returns the passages (indices) and their :class:`Sample` at that sample."""
+        pend = np.flatnonzero(self.phase == _PENDING)
+        out = self._prior_sample()
+        if pend.size:
+            self.n[pend] -= 1                       # back at the sample the window completed at, for its fits
+            try:
+                out.status[pend] = INITIALISING
+                self._fit_windows(pend, out)
+                self._widen_inconsistent(pend, out)            # (as update)
+            finally:
+                self.n[pend] += 1
+        return pend, out.take(pend)
+
+    def _initialise(self, starting, snr, out, defer=False):
+        """Detection and, once a passage's window is complete, its global fits: the bank starts from them
+        (with ``defer``, the passage is left pending for :meth:`fit_pending`)."""
+        if starting.size == 0:
+            return
+        o = self.options
+        detect = starting[(self.k0[starting] < 0) & (snr[starting] > o.snr_start)]
+        self.k0[detect] = self.n[detect]
+        seen = starting[self.k0[starting] >= 0]
+        self.peak[seen] = np.maximum(self.peak[seen], snr[seen])
+        have = self.n[seen] - self.k0[seen] + 1
+        # the window is complete, or the signal has passed its peak: a fit then spans the closest approach
+        passed = (o.through_peak is not None) & (snr[seen] < (o.through_peak or 0.0) * self.peak[seen])
+        ready = seen[(have >= self.window) | (passed & (have >= max(4, self.window // 5)))]
+        if ready.size == 0:
+            return
+        if defer:
+            self.phase[ready] = _PENDING
+            return
+        self._fit_windows(ready, out)
+
+    def _fit_windows(self, ready, out):
+        """The global fits of the windows of passages ``ready`` (complete at their current sample) and their
+        banks' start, one batch per window length: a passage's fits are those it would have alone (a batch of
+        windows of different lengths would pad the shorter ones, and their fits would move at rounding)."""
+        o = self.options
+        have = self.n[ready] - self.k0[ready] + 1
+        for length in np.unique(have):
+            group = ready[have == length]
+            yw, taus = self._window(group, self.k0[group])
+            t0 = time.perf_counter()
+            fits = self._fits(yw, taus)
+            self.seconds["initialiser"] += time.perf_counter() - t0
+            self.win[group] = fits.theta
+            self.win_t0[group] = self.t_hist[group, self.k0[group] % self.y_hist.shape[1]]
+            self.scan[group] = self.n[group]
+            self.phase[group] = _RUNNING
+            self._start_banks(group, fits, taus[:, -1], o.inflate, out)
+
+    def _fits(self, yw, taus):
+        """The global initialiser's fits of windows ``yw`` (R, W, m) with times ``taus`` (R, W)."""
+        o = self.options
+        regular = np.allclose(taus, np.arange(taus.shape[1]) * self.model.period, rtol=0, atol=1e-9)
+        return window_fits(self.model, yw, **self._grid, taus=None if regular else taus, keep=o.keep_init,
+                           grid_samples=o.grid_samples, grid_reserve=self.window,
+                           distinct_m=o.distinct_m, z_std=o.z_std, refine=o.refine, gof=o.gof,
+                           explore_samples=o.explore_samples, huber=self.huber)
+
+    def _global_starts(self, yw, taus, which, lengths):
+        """Starts (R, keep_init, n) at the windows' first samples: the global fits of the windows ``which``
+        (a restart after an alarm need not stay near the track that diverged), NaN for the others; ``lengths``
+        (R,): each window's samples (the others padding)."""
+        starts = np.full((yw.shape[0], self.options.keep_init, self.model.n), np.nan)
+        # (they are only starts, which the refit takes to all the samples: the global fits see at most a
+        # window's worth of them, evenly spread from the first to the last, so their cost does not grow; one
+        # batch per window length, its own samples: a passage's starts do not depend on the windows beside it)
+        for W in np.unique(lengths[which]):
+            rows = np.flatnonzero(which & (lengths == W))
+            pick = np.unique(np.round(np.linspace(0, W - 1, min(W, self.window))).astype(int))
+            starts[rows] = self._fits(yw[rows][:, pick], taus[rows][:, pick]).theta
+        return starts
+
+    def _start_banks(self, runs, fits, tau, inflate, out):
+        """(Re)start the banks of passages ``runs`` at this sample from window fits at times ``tau`` (R,) before
+        it; a fit that fails its test has its covariance inflated by its chi-square over the expected."""
+        H, xs = self._H, self.model.x_scale
+        A = transitions(self.model, tau)                                               # (R, n, n)
+        birge = np.where(fits.fit_ok[:, None], 1.0,
+                         np.maximum(1.0, fits.chi2[:, :1] / np.maximum(fits.expected[:, None], 1e-300)))
+        # the bank starts from at most BANK_INFLATION_MAX times the fit's covariance (a nonlinear filter
+        # started from a covariance 1e6 times too wide throws its sigma points far outside the model's
+        # domain: measured, a one-magnetometer passage went to 1e23 m); the rest of the inflation is
+        # reported on top of the bank's covariance until a fit passes
+        bank_birge = np.minimum(birge, BANK_INFLATION_MAX)
+        self.excess[runs] = (birge / bank_birge)[:, 0]
+        # no start is wider than the passage prior: the fit's information plus the prior's (a weak fit -- the
+        # range-moment trade-off of one magnetometer -- otherwise starts a bank kilometres wide)
+        scale = (inflate * self.kappa) * bank_birge[..., None, None]
+        cov = symmetrize(np.linalg.inv(fits.info / scale + self._prior_info))
+        seeds = np.einsum("rij,rmj->rmi", A, fits.theta)
+        P0 = A[:, None] @ cov @ np.swapaxes(A, -1, -2)[:, None]
+        loglik = fits.loglik
+        M = seeds.shape[1]
+        if M < H:   # fewer fits than hypotheses: the best again, with no weight
+            pad = (slice(None), np.zeros(H - M, dtype=int))
+            seeds, P0 = np.concatenate([seeds, seeds[pad]], 1), np.concatenate([P0, P0[pad]], 1)
+            loglik = np.concatenate([loglik, np.full((len(runs), H - M), -np.inf)], axis=1)
+        self.bank.reset_runs(runs, seeds * xs, P0 * np.outer(xs, xs)[None, None], loglik)
+        self.start[runs], self.trusted[runs] = self.n[runs], fits.fit_ok
+        self.ref[runs] = np.trace(P0[np.arange(len(runs)), 0, :2, :2] * np.outer(xs[:2], xs[:2]), axis1=-2, axis2=-1)
+        self.nis[runs] = np.nan
+        self.cons[runs], self.cons_n[runs], self.cons_now[runs] = 0.0, 0, False
+        self._report(runs, out)
+
+    def _restart(self, runs, snr, out):
+        """Refit the passages among ``runs`` whose bank is due (alarms, schedule, peak, collapse, a failed
+        consistency test: :func:`~shipsense.trackers.tracker.restarts.due`)."""
+        flags = np.empty((runs.size, 4), dtype=bool)
+        due(np.asarray(runs, dtype=np.int64), self.n, self.start, self.nis, self.trusted, self.alarms, self.peak,
+            self.peak_done, snr, self.scan, self.own, self.ref, self.cons_now, *_restart_options(self.options),
+            out.status, out.cov, INCONSISTENT, flags)
+        due_, alarm, after_peak, rescan = flags.T
+        if due_.any():
+            sel = runs[due_]
+            self.scan[runs[rescan]] = self.n[runs[rescan]]
+            self.peak_done[sel] |= after_peak[due_]
+            self.alarms[sel] += alarm[due_]
+            self.restarts[sel] += 1
+            failed_test = self.cons_now[runs]
+            self._refit(sel, alarm[due_], rescan[due_], out)
+            # a refit after a failed consistency test: the sample is still the test's (inconsistent), with the
+            # refit's covariance -- unless the fit failed its own test (then as any failed fit)
+            ok = runs[failed_test & self.trusted[runs]]
+            out.status[ok], self.cons_now[ok] = INCONSISTENT, True
+
+    def _refit(self, runs, alarm, rescan, out):
+        """Batch refits of passages ``runs`` to their samples since the window start (at most ``history``),
+        started from the selected estimate, the bank's live hypotheses and (``multistart``) the initial
+        window fits; the bank restarts from the ``keep`` best distinct fits."""
+        o, H, n = self.options, self._H, self.model.n
+        first = np.maximum(self.k0[runs], self.n[runs] - self.y_hist.shape[1] + 1)
+        lengths = self.n[runs] - first + 1
+        if not self._pads_exactly and np.unique(lengths).size > 1:
+            # one batch pads the shorter windows with missing samples: the compiled least-squares fits and their
+            # information skip them (a passage's refit is the one it gets alone), numpy's fits (a model without
+            # a compiled kernel) and a robust fit's information do not (they move at rounding with the length)
+            for w in np.unique(lengths):
+                group = lengths == w
+                self._refit(runs[group], alarm[group], rescan[group], out)
+            return
+        yw, taus = self._window(runs, first)
+        back = transitions(self.model, -taus[:, -1])                                    # now -> window start
+        rows = (runs[:, None] * H + np.arange(H)).ravel()
+        means = self.bank.belief.mean[rows].reshape(runs.size, H, n)
+        cum = self.bank.cum[runs]
+        sel = np.argmax(cum, axis=1)
+        live = cum > cum[np.arange(runs.size), sel][:, None] - o.ambiguity_nats
+        live[np.arange(runs.size), sel] = True
+        starts = np.where(live[..., None], means, np.nan)
+        starts = np.concatenate([starts[np.arange(runs.size), sel][:, None], np.where(
+            (np.arange(H) == sel[:, None])[..., None], np.nan, starts)], axis=1)
+        theta = np.einsum("rij,rhj->rhi", back, starts)
+        t_first = self.t_hist[runs, first % self.y_hist.shape[1]]
+        win = np.einsum("rij,rhj->rhi", transitions(self.model, t_first - self.win_t0[runs]), self.win[runs])
+        theta = np.concatenate([theta, np.where(alarm[:, None, None], win, np.nan)], axis=1)
+        t0 = time.perf_counter()
+        multistart = alarm | rescan
+        if multistart.any():   # an alarm: the global initialiser again, on everything since the detection
+            theta = np.concatenate([theta, self._global_starts(yw, taus, multistart, lengths)], axis=1)
+        prior = depth_prior(self.model, o.z_std)
+        fits = refit_window(self.model, yw, theta, taus=taus, prior=prior, keep=o.keep, distinct_m=o.distinct_m,
+                            gof=o.gof, huber=self.huber)
+        self.seconds["refits"] += time.perf_counter() - t0
+        self._start_banks(runs, fits, taus[:, -1], 1.0, out)
+        out.status[runs] = np.where(fits.fit_ok, RESTARTED, INCONSISTENT)
+
+
+def _restart_options(o):
+    """The options of :func:`~shipsense.trackers.tracker.restarts.due` as it takes them: numbers as given (a fractional,
+    infinite or negative value compares as it did in numpy), NaN for None (every comparison with it False)."""
+    def number(value):
+        return np.nan if value is None else float(value)
+
+    return (bool(o.robust), float(o.nis_window), float(o.nis_limit), float(o.max_restarts), number(o.through_peak),
+            number(o.refit_every), bool(o.rescan), number(o.collapse))
