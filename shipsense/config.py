@@ -21,8 +21,18 @@ from pathlib import Path
 from typing import Annotated, Literal
 
 import numpy as np
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    Strict,
+    ValidationError,
+    model_validator,
+)
 
+from shipsense.defaults import HUBER_GAMMA, N_PU
 from shipsense.errors import ShipsenseError
 from shipsense.physics.array import CHANNELS, KINDS, SensorArray
 from shipsense.physics.electric import Medium
@@ -295,18 +305,101 @@ class BankConfig(_Model):
         return np.array([std[c] for c in labels])
 
 
-class TrackerConfig(_Model):
-    """The tracker: the source study's filter, process noise and bank (``shipsense track --method bank``), and
-    the options of the project's tracker (:class:`shipsense.trackers.Tracker`)."""
+FILTERS = ("ekf", "ukf", "ckf", "cdkf", "srcdkf", "puekf", "huber_ukf")
+"""The filter units (:mod:`shipsense.trackers.filters`)."""
+Fraction = Annotated[Finite, Field(gt=0, lt=1)]
+Count = Annotated[int, Strict(), Field(ge=1, le=1_000_000)]
+Flag = Annotated[bool, Strict()]
 
-    filter: Literal["ekf", "ukf", "ckf", "cdkf", "srcdkf", "puekf", "huber_ukf"] = "ukf"
-    n_pu: Annotated[int, Field(ge=1)] = 1
+
+def _stages(v):
+    """Refinement stages as a tuple: one stage given as a whole number, or a list (a TOML array)."""
+    if isinstance(v, int) and not isinstance(v, bool):
+        return (v,)
+    return tuple(v) if isinstance(v, list) else v
+
+
+class TrackerOptions(_Model):
+    """Options of the project's tracker (:class:`shipsense.trackers.Tracker`), the ``[tracker]`` table's
+    own keys.  ``None`` on ``unit``, ``robust``, ``gap_limit_s`` and the initialiser's settings (``window_s``,
+    ``snr_start``, ``refine``, ``explore_samples``, ``grid_samples``, ``z_std``, ``rescan``) means the default
+    for the scenario and the array's family (resolved once, by
+    :func:`shipsense.trackers.tracker.settings.resolve_settings`); on ``refit_every``, ``through_peak``,
+    ``collapse`` and ``consistency_window`` it turns that restart rule or alarm off."""
+
+    method: Literal["tracker", "bank"] = Field(
+        "tracker", description="tracker: the project's tracker; bank: the source studies' bank of hypotheses "
+        "seeded from the first sample (the scenario's filter, process noise and [tracker.bank]).")
+    unit: Literal[FILTERS] | None = Field(
+        None, description="The tracker's filter unit (default: ukf, huber_ukf when robust; with method = "
+        "'bank': the scenario's filter).")
+    robust: Flag | None = Field(None, description="Huber updates and robust refits (default: on when the "
+                                "scenario's noise model is 'contaminated').")
+    huber_gamma: Annotated[Positive, _within(100.0, "")] = Field(
+        HUBER_GAMMA, description="Huber threshold on a whitened residual (robust updates and fits).")
+    window_s: Annotated[Positive, _within(3600.0, "s")] | None = Field(
+        None, description="Length of the initialisation window after the detection, s.")
+    snr_start: Annotated[Positive, _within(1e9, "")] | None = Field(
+        None, description="Detection: the strongest field channel's signal-to-noise ratio that starts a window.")
+    refine: Annotated[tuple[Count, ...], BeforeValidator(_stages), Field(min_length=1)] | None = Field(
+        None, description="Grid minima refined per stage (later stages only for passages whose fit fails).")
+    explore_samples: Count | None = Field(
+        None, description="Samples of the window the refinement explores on first (None: all).")
+    grid_samples: Count | None = Field(None, description="Samples of the window the grid search uses.")
+    z_std: Annotated[Positive, _within(1e3, "m")] | None = Field(
+        None, description="Prior standard deviation of the source depth in the fits, m (None: no prior).")
+    keep_init: Annotated[int, Strict(), Field(ge=1, le=64)] = Field(5, description="Hypotheses a bank starts with.")
+    keep: Annotated[int, Strict(), Field(ge=1, le=64)] = Field(3, description="Distinct fits a refit keeps.")
+    refit_every: Count | None = Field(20, description="Refit every this many samples until the closest "
+                                      "approach (None: never).")
+    through_peak: Fraction | None = Field(0.5, description="Refit once when the signal has fallen to this "
+                                          "fraction of its peak (None: never).")
+    nis_window: Annotated[int, Strict(), Field(ge=1, le=10_000)] = Field(
+        10, description="Samples of the divergence alarm's NIS window.")
+    nis_limit: Annotated[Positive, _within(1e6, "")] = Field(
+        3.0, description="Mean (median when robust) normalised NIS above which the bank has diverged.")
+    max_restarts: Annotated[int, Strict(), Field(ge=0, le=1_000_000)] = Field(
+        4, description="Alarms a passage may restart from.")
+    collapse: Annotated[Finite, Field(gt=0, le=1)] | None = Field(
+        0.25, description="Refit when the position covariance has shrunk below this fraction of the start's "
+        "without the innovations agreeing (None: never).")
+    ambiguity_nats: Positive = Field(10.0, description="Hypotheses within this many nats of the best "
+                                     "restart a refit.")
+    report_nats: Positive = Field(3.0, description="Near-ties within this many nats are reported ambiguous.")
+    report_distance_m: Annotated[Positive, _within(1e6, "m")] = Field(
+        20.0, description="... when farther apart than this, m.")
+    distinct_m: Annotated[Positive, _within(1e6, "m")] = Field(
+        15.0, description="Fits closer than this (m) are one.")
+    gof: Fraction = Field(0.01, description="Level of the fits' chi-square goodness-of-fit test.")
+    inflate: Annotated[Positive, _within(1e6, "")] = Field(
+        2.0, description="Inflation of a window fit's covariance when a bank starts from it.")
+    history: Annotated[int, Strict(), Field(ge=2, le=1_000_000)] = Field(
+        1000, description="Samples a refit may use (the cost per sample is bounded).")
+    gap_limit_s: Annotated[Positive, _within(1e9, "s")] | None = Field(
+        None, description="A gap between samples longer than this (s) is reported (default: 10 periods).")
+    consistency_window: Annotated[int, Strict(), Field(ge=2, le=1_000_000)] | None = Field(
+        20, description="Samples of the windowed innovation consistency test (None: off).")
+    consistency_level: Fraction = Field(0.01, description="Level of the consistency test.")
+    rescan: Flag | None = Field(None, description="Rerun the global initialiser on the schedule until the "
+                                "closest approach (default: one magnetometer).")
+
+    @model_validator(mode="after")
+    def _check_options(self):
+        if self.keep > self.keep_init:
+            raise ValueError(f"keep: cannot exceed keep_init ({self.keep_init}), got {self.keep}")
+        if self.refine is not None and any(b <= a for a, b in zip(self.refine, self.refine[1:])):
+            raise ValueError(f"refine: the stages' counts must increase, got {list(self.refine)}")
+        return self
+
+
+class TrackerConfig(TrackerOptions):
+    """The ``[tracker]`` table: the options of the project's tracker (:class:`TrackerOptions`) and the source
+    studies' filter, process noise and bank (``method = "bank"``, ``shipsense track --method bank``)."""
+
+    filter: Literal[FILTERS] = Field("ukf", description="The source studies' filter unit.")
+    n_pu: Annotated[int, Strict(), Field(ge=1, le=1000)] = Field(N_PU, description="PU-EKF sub-updates.")
     process_noise: ProcessNoiseConfig = ProcessNoiseConfig()
     bank: BankConfig | None = None
-    robust: bool | None = Field(None, description="Huber updates and robust refits (default: on when the "
-                                "scenario's noise model is 'contaminated').")
-    gap_limit_s: Annotated[Finite, Field(gt=0)] | None = Field(
-        None, description="A gap between samples longer than this (s) is reported (default: 10 periods).")
 
 
 class Scenario(_Model):
@@ -485,7 +578,7 @@ _TYPE_WORDS = {"int_type": "a whole number", "int_from_float": "a whole number",
                "dict_type": "a table", "model_type": "a table", "literal_error": None}
 
 
-def _format_error(err: ValidationError, source: str) -> str:
+def format_error(err: ValidationError, source: str) -> str:
     """One line naming the file, each field path and what is wrong, in the project's words (pydantic's union
     branch names and type jargon removed; of a union's failed branches, the value's own complaint is kept)."""
     by_loc = {}
@@ -529,7 +622,7 @@ def validate_scenario(data: dict, source: str, strict: bool = False) -> Scenario
             return Scenario.model_validate_json(text, strict=True)
         return Scenario.model_validate(data)
     except ValidationError as err:
-        raise ScenarioError(_format_error(err, source)) from None
+        raise ScenarioError(format_error(err, source)) from None
 
 
 def _shipped_dir():

@@ -744,6 +744,3 @@ def main(argv=None) -> int:
               "(run with --debug for the traceback)", file=sys.stderr)
         return EXIT_INTERNAL
 
-
-if __name__ == "__main__":
-    sys.exit(main())

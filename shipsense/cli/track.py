@@ -171,8 +171,8 @@ def _track_blocks(tracker, t, y, truth, steps, parts, header, labels, keys, keep
 def describe(summary: TrackSummary, source: str) -> list[str]:
     """The lines ``shipsense track`` prints about a tracked passage."""
     tr, f, c = summary.tracker, summary.final, summary.final_cov
-    what = ("the studies' bank of " f"{tr._H} hypotheses ({tr.unit.name})" if tr.options.method == "bank" else
-            f"the project's tracker ({tr.unit.name}{', robust' if tr.options.robust else ''})")
+    what = ("the studies' bank of " f"{tr.H} hypotheses ({tr.unit.name})" if tr.settings.method == "bank" else
+            f"the project's tracker ({tr.unit.name}{', robust' if tr.settings.robust else ''})")
     lines = [f"tracked {source} with {what}",
              f"  at the end ({summary.final_status}): x = {f[0]:.1f} m, y = {f[1]:.1f} m, v = ({f[2]:.2f}, "
              f"{f[3]:.2f}) m/s, 2-sigma {2 * np.sqrt(c[0, 0]):.2f} / {2 * np.sqrt(c[1, 1]):.2f} m; "

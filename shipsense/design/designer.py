@@ -182,7 +182,7 @@ def design_array(scenario, k, *, criterion="D", candidates=None, costs=None, bud
     from shipsense.design.observability import check_array
     from shipsense.models.field_model import candidate_model, subset_model
     from shipsense.simulator import sample_passages
-    from shipsense.trackers.bank.bank import study_bank
+    from shipsense.trackers.tracker.settings import resolve_settings
 
     t_start = time.perf_counter()
     if criterion not in pl.CRITERIA:
@@ -205,7 +205,7 @@ def design_array(scenario, k, *, criterion="D", candidates=None, costs=None, bud
     truth = sample_passages(scenario, passages if scenario.prior is not None else 1, seed=seed,
                             random=scenario.prior is not None)
     thetas = model.to_internal(model.state_from_truth(truth))
-    _, bank = study_bank(scenario)
+    bank = resolve_settings(scenario).bank
     prior_std = model.to_internal(bank.state_std(model.labels))
     timings = {}
     bar = tqdm(total=100, desc=f"design: Fisher matrices, {len(cands)} candidates x {len(thetas)} passages",

@@ -53,7 +53,7 @@ def evaluate_layout(scenario, passages=50, seed=HELD_OUT_SEED, filter_name=None,
     ``filter_name``).  The bound's prior is the bank's initial spread in both cases."""
     from shipsense.config import load_scenario
     from shipsense.simulator import simulate
-    from shipsense.trackers.bank.bank import study_bank
+    from shipsense.trackers.tracker.settings import resolve_settings
 
     sc = load_scenario(scenario)
     if sc.prior is None:
@@ -63,7 +63,9 @@ def evaluate_layout(scenario, passages=50, seed=HELD_OUT_SEED, filter_name=None,
     truth = model.state_from_truth(sim.truth)
     if method not in ("tracker", "bank"):
         raise ValueError(f"method must be 'tracker' or 'bank', got {method!r}")
-    unit, bank_cfg = study_bank(sc, filter_name)
+    override = {"unit": filter_name} if filter_name and method == "bank" else {}
+    settings = resolve_settings(sc, method=method, **override)
+    unit, bank_cfg = settings.filter_unit(), settings.bank
     seeds, P0 = seed_hypotheses(model, sim.measurements[:, 0], bank_cfg)
     if method == "bank":
         bank = run_bank(unit, model, sim.measurements, seeds, P0, prune_nats=bank_cfg.prune_nats)
@@ -73,7 +75,7 @@ def evaluate_layout(scenario, passages=50, seed=HELD_OUT_SEED, filter_name=None,
         from shipsense.trackers import Tracker
         from shipsense.trackers.tracker.results import RESTARTED, TRACKING
 
-        res = Tracker(sc, passages=passages).track(sim.times, sim.measurements)
+        res = Tracker(sc, passages=passages, settings=settings).track(sim.times, sim.measurements)
         est, tracked = res.estimates, np.isin(res.status, (TRACKING, RESTARTED))
     half = sc.steps // 2
     err = position_error(est, truth)[:, half:]

@@ -113,7 +113,7 @@ class PassageCore:
         self.model = self.tracker.model
         arr = self.model.array
         self.S = len(arr.ids)
-        self.H = self.tracker._H
+        self.H = self.tracker.H
         self.max_reads = self.S if max_reads is None else number("max_reads", max_reads, 1, self.S, integer=True)
         self.energy_cost = energy_cost
         self.error_scale = error_scale

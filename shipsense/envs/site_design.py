@@ -210,7 +210,7 @@ class DesignCore:
         from shipsense.design.placement import build_problem
         from shipsense.models.field_model import candidate_model
         from shipsense.simulator import sample_passages
-        from shipsense.trackers.bank.bank import study_bank
+        from shipsense.trackers.tracker.settings import resolve_settings
 
         for e, rng in zip(envs, rngs):
             site = self.fixed_site if self.fixed_site is not None else sample_site(rng, self.half_width, self.xy,
@@ -223,7 +223,7 @@ class DesignCore:
                 model = self._models[site.water_depth_m] = candidate_model(sc, cands)
             truth = sample_passages(sc, self.P, seed=seed)
             thetas = model.to_internal(model.state_from_truth(truth))
-            _, bank = study_bank(sc)
+            bank = resolve_settings(sc).bank
             prior_std = model.to_internal(bank.state_std(model.labels))
             problem = build_problem(model, thetas, sc.steps, self.k, prior_std, stride=self.stride)
             self.J[e], self.eps[e], self.logc[e] = problem.J, problem.eps, math.log(problem.scale)

@@ -24,6 +24,7 @@ from shipsense.trackers.bank.seeding import seed_hypotheses, seed_ranges
 from shipsense.trackers.filters import get_filter
 from shipsense.trackers.filters.run import run_filter
 from shipsense.trackers.metrics import convergence_rate, mrmse, position_error, rmse_k
+from shipsense.trackers.tracker.settings import resolve_settings
 
 OFFSETS = (10.0, 30.0, 50.0, 100.0, 200.0)
 UNITS = ("ekf", "ukf", "ckf", "cdkf", "srcdkf")
@@ -46,7 +47,8 @@ def _study(o, st, runs, seed):
     sim = simulate(sc, runs=runs, seed=seed)
     model = model_from_scenario(sc)
     truth = model.state_from_truth(sim.truth)
-    bank = sc.tracker.bank
+    settings = resolve_settings(sc)
+    bank = settings.bank
     seeds, P0 = seed_hypotheses(model, sim.measurements[:, 0], bank)
     times = sc.times
     st.done()
@@ -62,7 +64,7 @@ def _study(o, st, runs, seed):
     x0[..., 4:] = 0.0
     rows, curves, rates = [], {}, []
     for i, d in enumerate(OFFSETS):
-        basin = run_filter(sc.tracker.filter, model, sim.measurements, x0[i], P0, store=("means",)).means
+        basin = run_filter(settings.filter, model, sim.measurements, x0[i], P0, store=("means",)).means
         rate = convergence_rate(basin, truth)
         final = position_error(basin, truth)[:, -1]
         rows.append([d, rate, float(np.median(final)), float(np.sqrt(np.mean(final**2)))])
@@ -93,7 +95,7 @@ def _study(o, st, runs, seed):
     for conv in (bank.bearing_convention, *({"north", "east"} - {bank.bearing_convention})):
         cbank = bank.model_copy(update={"bearing_convention": conv})
         cseeds, _ = seed_hypotheses(model, sim.measurements[:, 0], cbank)
-        cb = bank_tally(sc.tracker.filter, model, sim.measurements, cseeds, P0, truth)
+        cb = bank_tally(settings.filter, model, sim.measurements, cseeds, P0, truth)
         readings[conv] = (cb.selected_means, *bank_summary(cb, truth), _reading(conv, cb, cseeds, truth, basin_radius))
     selected, summ, tr, main = readings[bank.bearing_convention]
     bar_charts(o, "selection_bars.png", f"S0 exp. 3: {seeds.shape[1]} hypotheses, {runs} runs, bearings from "
@@ -127,7 +129,7 @@ def _study(o, st, runs, seed):
     st.step("dense bank")
     dense_bank = bank.model_copy(update={"bearings_deg": list(DENSE_BEARINGS)})
     dseeds, dP0 = seed_hypotheses(model, sim.measurements[:, 0], dense_bank)   # the literal bank's Q: only l changes
-    bd = bank_tally(sc.tracker.filter, model, sim.measurements, dseeds, dP0, truth)
+    bd = bank_tally(settings.filter, model, sim.measurements, dseeds, dP0, truth)
     dsumm, _ = bank_summary(bd, truth)
     dense = {"hypotheses": int(dseeds.shape[1]), "bearings_deg": list(DENSE_BEARINGS),
              "process_noise": "the scenario's (Q = 0.1 I, SI)", "bearing_convention": bank.bearing_convention,
@@ -141,7 +143,7 @@ def _study(o, st, runs, seed):
     st.done()
     # beyond the source: the project's tracker, the global initialiser seeding the same unit and process noise
     st.step("global initialiser")
-    gi = global_init_summary(get_filter(sc.tracker.filter), model, sim.measurements, truth, sc)
+    gi = global_init_summary(get_filter(settings.filter), model, sim.measurements, truth, sc)
     st.done()
 
     summary = {

@@ -23,6 +23,7 @@ from shipsense.trackers.bank.bank import run_bank
 from shipsense.trackers.bank.seeding import seed_hypotheses
 from shipsense.trackers.filters import get_filter
 from shipsense.trackers.metrics import converged, rmse_k
+from shipsense.trackers.tracker.settings import resolve_settings
 
 SYMMETRY_SENSORS = ((0.0, 5.0), (0.0, 0.0), (5.0, 0.0))
 SYMMETRY_BEARINGS = (np.pi / 4, 3 * np.pi / 4, 5 * np.pi / 4, 7 * np.pi / 4)
@@ -124,10 +125,11 @@ def bank_for(sc, runs, seed, unit, o=None, tag=None, chain=None):
     sim = simulate(sc, runs=runs, seed=seed)
     model = model_from_scenario(sc)
     truth = model.state_from_truth(sim.truth)
-    seeds, P0 = seed_hypotheses(model, sim.measurements[:, 0], sc.tracker.bank)
+    bank = resolve_settings(sc).bank
+    seeds, P0 = seed_hypotheses(model, sim.measurements[:, 0], bank)
     b = run_bank(unit, model, sim.measurements, seeds, P0, store=LEAN)
     summ, _ = bank_summary(b, truth, centre=model.array.positions[:, :2].mean(axis=0))
-    amb = b.ambiguities(nats=sc.tracker.bank.ambiguity_nats, distance=sc.tracker.bank.ambiguity_distance)
+    amb = b.ambiguities(nats=bank.ambiguity_nats, distance=bank.ambiguity_distance)
     counts = {}
     for pairs in amb:
         for i, j, _, _ in pairs:
@@ -157,7 +159,8 @@ def _study(o, st, runs, seed):
     """The study's runs, tables and figures to draw (``o``), its stages ``st`` but the figures; returns the
     summary."""
     p1, p2 = load_scenario("S1-P1"), load_scenario("S1-P2")
-    unit = get_filter(p2.tracker.filter, n_pu=p2.tracker.n_pu)
+    p2_settings = resolve_settings(p2)
+    unit = p2_settings.study_unit()
     st.step("symmetry")
     sym = symmetry_table(p1, o)
     st.done()
@@ -172,12 +175,12 @@ def _study(o, st, runs, seed):
               [[i + 1, h["range_m"], h["bearing_rad"], h["trmse_m"], h["mean_loglik"], h["convergence_rate"],
                 h["mirror_rate"]] for i, h in enumerate(summ["hypotheses"])])
         st.done()
-    rmse_plot(o, "P1_vs_P2_rmse.png", f"S1 exp. 2: selected estimate, {unit.name} (N_pu = {p2.tracker.n_pu})",
+    rmse_plot(o, "P1_vs_P2_rmse.png", f"S1 exp. 2: selected estimate, {unit.name} (N_pu = {p2_settings.n_pu})",
               p2.times, curves)
     st.step("filters")
     compare = {}
     for name, u in (("ekf (N_pu = 1)", get_filter("puekf", n_pu=1)),
-                    (f"puekf (N_pu = {p2.tracker.n_pu})", unit),
+                    (f"puekf (N_pu = {p2_settings.n_pu})", unit),
                     ("puekf (N_pu = 10)", get_filter("puekf", n_pu=10)), ("ukf", get_filter("ukf"))):
         summ, b, truth = bank_for(p2, runs, seed, u)
         compare[name] = {"selected_mrmse_r_m": summ["selected_mrmse_m"]["r"],
@@ -201,5 +204,5 @@ def _study(o, st, runs, seed):
     o.figure("arrays.png", _arrays_figure, {tag: (sc.array(), result[tag]["ambiguous_run_fraction"])
                                             for tag, sc in (("P1", p1), ("P2", p2))})
     return {"scenario": "S1", "runs": runs, "seed": seed, "seconds": None,     # (finish: every stage's)
-            "filter": unit.name, "n_pu": p2.tracker.n_pu, **result, "symmetry_table": sym, "raw_chain": raw_chain,
+            "filter": unit.name, "n_pu": p2_settings.n_pu, **result, "symmetry_table": sym, "raw_chain": raw_chain,
             "P2_filters": compare, "P2_global_init": gi}

@@ -81,31 +81,27 @@ from shipsense.config import BankConfig, load_scenario
 from shipsense.models.field_model import model_from_scenario
 from shipsense.reproduce.common import Output, refit_stage, track_global, track_restarting
 from shipsense.simulator import simulate
-from shipsense.trackers.bank.bank import run_bank, study_bank
+from shipsense.trackers.bank.bank import run_bank
 from shipsense.trackers.bank.seeding import seed_hypotheses
 from shipsense.trackers.metrics import converged_until, passage_ends
+from shipsense.trackers.tracker.settings import resolve_settings
 
 PERIOD, STEPS = 0.5, 330
 SIGMA_A = 0.02
 REFIT_PEAK = 0.5
 """``global_init_refit`` and the default configuration re-fit each passage once its signal has fallen to this
 fraction of its peak (0.7 and 0.9 were farther from the bound on 200 two-magnetometer passages)."""
-FAMILIES = {   # base scenario, sensors, strength key, its span, filter unit, CPA half-width (m), initialiser options
-    "one_magnetometer": ("S0", None, "moment", (1e6, 1e8), "srcdkf", 50.0,
-                         {"snr_start": 400.0, "refine": (20, 60), "explore_samples": 15}),
-    "two_magnetometers": ("S2", ["M1", "M2"], "moment", (1e4, 1e6), "ukf", 20.0,
-                          {"snr_start": 5.0, "refine": (5, 20)}),
-    "envelope_p2": ("S1-P2", None, "p", (20.0, 2000.0), "puekf", 30.0, {"snr_start": 50.0, "refine": (10, 30, 60)}),
+FAMILIES = {   # base scenario, sensors, strength key, its span, filter unit, CPA half-width (m)
+    "one_magnetometer": ("S0", None, "moment", (1e6, 1e8), "srcdkf", 50.0),
+    "two_magnetometers": ("S2", ["M1", "M2"], "moment", (1e4, 1e6), "ukf", 20.0),
+    "envelope_p2": ("S1-P2", None, "p", (20.0, 2000.0), "puekf", 30.0),
 }
-"""Initialiser options per family (measured, EXPERIMENTS.md): the window's SNR start (for the single magnetometer
-the later, stronger window gave 77 %, 94 % and 97 % convergence at SNR 50, 200 and 400), and the grid minima
-refined in stages: every passage gets the first count, and only passages whose best fit fails the chi-square
-test the later ones (for P2 ten from the start: its close passages' global minima are narrower than the
-grid; the two magnetometers stop at 20, since a third stage of 60 failed the same passages and made the
-initialiser dearer than the bank).  The single magnetometer explores 20, then 60 minima on about 15 samples
-of its window (``explore_samples``): on S0's windows the stages (5, 20, 60) on every sample missed the
-window's global minimum on 16 of 100 passages while passing the test, and this on 2.  Envelope families also
-get the bank's depth prior (``z_std``, :func:`init_options`)."""
+"""The study's families: base scenario, sensors, the source strength drawn and its span, the studies' filter unit
+and the half-width of the closest approaches drawn."""
+STUDY_INIT = {"one_magnetometer": {"snr_start": 400.0}}
+"""Where the study's initialiser differs from the tracker's family settings
+(:data:`~shipsense.trackers.tracker.settings.FAMILY_SETTINGS`): the single magnetometer's window starts later,
+at a stronger signal (the study has no refits to correct an early window's fit)."""
 TRACKER_SIGMA_A = 0.1
 """White acceleration (m/s²) of :func:`consistency`'s ``dwna`` configuration (global initialiser, one refit
 after the closest approach): 0.1 put S0 and S1-P2 in their NEES bands on the first seed, the library's
@@ -114,15 +110,16 @@ default 1 m/s² neither; since the single magnetometer's explored search S0 is u
 
 
 def init_options(name, sc):
-    """The global initialiser's options for family ``name`` on its scenario ``sc`` (see :data:`FAMILIES`)."""
-    opts = dict(FAMILIES[name][-1])
-    if FAMILIES[name][2] == "p":   # the same prior on the source depth as the studies' bank
-        opts["z_std"] = sc.tracker.bank.z_std
-    return opts
+    """The global initialiser's options for family ``name`` on its scenario ``sc``: the tracker's family settings
+    (SNR start, refinement stages, explored samples, the bank's depth prior for electrodes) with the study's own
+    (:data:`STUDY_INIT`)."""
+    s = resolve_settings(sc)
+    opts = {k: getattr(s, k) for k in ("snr_start", "refine", "explore_samples", "z_std")}
+    return {**opts, **STUDY_INIT.get(name, {})}
 
 
 def family_scenario(name):
-    base, sensors, key, span, unit, cpa, _ = FAMILIES[name]
+    base, sensors, key, span, unit, cpa = FAMILIES[name]
     sc = load_scenario(base)
     if sensors is not None:
         sc = sc.model_copy(update={"sensors": [s for s in sc.sensors if s.id in sensors]})
@@ -179,7 +176,7 @@ def _pooled_bound(model, info_mean, J0):
 def family_passages(name, passages, seed):
     """A family's scenario, model, filter unit, and ``passages`` random passages: y (SI), truth and ends."""
     sc, model = family_scenario(name)
-    unit, _ = study_bank(sc)
+    unit = resolve_settings(sc).study_unit()
     sim = simulate(sc, runs=passages, seed=seed, random=True)
     y = sim.measurements[..., np.isin([c[0] for c in sim.channels], model.array.ids)]
     truth = model.state_from_truth(sim.truth)
@@ -361,7 +358,7 @@ def family_chunk(name, passages, seed):
 
     # the source studies' bank
     t0 = time.perf_counter()
-    seeds, P0 = seed_hypotheses(model, y[:, 0], sc.tracker.bank)
+    seeds, P0 = seed_hypotheses(model, y[:, 0], resolve_settings(sc).bank)
     bank = run_bank(unit, model, y, seeds, P0)
     keep("miv_bank", bank.selected_means, bank.selected_pos_cov, time.perf_counter() - t0)
     out.update({f"bound__{k}": v for k, v in _bound_parts(model, truth, P0).items()})

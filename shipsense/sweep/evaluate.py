@@ -125,9 +125,9 @@ def crlb_position_trace(sc, model, truth):
     """Trace (R, K) of the position block of each passage's constant-velocity CRLB, m², with the prior
     information of the tracker's bank (its initial standard deviations)."""
     from shipsense.design.fisher import pcrlb
-    from shipsense.trackers.bank.bank import study_bank
+    from shipsense.trackers.tracker.settings import resolve_settings
 
-    _, bank = study_bank(sc)
+    bank = resolve_settings(sc).bank
     J0 = np.diag((bank.state_std(model.labels) / model.x_scale) ** -2.0)
     b = pcrlb(model, model.to_internal(truth), J0, per_run=True, Q=np.zeros_like(model.Q))
     return b[..., 0, 0] * model.x_scale[0] ** 2 + b[..., 1, 1] * model.x_scale[1] ** 2

@@ -13,7 +13,7 @@ from shipsense.design import placement as pl
 from shipsense.design.fisher import passage_fim
 from shipsense.models.field_model import candidate_model, subset_model
 from shipsense.simulator import sample_passages
-from shipsense.trackers.bank.bank import study_bank
+from shipsense.trackers.tracker.settings import resolve_settings
 
 
 @pytest.fixture(scope="module")
@@ -106,7 +106,7 @@ def test_the_s0_design_under_the_scenario_prior_is_the_brute_force_bayes_optimum
     cands = pl.grid_candidates([(-30, -30), (30, -30), (30, 30), (-30, 30)], 30.0, -20.0)   # 3 x 3
     model = candidate_model(sc, cands)
     thetas = model.to_internal(model.state_from_truth(sample_passages(sc, 4, seed=1)))
-    _, bank = study_bank(sc)
+    bank = resolve_settings(sc).bank
     std = model.to_internal(bank.state_std(model.labels))
     problem = pl.build_problem(model, thetas, sc.steps, 2, std)
     res = pl.place(problem, "D")

@@ -185,7 +185,7 @@ def test_resets_with_missing_first_samples_never_crash_and_the_observer_is_the_t
     """S0 with 30 % dropouts: a passage whose first sample is missing used to make seeding raise on reset."""
     env = gym.make("shipsense/Passage-v0", scenario="S0", overrides={"noise": {"dropout": 0.3}, "steps": 40})
     core = env.unwrapped.core
-    assert core.tracker.options.method == "tracker" and core.H == 5
+    assert core.tracker.settings.method == "tracker" and core.H == 5
     for seed in range(25):
         obs, _ = env.reset(seed=seed)
         assert np.isfinite(obs).all() and env.observation_space.contains(obs)

@@ -6,7 +6,7 @@ log-likelihoods, pruning) and :mod:`~shipsense.trackers.bank.selection` (the max
 the mixture's mean-square error).
 """
 
-from shipsense.trackers.bank.bank import BankRun, BankState, default_bank, run_bank, study_bank
+from shipsense.trackers.bank.bank import BankRun, BankState, default_bank, run_bank
 from shipsense.trackers.bank.seeding import seed_hypotheses, seed_ranges
 
-__all__ = ["BankRun", "BankState", "default_bank", "run_bank", "seed_hypotheses", "seed_ranges", "study_bank"]
+__all__ = ["BankRun", "BankState", "default_bank", "run_bank", "seed_hypotheses", "seed_ranges"]

@@ -448,18 +448,3 @@ def default_bank():
 
     return BankConfig(levels=[1e5, 1e6, 1e7], bearings_deg=[45.0, 135.0, 225.0, 315.0],
                       initial_velocity=(5.0, 5.0), initial_course="towards_array")
-
-
-def study_bank(scenario, filter_name=None):
-    """The scenario's study filter unit (with its options) and bank configuration, or the defaults.
-
-    Returns ``(unit, bank_config)``: ``[tracker].filter`` (``ukf`` without a
-    tracker section) unless ``filter_name`` is given, ``n_pu`` for the PUEKF,
-    and ``[tracker.bank]`` or :func:`default_bank`.
-    """
-    tracker = scenario.tracker
-    cfg = tracker.bank if tracker is not None and tracker.bank is not None else default_bank()
-    name = filter_name or (tracker.filter if tracker is not None else "ukf")
-    options = {"n_pu": tracker.n_pu} if name == "puekf" and tracker is not None else {}
-    return get_filter(name, **options), cfg
-

@@ -45,11 +45,11 @@ import numpy as np
 from numba import njit
 
 from shipsense import numba_cache
+from shipsense.defaults import HUBER_GAMMA, N_PU
 from shipsense.models.measurement import loop_jit, measure, measure_jacobian, wrap_angle
 from shipsense.parallel import SPLIT_MIN, in_chunks
 from shipsense.trackers.filters.cdkf import H_STIRLING
 from shipsense.trackers.filters.core import LOG_2PI, Belief, BeliefWithCov, Innovation, prior_health, sqrt_psd
-from shipsense.trackers.filters.huber_ukf import GAMMA
 from shipsense.trackers.filters.ukf import merwe_weights
 
 # -- small dense linear algebra, one element at a time ----------------------------------------------------------
@@ -832,12 +832,12 @@ def _constants(name, n, options):
 def _constants_of(name, n, items):
     options = dict(items)
     spread, center, Wm, Wc = 1.0, 1, _NO_WEIGHTS, _NO_WEIGHTS
-    h, gamma, iterations, n_pu = H_STIRLING, GAMMA, 10, 1
+    h, gamma, iterations, n_pu = H_STIRLING, HUBER_GAMMA, 10, 1
     filt = filter_code(name)
     if name in ("ukf", "huber_ukf"):
         spread, Wm, Wc = _merwe(merwe_weights, n, options.get("alpha", 1.0), options.get("beta", 2.0),
                                 options.get("kappa", 0.0))
-        gamma = float(options.get("gamma", GAMMA))
+        gamma = float(options.get("gamma", HUBER_GAMMA))
         iterations = int(options.get("iterations", 10))
     elif name == "ckf":
         center, spread = 0, float(np.sqrt(n))
@@ -845,7 +845,7 @@ def _constants_of(name, n, items):
     elif name in ("cdkf", "srcdkf"):
         h = float(options.get("h", H_STIRLING))
     elif name == "puekf":
-        n_pu = int(options.get("n_pu", 5))
+        n_pu = int(options.get("n_pu", N_PU))
         if n_pu < 1:
             raise ValueError(f"n_pu must be >= 1, got {n_pu}")
     return filt, spread, center, Wm, Wc, h, gamma, iterations, n_pu

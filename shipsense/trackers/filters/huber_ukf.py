@@ -23,13 +23,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from shipsense.defaults import HUBER_GAMMA
 from shipsense.trackers.filters.core import Belief, chol_solve, gain_update, prepare, safe_cholesky
 from shipsense.trackers.filters.ukf import merwe_weights, sigma_statistics
 
-GAMMA = 1.345
 
-
-def update(belief: Belief, y, model, mask=None, gamma=GAMMA, iterations=10, alpha=1.0, beta=2.0, kappa=0.0):
+def update(belief: Belief, y, model, mask=None, gamma=HUBER_GAMMA, iterations=10, alpha=1.0, beta=2.0, kappa=0.0):
     """Huber-UKF measurement update; returns ``(belief, innovation)``."""
     y, present, R = prepare(y, model, mask)
     spread, Wm, Wc = merwe_weights(belief.mean.shape[-1], alpha, beta, kappa)

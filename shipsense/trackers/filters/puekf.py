@@ -11,11 +11,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from shipsense.defaults import N_PU
 from shipsense.trackers.filters.core import Belief, gain_update, innovation, prepare, safe_cholesky
 from shipsense.trackers.filters.ekf import linearised_terms
 
 
-def update(belief: Belief, y, model, mask=None, n_pu: int = 5):
+def update(belief: Belief, y, model, mask=None, n_pu: int = N_PU):
     """PUEKF measurement update with ``n_pu`` sub-updates; returns ``(belief, innovation)``."""
     if int(n_pu) < 1:
         raise ValueError(f"n_pu must be >= 1, got {n_pu}")

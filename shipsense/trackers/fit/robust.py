@@ -9,6 +9,8 @@ from functools import lru_cache, partial
 
 import numpy as np
 
+from shipsense.defaults import HUBER_GAMMA
+
 
 @dataclass(frozen=True)
 class Huber:
@@ -20,7 +22,7 @@ class Huber:
     ``dof sigma^2`` per residual (:attr:`moments`, by Gauss-Hermite quadrature), a normal approximation.
     """
 
-    gamma: float = 1.345
+    gamma: float = HUBER_GAMMA
     eps: float = 0.0
     scale: float = 10.0
 

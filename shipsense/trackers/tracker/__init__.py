@@ -1,14 +1,13 @@
 """The project's passage tracker (:class:`Tracker`): detection, the global initialiser, a bank of its fits,
 restarts from batch refits and the consistency alarms, one sample of every passage at a time.
 
-:mod:`~shipsense.trackers.tracker.options` (options and the per-family settings),
+:mod:`~shipsense.trackers.tracker.settings` (the settings, resolved once, and the per-family table),
 :mod:`~shipsense.trackers.tracker.results` (statuses and outputs), :mod:`~shipsense.trackers.tracker.tracker`
 (the tracker), :mod:`~shipsense.trackers.tracker.step` (its compiled sample step),
 :mod:`~shipsense.trackers.tracker.restarts` (refits and when they are due) and
 :mod:`~shipsense.trackers.tracker.consistency` (the windowed innovation test).
 """
 
-from shipsense.trackers.tracker.options import TrackerOptions, family_options, prior_belief
 from shipsense.trackers.tracker.results import (
     INCONSISTENT,
     INITIALISING,
@@ -21,7 +20,9 @@ from shipsense.trackers.tracker.results import (
     Sample,
     TrackResult,
 )
+from shipsense.trackers.tracker.settings import FAMILY_SETTINGS, TrackerSettings, prior_belief, resolve_settings
 from shipsense.trackers.tracker.tracker import Tracker
 
 __all__ = ["INCONSISTENT", "INITIALISING", "NO_DATA", "RESTARTED", "STATUSES", "TRACKING", "Gap", "PassageState",
-           "Sample", "TrackResult", "Tracker", "TrackerOptions", "family_options", "prior_belief"]
+           "Sample", "TrackResult", "Tracker", "TrackerSettings", "FAMILY_SETTINGS", "prior_belief",
+           "resolve_settings"]

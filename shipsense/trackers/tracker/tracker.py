@@ -79,12 +79,9 @@ from shipsense.models.transitions import transitions
 from shipsense.trackers.bank.bank import BankState
 from shipsense.trackers.bank.seeding import seed_hypotheses
 from shipsense.trackers.bank.selection import report
-from shipsense.trackers.filters import get_filter
 from shipsense.trackers.filters.core import UNROLL_MIN_BATCH, Belief, symmetrize
-from shipsense.trackers.fit.robust import Huber
 from shipsense.trackers.init.window_fits import depth_prior, window_fits
 from shipsense.trackers.tracker.consistency import quantile_table, window_test
-from shipsense.trackers.tracker.options import TrackerOptions, family_options, initial_grid, prior_belief
 from shipsense.trackers.tracker.restarts import due, refit_window
 from shipsense.trackers.tracker.results import (
     INCONSISTENT,
@@ -97,6 +94,7 @@ from shipsense.trackers.tracker.results import (
     Sample,
     TrackResult,
 )
+from shipsense.trackers.tracker.settings import TrackerSettings, initial_grid, prior_belief, resolve_settings
 from shipsense.trackers.tracker.step import TrackerStep, prepare_sample
 
 _WAITING, _STARTING, _RUNNING, _PENDING = 0, 1, 2, 3   # phases of a passage (_PENDING: its window fits deferred)
@@ -119,8 +117,11 @@ class Tracker:
         Passages tracked side by side (the batch).
     sensors : list of str, optional
         The sensor ids to use (default: all).
+    settings : TrackerSettings, optional
+        Resolved settings (:func:`~shipsense.trackers.tracker.settings.resolve_settings`); by default resolved
+        here from the scenario and ``options``.
     **options
-        :class:`TrackerOptions`.
+        Fields of :class:`~shipsense.config.TrackerConfig` that override the scenario's ``[tracker]`` table.
 
     Examples
     --------
@@ -132,34 +133,25 @@ class Tracker:
     ((2, 80, 7), (2, 80, 7, 7), (2, 80))
     """
 
-    def __init__(self, scenario, *, passages=1, sensors=None, **options):
+    def __init__(self, scenario, *, passages=1, sensors=None, settings=None, **options):
         from shipsense.config import load_scenario
         from shipsense.models.field_model import model_from_scenario
-        from shipsense.trackers.bank.bank import study_bank
 
         self.scenario = sc = load_scenario(scenario)
-        opts = TrackerOptions(**options)
-        model = model_from_scenario(sc, sensors=sensors)
-        cfg = sc.tracker
-        if opts.robust is None:
-            robust = cfg.robust if cfg is not None and cfg.robust is not None else sc.noise.model == "contaminated"
-            opts = replace(opts, robust=bool(robust))
-        if opts.gap_limit_s is None:
-            gap = cfg.gap_limit_s if cfg is not None and cfg.gap_limit_s is not None else 10.0 * sc.period
-            opts = replace(opts, gap_limit_s=float(gap))
-        fam = family_options(model, sc)
-        opts = replace(opts, **{k: v for k, v in fam.items() if getattr(opts, k) is None})
-        study_unit, self.bank_config = study_bank(sc, opts.unit if opts.method == "bank" else None)
-        if opts.method == "bank":
-            self.unit, self.model = study_unit, model
-        else:
-            self.unit = get_filter(opts.unit or ("huber_ukf" if opts.robust else "ukf"))
-            self.model = model.without_process_noise()
-        self.options = opts
-        self.huber = None
-        if opts.robust:
-            contaminated = sc.noise.model == "contaminated"
-            self.huber = Huber(eps=sc.noise.eps, scale=sc.noise.outlier_scale) if contaminated else Huber()
+        if settings is None:
+            settings = resolve_settings(sc, sensors, **options)
+        elif options:
+            raise TypeError(f"give settings or options, not both (got {', '.join(options)})")
+        elif not isinstance(settings, TrackerSettings):
+            raise TypeError(f"settings must be TrackerSettings (resolve_settings), got {type(settings).__name__}")
+        self.settings = opts = settings
+        model = model_from_scenario(sc, sensors=sensors, process_noise=opts.process_noise)
+        self.bank_config = opts.bank
+        self.unit = opts.filter_unit()
+        # the project's tracker: a bank without process noise (the passages are straight); the studies' bank
+        # keeps the scenario's
+        self.model = model if opts.method == "bank" else model.without_process_noise()
+        self.huber = opts.huber(sc.noise)
         # the bank's noise: with Huber updates the estimate's variance is kappa times the nominal one
         kappa = self.huber.variance_factor if self.huber is not None else 1.0
         self.filter_model = replace(self.model, R=self.model.R * kappa)
@@ -170,7 +162,7 @@ class Tracker:
         self._grid = initial_grid(sc)
         self._prior = prior_belief(self.model, sc, self.bank_config)
         self._prior_info = np.diag(self.model.x_scale ** 2 / np.diag(self._prior[1]))   # internal units
-        self._compiled = TrackerStep.of(self.unit, self.filter_model, self._H)
+        self._compiled = TrackerStep.of(self.unit, self.filter_model, self.H)
         spec = kernel_of(self.model)
         self._pads_exactly = self.huber is None and spec is not None and spec[0] == FIELD   # (_restart's refits)
         self._R_used = np.ascontiguousarray(self.filter_model.R[None], dtype=float)
@@ -184,7 +176,7 @@ class Tracker:
         P = int(passages if passages is not None else self.P)
         if P < 1:
             raise ValueError(f"passages must be at least 1, got {passages}")
-        n, H = self.model.n, self._H
+        n, H = self.model.n, self.H
         self.P = P
         for name, (shape, dtype, value) in self._state_fields().items():
             setattr(self, name, np.full((P, *shape), value, dtype=dtype))
@@ -200,7 +192,7 @@ class Tracker:
         idx = np.asarray(passages, dtype=int)
         for name, (_, _, value) in self._state_fields().items():
             getattr(self, name)[idx] = value
-        H, n = self._H, self.model.n
+        H, n = self.H, self.model.n
         self.bank.reset_runs(idx, np.broadcast_to(self._prior[0], (idx.size, H, n)), self._prior[1])
         return self
 
@@ -217,14 +209,14 @@ class Tracker:
         bank's start factorises its hypotheses' covariances (``safe_cholesky``), which from 512 matrices on
         takes an unrolled form equal to LAPACK's only to rounding (e.g. run-ins side by side,
         :meth:`sibling`)."""
-        return max(1, (UNROLL_MIN_BATCH - 1) // self._H)
+        return max(1, (UNROLL_MIN_BATCH - 1) // self.H)
 
     def passage_states(self, passages):
         """The :class:`PassageState` of each of ``passages`` (indices): copies, for :meth:`set_passage_states`
         of this tracker or a sibling (:meth:`sibling`)."""
         idx = self._passage_indices(passages)
         self._check_unpruned()
-        H, size, names = self._H, self.y_hist.shape[1], list(self._state_fields())
+        H, size, names = self.H, self.y_hist.shape[1], list(self._state_fields())
         out = []
         for p in idx.tolist():
             hist = int(min(self.n[p], size))
@@ -249,7 +241,7 @@ class Tracker:
         if any(not isinstance(st, PassageState) or st.model is not self.model for st in states):
             raise ValueError("passage states must come from this tracker or a sibling (Tracker.sibling)")
         self._check_unpruned()
-        H, b, fresh = self._H, self.bank.belief, self._state_fields()
+        H, b, fresh = self.H, self.bank.belief, self._state_fields()
         moved = set(idx.tolist())
         self.gaps = [g for g in self.gaps if g.passage not in moved]      # (a previous occupant's)
         for p, st in zip(idx.tolist(), states):
@@ -285,7 +277,7 @@ class Tracker:
     def _state_fields(self):
         """Per-passage state: name -> (shape after the passage axis, dtype, value at a passage's start)."""
         m, n = self.model.m, self.model.n
-        hist = self.options.history if self.options.method == "tracker" else 1
+        hist = self.settings.history if self.settings.method == "tracker" else 1
         return {
             "n": ((), int, 0),                      # samples seen: the index of the next one
             "phase": ((), np.int8, _WAITING),
@@ -300,16 +292,16 @@ class Tracker:
             "restarts": ((), int, 0),
             "peak_done": ((), bool, False),
             "ref": ((), float, np.nan),             # position covariance trace at the last (re)start
-            "nis": ((self.options.nis_window,), float, np.nan),
+            "nis": ((self.settings.nis_window,), float, np.nan),
             "snr": ((3,), float, np.nan),
-            "win": ((self.options.keep_init, n), float, np.nan),   # window fits at k0 (internal)
+            "win": ((self.settings.keep_init, n), float, np.nan),   # window fits at k0 (internal)
             "win_t0": ((), float, np.nan),
             "y_hist": ((hist, m), float, np.nan),
             "t_hist": ((hist,), float, np.nan),
             "own": ((), float, np.nan),             # trace of the selected hypothesis's own position covariance
             # the consistency test's window (consistency.terms of the selected hypothesis), its length, the
             # samples it failed on, and whether it failed on this one
-            "cons": ((self.options.consistency_window or 1, 2, m), float, 0.0),
+            "cons": ((self.settings.consistency_window or 1, 2, m), float, 0.0),
             "cons_n": ((), int, 0),
             "cons_tests": ((), int, 0),
             "cons_fails": ((), int, 0),
@@ -317,8 +309,9 @@ class Tracker:
         }
 
     @property
-    def _H(self):
-        return self.options.keep_init if self.options.method == "tracker" else (
+    def H(self):
+        """Hypotheses of a passage's bank."""
+        return self.settings.keep_init if self.settings.method == "tracker" else (
             len(self.bank_config.levels) * len(self.bank_config.bearings_deg))
 
     # -- one sample ---------------------------------------------------------------------------------------------
@@ -342,7 +335,7 @@ class Tracker:
         code, i, yi, dt, snr, starting, running, gap = prepare_sample(
             act, np.ascontiguousarray(t), np.ascontiguousarray(y), self.model.y_scale, self.phase, self.last_t,
             self.n, self.y_hist, self.t_hist, self.cons_now, self._snr_field, self._snr_std,
-            float(self.options.gap_limit_s), _PHASES)
+            float(self.settings.gap_limit_s), _PHASES)
         if code == 4:
             raise IndexError(f"index {int(act[i])} is out of bounds for {self.P} passages")
         if code == 5:
@@ -357,15 +350,15 @@ class Tracker:
             raise ValueError(f"time must increase: passage {p} goes from {self.last_t[p]:.9g} s to {t[i]:.9g} s")
         if gap:
             step = dt[act]
-            for p in act[step > self.options.gap_limit_s]:
+            for p in act[step > self.settings.gap_limit_s]:
                 self.gaps.append(Gap(int(p), float(self.last_t[p]), float(t[act == p][0])))
-        if self.options.robust:
+        if self.settings.robust:
             snr = self._robust_snr(snr, yi, act)
         out = self._prior_sample()
         out.status[starting] = INITIALISING
         if running.size:
             self._step(running, yi, dt, out)
-        if self.options.method == "bank":
+        if self.settings.method == "bank":
             if starting.size:
                 self._seed_bank(starting, yi * self.model.y_scale, out)
         else:
@@ -446,7 +439,7 @@ class Tracker:
         """Predict (time steps ``dt``) and update the banks of passages ``runs``; write their output (one
         compiled call where the model has a compiled step, :mod:`~shipsense.trackers.tracker.step`: the same
         numbers)."""
-        H = self._H
+        H = self.H
         d, T = dt[runs], self.model.period
         regular = all(abs(step - T) <= 1e-9 * T for step in d.tolist())
         model = None if regular else self.filter_model.stepped(np.repeat(d, H))
@@ -463,7 +456,7 @@ class Tracker:
         m_sel = inn.m.reshape(-1)[pick]
         self.nis[runs, :-1] = self.nis[runs, 1:]                  # the window moves on by one sample
         self.nis[runs, -1] = np.where(m_sel > 0, inn.nis.reshape(-1)[pick] / np.maximum(m_sel, 1), np.nan)
-        test = self.options.consistency_window and self.options.method == "tracker"   # (the bank is the studies')
+        test = self.settings.consistency_window and self.settings.method == "tracker"   # (the bank is the studies')
         failed = self._consistency(runs, yi, inn, sel) if test else runs[:0]
         self._report(runs, out)
         out.status[failed] = INCONSISTENT
@@ -472,7 +465,7 @@ class Tracker:
         """:meth:`_step` of passages ``runs`` in compiled calls (``stepped``: the filter model with their
         transitions, irregular sampling); returns the passages it did not step (an element's update failed:
         nothing of theirs written)."""
-        o, h = self.options, self.huber
+        o, h = self.settings, self.huber
         runs = np.asarray(runs, dtype=np.int64)
         test = bool(o.consistency_window and o.method == "tracker")
         consistency = (self._R_used, self.model.R,
@@ -497,18 +490,18 @@ class Tracker:
         h = self.huber
         R_used = self.filter_model.R[None] if inn.R is None else inn.R
         failed = np.empty(runs.size, dtype=bool)
-        window_test(np.asarray(runs, dtype=np.int64), np.asarray(sel, dtype=np.int64), self._H, inn.eps, inn.S,
+        window_test(np.asarray(runs, dtype=np.int64), np.asarray(sel, dtype=np.int64), self.H, inn.eps, inn.S,
                     np.asarray(R_used, dtype=float), self.model.R, np.isfinite(yi[runs]),
                     *((float(h.gamma), float(h.eps), float(h.scale)) if h is not None else (np.inf, 0.0, 1.0)),
-                    quantile_table(self.options.consistency_level, self.model.m), self.cons, self.cons_n,
+                    quantile_table(self.settings.consistency_level, self.model.m), self.cons, self.cons_n,
                     self.cons_tests, self.cons_fails, self.cons_now, failed)
         return runs[failed]
 
     def _report(self, runs, out):
         """Selected estimate, its mixture mean-square error (tracker) or own covariance (bank), and the
         selection figures of passages ``runs`` (:func:`~shipsense.trackers.bank.selection.report`)."""
-        o, belief = self.options, self.bank.belief
-        report(belief.mean, belief.chol, np.asarray(runs, dtype=np.int64), self._H, self.model.x_scale,
+        o, belief = self.settings, self.bank.belief
+        report(belief.mean, belief.chol, np.asarray(runs, dtype=np.int64), self.H, self.model.x_scale,
                self.bank.cum[runs], o.method == "tracker", float(o.report_nats), float(o.report_distance_m),
                self.excess, out.estimate, out.cov, self.own, out.gap_nats, out.ambiguous, out.hypotheses,
                out.selected)
@@ -563,7 +556,7 @@ class Tracker:
         (with ``defer``, the passage is left pending for :meth:`fit_pending`)."""
         if starting.size == 0:
             return
-        o = self.options
+        o = self.settings
         detect = starting[(self.k0[starting] < 0) & (snr[starting] > o.snr_start)]
         self.k0[detect] = self.n[detect]
         seen = starting[self.k0[starting] >= 0]
@@ -583,7 +576,7 @@ class Tracker:
         """The global fits of the windows of passages ``ready`` (complete at their current sample) and their
         banks' start, one batch per window length: a passage's fits are those it would have alone (a batch of
         windows of different lengths would pad the shorter ones, and their fits would move at rounding)."""
-        o = self.options
+        o = self.settings
         have = self.n[ready] - self.k0[ready] + 1
         for length in np.unique(have):
             group = ready[have == length]
@@ -599,7 +592,7 @@ class Tracker:
 
     def _fits(self, yw, taus):
         """The global initialiser's fits of windows ``yw`` (R, W, m) with times ``taus`` (R, W)."""
-        o = self.options
+        o = self.settings
         regular = np.allclose(taus, np.arange(taus.shape[1]) * self.model.period, rtol=0, atol=1e-9)
         return window_fits(self.model, yw, **self._grid, taus=None if regular else taus, keep=o.keep_init,
                            grid_samples=o.grid_samples, grid_reserve=self.window,
@@ -610,7 +603,7 @@ class Tracker:
         """Starts (R, keep_init, n) at the windows' first samples: the global fits of the windows ``which``
         (a restart after an alarm need not stay near the track that diverged), NaN for the others; ``lengths``
         (R,): each window's samples (the others padding)."""
-        starts = np.full((yw.shape[0], self.options.keep_init, self.model.n), np.nan)
+        starts = np.full((yw.shape[0], self.settings.keep_init, self.model.n), np.nan)
         # (they are only starts, which the refit takes to all the samples: the global fits see at most a
         # window's worth of them, evenly spread from the first to the last, so their cost does not grow; one
         # batch per window length, its own samples: a passage's starts do not depend on the windows beside it)
@@ -623,7 +616,7 @@ class Tracker:
     def _start_banks(self, runs, fits, tau, inflate, out):
         """(Re)start the banks of passages ``runs`` at this sample from window fits at times ``tau`` (R,) before
         it; a fit that fails its test has its covariance inflated by its chi-square over the expected."""
-        H, xs = self._H, self.model.x_scale
+        H, xs = self.H, self.model.x_scale
         A = transitions(self.model, tau)                                               # (R, n, n)
         birge = np.where(fits.fit_ok[:, None], 1.0,
                          np.maximum(1.0, fits.chi2[:, :1] / np.maximum(fits.expected[:, None], 1e-300)))
@@ -657,7 +650,7 @@ class Tracker:
         consistency test: :func:`~shipsense.trackers.tracker.restarts.due`)."""
         flags = np.empty((runs.size, 4), dtype=bool)
         due(np.asarray(runs, dtype=np.int64), self.n, self.start, self.nis, self.trusted, self.alarms, self.peak,
-            self.peak_done, snr, self.scan, self.own, self.ref, self.cons_now, *_restart_options(self.options),
+            self.peak_done, snr, self.scan, self.own, self.ref, self.cons_now, *_restart_options(self.settings),
             out.status, out.cov, INCONSISTENT, flags)
         due_, alarm, after_peak, rescan = flags.T
         if due_.any():
@@ -677,7 +670,7 @@ class Tracker:
         """Batch refits of passages ``runs`` to their samples since the window start (at most ``history``),
         started from the selected estimate, the bank's live hypotheses and (``multistart``) the initial
         window fits; the bank restarts from the ``keep`` best distinct fits."""
-        o, H, n = self.options, self._H, self.model.n
+        o, H, n = self.settings, self.H, self.model.n
         first = np.maximum(self.k0[runs], self.n[runs] - self.y_hist.shape[1] + 1)
         lengths = self.n[runs] - first + 1
         if not self._pads_exactly and np.unique(lengths).size > 1:

@@ -75,7 +75,7 @@ def test_the_tracker_flags_an_optimistic_filter_and_not_an_honest_one():
     tr, res = _s2(1, 8, 21)
     tests, fails = int(tr.cons_tests.sum()), int(tr.cons_fails.sum())
     assert tests > 100
-    assert fails <= stats.binom.isf(1e-3, tests, tr.options.consistency_level), (fails, tests)
+    assert fails <= stats.binom.isf(1e-3, tests, tr.settings.consistency_level), (fails, tests)
     tr3, res3 = _s2(3, 8, 21)
     assert tr3.cons_fails.sum() > 5 * max(fails, 1), (tr3.cons_fails.sum(), fails)
     assert (res3.status == INCONSISTENT).sum() >= tr3.cons_fails.sum() // 2

@@ -104,12 +104,13 @@ def test_the_compiled_restart_test_is_the_trackers_rules(robust, which):
     test; stuck passages reported inconsistent with their covariance scaled by the level (np.nanmean's or
     np.nanmedian's, to the bit); the peak updated; passages not asked about untouched.  Options None, False,
     fractional, infinite and negative, as a user may give them."""
-    from shipsense.trackers.tracker.options import TrackerOptions
+    from shipsense.config import TrackerOptions
     from shipsense.trackers.tracker.restarts import due
     from shipsense.trackers.tracker.tracker import _restart_options
 
     o = _RESTART_OPTIONS[which]
-    options = TrackerOptions(robust=robust, nis_window=10, nis_limit=3.0, **o)
+    # (model_construct: the values a user may hand the compiled rule directly, outside the options' ranges)
+    options = TrackerOptions.model_construct(robust=robust, nis_window=10, nis_limit=3.0, **o)
     rng = np.random.default_rng(11)
     P, Nw, n = 40, 10, 3
     nis = rng.exponential(2.5, (P, Nw))

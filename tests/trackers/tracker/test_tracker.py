@@ -248,7 +248,7 @@ def test_robust_mode_with_outliers_and_dropouts_stays_consistent():
                                                  "dropout": 0.3})
     sim = simulate(sc, runs=4, seed=3, random=True)
     tr = Tracker(sc, passages=4, sensors=["M1", "M2"])
-    assert tr.options.robust and tr.unit.name == "huber_ukf" and 1.9 < tr.kappa < 2.1
+    assert tr.settings.robust and tr.unit.name == "huber_ukf" and 1.9 < tr.kappa < 2.1
     res = tr.track(sim.times, sim.measurements[..., :6])
     truth = tr.model.state_from_truth(sim.truth)
     err = np.hypot(*(res.estimates[:, -1, :2] - truth[:, -1, :2]).T)
@@ -410,19 +410,20 @@ def test_one_magnetometer_rescans_and_leaves_a_wrong_basin():
     sc = load_scenario("S0")
     sim = simulate(sc, runs=300, seed=0, random=True)
     tr = Tracker(sc, passages=1)
-    assert tr.options.rescan and not Tracker("S2", sensors=["M1", "M2"]).options.rescan
+    assert tr.settings.rescan and not Tracker("S2", sensors=["M1", "M2"]).settings.rescan
     res = tr.track(sim.times, sim.measurements[79:80])
     truth = tr.model.state_from_truth(sim.truth[79:80])
     err = np.hypot(*(res.estimates[0, :, :2] - truth[0, :, :2]).T)
     assert err[200] < 10.0 and err[-30:].max() < 10.0, (err[200], err[-30:].max())
 
 
-@pytest.mark.parametrize("bad, match", [({"window_s": 0.0}, "window_s must be a positive number"),
-                                        ({"grid_samples": 0}, "grid_samples must be a positive integer"),
-                                        ({"grid_samples": 7.5}, "grid_samples must be a positive integer"),
-                                        ({"grid_samples": True}, "grid_samples must be a positive integer"),
-                                        ({"consistency_window": 1}, "consistency_window must be an integer"),
-                                        ({"keep": 6}, "keep \\(6\\) cannot exceed keep_init \\(5\\)")])
+@pytest.mark.parametrize("bad, match", [({"window_s": 0.0}, "window_s: must be > 0"),
+                                        ({"grid_samples": 0}, "grid_samples: must be greater than or equal to 1"),
+                                        ({"grid_samples": 7.5}, "grid_samples: expected a whole number"),
+                                        ({"grid_samples": True}, "grid_samples: expected a whole number"),
+                                        ({"consistency_window": 1}, "consistency_window: must be greater than or "
+                                                                    "equal to 2"),
+                                        ({"keep": 6}, "keep: cannot exceed keep_init \\(5\\), got 6")])
 def test_bad_options_raise_one_error_naming_the_option(bad, match):
     with pytest.raises(ValueError, match=match):
         Tracker("S2", **bad)
@@ -434,9 +435,9 @@ def test_the_grid_search_samples_follow_the_array_family():
     passages); an explicit value wins, and window_fits is called with it."""
     from shipsense.trackers.tracker import tracker as tracker_module
 
-    assert Tracker("S2").options.grid_samples == 15
-    assert Tracker("S0").options.grid_samples == 16
-    assert Tracker("S1-P2").options.grid_samples == 16
+    assert Tracker("S2").settings.grid_samples == 15
+    assert Tracker("S0").settings.grid_samples == 16
+    assert Tracker("S1-P2").settings.grid_samples == 16
     sc = load_scenario("S2")
     sim = simulate(sc, runs=1, seed=2, random=True)
     seen = []

@@ -1,0 +1,7 @@
+"""``python -m shipsense.cli``: the command line (:func:`shipsense.cli.main`)."""
+
+import sys
+
+from shipsense.cli import main
+
+sys.exit(main())
