@@ -86,7 +86,8 @@ def run_studies(names, runs=None, out="results", seed=0, progress=True, *, worke
     its folder holds its ``summary.json`` (written last): then it is skipped and its summary read back; another
     run's folder is refused; ``restart`` runs a study afresh in either.  Returns {name: summary}."""
     from shipsense.atomic import atomic_write_bytes
-    from shipsense.sweep.runner import _close, connect, execute
+    from shipsense.parallel import dask_client
+    from shipsense.sweep.runner import execute
     from shipsense.tasks import TaskStore
 
     tasks = [StudyTask(n, runs or EXPERIMENTS[n][1], seed) for n in names]
@@ -107,15 +108,9 @@ def run_studies(names, runs=None, out="results", seed=0, progress=True, *, worke
             atomic_write_bytes(path, files[rel])
         summaries[task.study] = result["summary"]
 
-    own = client is None and todo and not (scheduler is None and workers == 0)
-    if own:
-        client = connect(workers, scheduler, log)
     t0 = time.perf_counter()
-    try:
+    with dask_client(workers, scheduler, client, needed=bool(todo), log=log) as client:
         execute(todo, run_study, keep, client, None if progress else False, key="shipsense-reproduce")
-    finally:
-        if own:
-            _close(client)
     for t in tasks:
         if t.study not in summaries:   # finished before: read back
             summaries[t.study] = json.loads(_summary(stores[t.study]).read_text())
@@ -127,15 +122,11 @@ def run_all(runs=None, out="results", seed=0, progress=True, *, workers=None, sc
             log=print):
     """S0, S1 and S2 side by side, then the wide study's chunks, on one Dask cluster (``workers``: None = one
     per core, 0 = this process); returns {name: summary}."""
+    from shipsense.parallel import dask_client
     from shipsense.reproduce import wide
-    from shipsense.sweep.runner import _close, connect
 
-    client = None if (scheduler is None and workers == 0) else connect(workers, scheduler, log)
-    try:
+    with dask_client(workers, scheduler, log=log) as client:
         out_all = run_studies(STUDIES, runs, out, seed, progress, client=client, workers=0, restart=restart, log=log)
         out_all["WIDE"] = wide.run(runs=runs or EXPERIMENTS["WIDE"][1], out=Path(out) / "wide", seed=seed,
                                    progress=progress, client=client, workers=0, restart=restart, log=log)
-    finally:
-        if client is not None:
-            _close(client)
     return out_all

@@ -485,7 +485,8 @@ def run(runs=500, out="results/wide", seed=0, progress=True, *, workers=0, sched
     N on a local Dask cluster of N single-threaded processes, None on one per core; ``scheduler``: an existing
     Dask cluster's address.
     """
-    from shipsense.sweep.runner import _close, connect, execute
+    from shipsense.parallel import dask_client
+    from shipsense.sweep.runner import execute
 
     o = Output(out)
     t0 = time.perf_counter()
@@ -499,16 +500,10 @@ def run(runs=500, out="results/wide", seed=0, progress=True, *, workers=0, sched
         log("wide: dask is not installed, running in this process (pip install 'shipsense[sweep]' for a local "
             "cluster)")
         workers = 0
-    own = client is None and todo and not (scheduler is None and workers == 0)
-    if own:
-        client = connect(workers, scheduler, log)
-    try:
+    with dask_client(workers, scheduler, client, needed=bool(todo), log=log) as client:
         store.begin()
         execute(todo, run_task, lambda t, r: _store(store, t, r), client, None if progress else False,
                 key="shipsense-wide")
-    finally:
-        if own:
-            _close(client)
     summary, rows = {}, []
     for name in FAMILIES:
         summary[name] = family_rows(name, [_load(store, t) for t in todo_all if t.part is None and t.family == name])

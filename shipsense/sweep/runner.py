@@ -19,22 +19,17 @@ starts afresh.
 
 from __future__ import annotations
 
-import os
 import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from shipsense.parallel import dask_client
 from shipsense.sweep.cells import Task, build_cells, make_tasks
 from shipsense.sweep.spec import SweepError, SweepSpec
 from shipsense.sweep.store import table_bytes
 from shipsense.tasks import TaskStore, canonical_hash
 
-SCHEDULER_TIMEOUT_S = 5.0
-"""How long to wait for a ``--scheduler`` address to answer."""
-ONE_THREAD = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "SHIPSENSE_THREADS": "1"}
-"""A local cluster runs a single-threaded worker per core: BLAS, OpenMP and the compiled filter steps held to one
-thread in each."""
 OWN_FILES = ("results.parquet", "results.csv", "passages.parquet", "*.png")
 """What a sweep writes into its folder beside the marker and the chunks (removed with them on a restart)."""
 
@@ -122,15 +117,10 @@ def run_sweep(spec: SweepSpec, base_dir, out, *, workers: int | None = None, sch
     log(f"sweep {spec.name!r}: {len(cells)} cells, {len(tasks)} tasks"
         + (f"; {skipped} already finished in {out}, {len(todo)} to run" if skipped else ""))
     t0 = time.perf_counter()
-    own = client is None and todo and not (scheduler is None and workers == 0)
-    if own:   # before anything is written: a scheduler that does not answer leaves no folder behind
-        client = connect(workers, scheduler, log)
-    try:
+    # the client first: a scheduler that does not answer leaves no folder behind
+    with dask_client(workers, scheduler, client, needed=bool(todo), log=log) as client:
         store.begin(**_meta(spec), status="running", cells=len(cells), tasks=len(tasks))
         task_seconds, n_workers = _execute(todo, store, client, progress)
-    finally:
-        if own:
-            _close(client)
     wall = time.perf_counter() - t0
     summarise(spec, cells, out, csv=csv)
     store.mark(**_meta(spec), status="complete", cells=len(cells), tasks=len(tasks), skipped=skipped, ran=len(todo),
@@ -199,37 +189,3 @@ def execute(tasks, run, store, client=None, progress=None, *, describe=None, key
         return n_workers
     finally:
         bar.close()
-
-
-def _close(client):
-    cluster = getattr(client, "cluster", None)
-    client.close()
-    if cluster is not None:
-        cluster.close()
-
-
-def connect(workers: int | None, scheduler: str | None, log=print):
-    """A Dask client: on ``scheduler`` (answering within :data:`SCHEDULER_TIMEOUT_S`), or on a new local
-    cluster of ``workers`` single-threaded processes (default: the cores), BLAS pinned to one thread each."""
-    import logging
-
-    try:
-        import dask
-        from distributed import Client, LocalCluster
-    except ImportError:
-        raise SweepError("running on Dask needs the sweep extra: pip install 'shipsense[sweep]' "
-                         "(or --workers 0 to run serially)") from None
-    if scheduler is not None:
-        try:
-            client = Client(scheduler, timeout=f"{SCHEDULER_TIMEOUT_S}s")
-        except (OSError, TimeoutError, ValueError) as err:
-            raise SweepError(f"--scheduler {scheduler}: no Dask scheduler answered within "
-                             f"{SCHEDULER_TIMEOUT_S:g} s ({type(err).__name__}: {err})") from None
-    else:
-        n = workers if workers is not None else (os.cpu_count() or 1)
-        with dask.config.set({"distributed.nanny.pre-spawn-environ": ONE_THREAD}):
-            cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, silence_logs=logging.ERROR,
-                                   dashboard_address=":0")
-        client = Client(cluster)
-    log(f"dask: {len(client.scheduler_info().get('workers', {}))} workers, dashboard {client.dashboard_link}")
-    return client
