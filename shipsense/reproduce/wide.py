@@ -80,7 +80,7 @@ from shipsense.reproduce.common import Output, refit_stage, track_global, track_
 from shipsense.simulator import simulate
 from shipsense.tasks import TaskStore, canonical_hash
 from shipsense.trackers.bank import run_bank, study_bank
-from shipsense.trackers.metrics import converged_until, passage_ends
+from shipsense.trackers.metrics import converged_until, passage_ends, position_crlb_trace, position_nees
 from shipsense.trackers.models import model_from_scenario
 from shipsense.trackers.seeding import seed_hypotheses
 
@@ -151,11 +151,6 @@ def position_bounds(model, truth, P0):
     return {**parts, "pcrlb_pooled": _pooled_bound(model, parts["info_sum"] / len(truth), parts["J0"])}
 
 
-def _trace(model, b):
-    xs2 = model.x_scale[:2] ** 2
-    return b[..., 0, 0] * xs2[0] + b[..., 1, 1] * xs2[1]
-
-
 def _bound_parts(model, truth, P0):
     """The per-passage bounds of :func:`position_bounds`, and what its pooled bound needs from these passages:
     the sum of their measurement information (K, n, n) and the prior information ``J0`` (internal units)."""
@@ -164,15 +159,16 @@ def _bound_parts(model, truth, P0):
     x = model.to_internal(truth)
     J0 = np.linalg.inv(P0 / np.outer(model.x_scale, model.x_scale))
     info = measurement_information(model, x)
-    return {"pcrlb": _trace(model, pcrlb_from_information(model, info, J0)),
-            "crlb_deterministic": _trace(model, pcrlb_from_information(model, info, J0, Q=np.zeros_like(model.Q))),
+    return {"pcrlb": position_crlb_trace(pcrlb_from_information(model, info, J0), model.x_scale),
+            "crlb_deterministic": position_crlb_trace(pcrlb_from_information(model, info, J0, Q=np.zeros_like(model.Q)),
+                                                      model.x_scale),
             "info_sum": info.sum(axis=0), "J0": J0}
 
 
 def _pooled_bound(model, info_mean, J0):
     from shipsense.design.fisher import pcrlb_from_information
 
-    return _trace(model, pcrlb_from_information(model, info_mean[None], J0)[0])
+    return position_crlb_trace(pcrlb_from_information(model, info_mean[None], J0)[0], model.x_scale)
 
 
 def family_passages(name, passages, seed):
@@ -196,18 +192,14 @@ def converged(est, truth, ends):
 def passage_figures(est, covs_pos, truth, ends, status=None):
     """A method's per-passage figures, from which :func:`aggregate` computes its row (so that chunks of
     passages can be pooled): ``conv`` (R,), and (R, K) ``err`` (position error, NaN after each passage's
-    end), ``valid`` (its samples), ``q`` (position NEES, NaN where no covariance is given) and ``track``
-    (the method reports a track: for the Tracker, ``status`` `tracking` or `restarted`; the studies'
-    methods always do)."""
+    end), ``valid`` (its samples), ``q`` (position NEES, :func:`~shipsense.trackers.metrics.position_nees`:
+    NaN where no covariance is given) and ``track`` (the method reports a track: for the Tracker, ``status``
+    `tracking` or `restarted`; the studies' methods always do)."""
     from shipsense.trackers.tracker import RESTARTED, TRACKING
 
     conv, err, valid = converged(est, truth, ends)
-    d = est[..., :2] - truth[..., :2]
-    a, b, c = covs_pos[..., 0, 0], covs_pos[..., 0, 1], covs_pos[..., 1, 1]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        q = (c * d[..., 0] ** 2 - 2 * b * d[..., 0] * d[..., 1] + a * d[..., 1] ** 2) / (a * c - b * b)
     track = np.ones_like(valid) if status is None else np.isin(status, (TRACKING, RESTARTED))
-    return {"conv": conv, "err": err, "valid": valid, "q": np.where(np.isfinite(q), q, np.nan), "track": track}
+    return {"conv": conv, "err": err, "valid": valid, "q": position_nees(est, covs_pos, truth), "track": track}
 
 
 def aggregate(fig, ends, bounds, seconds):
