@@ -1,6 +1,6 @@
 """Threads for the compiled kernels, each run by a kernel that releases the GIL (numba ``nogil=True``): a large
 batch split into contiguous chunks (:func:`in_chunks`), or a few items of unequal cost handed out one at a
-time (:func:`in_turns`).
+time (:func:`in_turns`); and, across processes, the Dask client a command's tasks run on (:func:`dask_client`).
 
 The filter steps (:mod:`shipsense.trackers.filters.fused`), the tracker's step, the grid search, the
 Levenberg-Marquardt fits and the fast HED field (:mod:`shipsense.physics.electric`) treat every element
@@ -188,3 +188,62 @@ def in_turns(fn, n):
     for f in futures:
         if not f.cancelled() and f.exception() is not None:
             raise f.exception()
+
+
+SCHEDULER_TIMEOUT_S = 5.0
+"""How long to wait for a ``--scheduler`` address to answer."""
+ONE_THREAD = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "SHIPSENSE_THREADS": "1"}
+"""A local cluster runs a single-threaded worker per core: BLAS, OpenMP and the compiled filter steps held to one
+thread in each."""
+
+
+@contextmanager
+def dask_client(workers: int | None = None, scheduler: str | None = None, client=None, *, needed: bool = True,
+                log=print):
+    """The Dask client a command's tasks run on, for the ``with`` block; a client made here is closed (with
+    its local cluster) when the block ends, however it ends.
+
+    * ``client`` given: that one (the caller's: left open);
+    * ``workers == 0`` and no ``scheduler``, or nothing to run (``needed`` false): None -- run in this process;
+    * else a new client on ``scheduler`` (an address, ``tcp://host:8786``, answering within
+      :data:`SCHEDULER_TIMEOUT_S`), or on a new local cluster of ``workers`` single-threaded processes (None:
+      one per core) with BLAS held to one thread each (:data:`ONE_THREAD`).
+
+    A scheduler that does not answer, or Dask not installed, is a :class:`~shipsense.errors.ShipsenseError`
+    raised before the block runs."""
+    if client is not None or not needed or (scheduler is None and workers == 0):
+        yield client
+        return
+    own = _connect(workers, scheduler, log)
+    try:
+        yield own
+    finally:
+        cluster = getattr(own, "cluster", None)
+        own.close()
+        if cluster is not None:
+            cluster.close()
+
+
+def _connect(workers, scheduler, log):
+    import logging
+
+    try:
+        import dask
+        from distributed import Client, LocalCluster
+    except ImportError:
+        raise ShipsenseError("running on Dask needs the sweep extra: pip install 'shipsense[sweep]' "
+                             "(or --workers 0 to run serially)") from None
+    if scheduler is not None:
+        try:
+            client = Client(scheduler, timeout=f"{SCHEDULER_TIMEOUT_S}s")
+        except (OSError, TimeoutError, ValueError) as err:
+            raise ShipsenseError(f"--scheduler {scheduler}: no Dask scheduler answered within "
+                                 f"{SCHEDULER_TIMEOUT_S:g} s ({type(err).__name__}: {err})") from None
+    else:
+        n = workers if workers is not None else (os.cpu_count() or 1)
+        with dask.config.set({"distributed.nanny.pre-spawn-environ": ONE_THREAD}):
+            cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, silence_logs=logging.ERROR,
+                                   dashboard_address=":0")
+        client = Client(cluster)
+    log(f"dask: {len(client.scheduler_info().get('workers', {}))} workers, dashboard {client.dashboard_link}")
+    return client

@@ -2,6 +2,7 @@
 
 import os
 import signal
+import sys
 import time
 
 import numpy as np
@@ -186,3 +187,52 @@ def test_the_background_thread_holds_one_cpu_while_it_works(monkeypatch):
     assert parallel.threads() == 3 and parallel.background_allowed()
     with parallel.serial():
         assert not parallel.background_allowed()
+
+
+class _Given:
+    """A stand-in for the caller's own client: it must be handed back and left open."""
+
+    closed = False
+
+    def close(self):
+        self.closed = True
+
+
+def test_the_dask_client_is_the_callers_or_none_without_a_cluster():
+    given = _Given()
+    with parallel.dask_client(2, None, given) as client:
+        assert client is given
+    assert not given.closed
+    with parallel.dask_client(0, None) as client:                        # serial: no cluster
+        assert client is None
+    with parallel.dask_client(2, "tcp://nowhere:1", needed=False) as client:   # nothing to run: no cluster
+        assert client is None
+
+
+def test_a_dask_client_made_here_is_closed_with_its_cluster_however_the_block_ends(monkeypatch):
+    distributed = pytest.importorskip("distributed")
+    closed, close = [], distributed.Client.close
+
+    def recorded(self, *args, **kwargs):
+        closed.append(self)
+        return close(self, *args, **kwargs)
+
+    monkeypatch.setattr(distributed.Client, "close", recorded)
+    lines = []
+    with pytest.raises(KeyError), parallel.dask_client(1, None, log=lines.append) as client:
+        assert len(client.scheduler_info()["workers"]) == 1
+        cluster = client.cluster
+        raise KeyError("the block fails")
+    assert client in closed and cluster.status.name == "closed"
+    assert lines and lines[0].startswith("dask: 1 workers")
+
+
+def test_a_scheduler_that_does_not_answer_or_no_dask_is_one_message(monkeypatch):
+    pytest.importorskip("distributed")
+    monkeypatch.setattr(parallel, "SCHEDULER_TIMEOUT_S", 0.5)
+    with pytest.raises(ShipsenseError, match=r"--scheduler tcp://127.0.0.1:9: no Dask scheduler answered within "
+                       r"0.5 s"), parallel.dask_client(None, "tcp://127.0.0.1:9"):
+        pass
+    monkeypatch.setitem(sys.modules, "distributed", None)      # (import distributed fails)
+    with pytest.raises(ShipsenseError, match="running on Dask needs the sweep extra"), parallel.dask_client(2, None):
+        pass

@@ -668,7 +668,8 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("--workers", type=_whole(0, 1024), default=None,
                    help="local Dask workers, one thread each (default: the cores; 0 runs serially in-process)")
     w.add_argument("--scheduler", default=None, metavar="ADDRESS", help="an existing Dask scheduler, tcp://host:8786")
-    w.add_argument("--restart", action="store_true", help="discard another sweep's results found in DIR")
+    w.add_argument("--restart", action="store_true",
+                   help="start afresh, discarding the results found in DIR (this sweep's or another's)")
     w.add_argument("--csv", action="store_true", help="also write results.csv")
     w.add_argument("--quiet", action="store_true", help="no progress bar or log lines")
     w.add_argument("--example", action="store_true", help="print an example sweep file (about 100 cells) and exit")
@@ -689,7 +690,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "skipped when rerun")
     r.add_argument("--scheduler", default=None, metavar="ADDRESS", help="an existing Dask scheduler, tcp://host:8786")
     r.add_argument("--restart", action="store_true",
-                   help="run finished studies again; wide: discard another run's chunks found in OUT")
+                   help="start afresh, discarding the results found in OUT (finished studies, wide's chunks; this "
+                        "run's or another's)")
     r.set_defaults(func=cmd_reproduce)
     return p
 

@@ -22,7 +22,7 @@ from shipsense.design.observability import check_array
 from shipsense.models.field_model import model_from_scenario
 from shipsense.trackers.bank.bank import run_bank
 from shipsense.trackers.bank.seeding import seed_hypotheses
-from shipsense.trackers.metrics import convergence_rate, position_error, trmse
+from shipsense.trackers.metrics import convergence_rate, position_crlb_trace, position_error, trmse
 
 HELD_OUT_SEED = 10_000
 
@@ -82,7 +82,7 @@ def evaluate_layout(scenario, passages=50, seed=HELD_OUT_SEED, filter_name=None,
     tracked = tracked[:, half:]
     P0i = P0 / np.outer(model.x_scale, model.x_scale)
     bounds = pcrlb(model, model.to_internal(truth), np.linalg.inv(P0i))[half:]
-    trace = np.broadcast_to(bounds[:, 0, 0] + bounds[:, 1, 1], err.shape)
+    trace = np.broadcast_to(position_crlb_trace(bounds, model.x_scale), err.shape)
     rmse = float(np.sqrt(np.mean(err ** 2)))
     rmse_tracked = float(np.sqrt(np.mean(err[tracked] ** 2))) if tracked.any() else float("nan")
     bound = float(np.sqrt(np.mean(trace[tracked]))) if tracked.any() else float("nan")

@@ -23,6 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from shipsense.models.transitions import powers
+from shipsense.trackers.metrics import position_crlb_trace
 
 
 def trajectory(model, theta, steps):
@@ -203,7 +204,7 @@ def bound_map(model, xs, ys, velocity, params, steps=21, per_sensor=True):
 
     def pos_bound(J):
         C = centre @ crlb(J) @ centre.T
-        val = np.sqrt(np.clip(C[..., 0, 0] + C[..., 1, 1], 0, None))
+        val = np.sqrt(np.clip(position_crlb_trace(C, model.x_scale), 0, None))
         rank = np.linalg.matrix_rank(J, hermitian=True)
         return np.where(rank < model.n, np.inf, val)
 

@@ -1,4 +1,4 @@
-"""The reference experiments (scenarios.md): ``shipsense reproduce S0|S1|S2``, ``wide`` (issue 7), and ``all``.
+"""The reference experiments: ``shipsense reproduce S0|S1|S2``, ``wide`` (the wide-prior study), and ``all``.
 
 Each study's ``run(runs, out, seed, progress)`` writes ``summary.json``, CSV
 tables and PNG figures into ``out`` and returns the summary.  The keys of
@@ -7,7 +7,8 @@ tables and PNG figures into ``out`` and returns the summary.  The keys of
 They run on the sweep's path (:func:`shipsense.sweep.runner.execute`):
 S0, S1 and S2 are one task each -- run in a scratch folder on a worker, their
 files returned and written atomically into ``OUT/<study>`` by this process,
-with a ``run.json`` marker last, so a finished study is skipped when the
+``summary.json`` last, in a folder marked by ``run.json``
+(:class:`~shipsense.tasks.TaskStore`), so a finished study is skipped when the
 same command runs again -- and the wide study is its chunks
 (:func:`shipsense.reproduce.wide.run`).  ``all`` runs the three studies side
 by side on one Dask cluster, then the wide study's chunks on it.
@@ -30,8 +31,8 @@ def run(name: str, runs: int | None = None, out=None, seed: int = 0, progress: b
     """Run the experiment set ``name`` (S0, S1, S2 or wide) into ``out`` (default ``results/NAME``).
 
     ``options``: ``workers`` (0: in this process, the default for one study; N: a local Dask cluster of N
-    processes; None: one per core), ``scheduler`` (an existing cluster), ``restart`` (run a finished study
-    again; for wide, discard another run's chunks) -- see :func:`run_studies` and
+    processes; None: one per core), ``scheduler`` (an existing cluster), ``restart`` (start afresh in a
+    folder holding this run's or another run's results) -- see :func:`run_studies` and
     :func:`shipsense.reproduce.wide.run`."""
     from importlib import import_module
 
@@ -74,50 +75,45 @@ def run_study(task: StudyTask) -> dict:
     return {"summary": summary, "files": files}
 
 
-def _finished(folder: Path, task: StudyTask) -> bool:
-    try:
-        return json.loads((folder / "run.json").read_text()) == task.identity()
-    except (OSError, ValueError):
-        return False
+def _summary(store) -> Path:
+    return store.folder / "summary.json"
 
 
 def run_studies(names, runs=None, out="results", seed=0, progress=True, *, workers=0, scheduler=None, client=None,
                 restart=False, folders=None, log=print):
-    """Run studies ``names`` (of S0, S1, S2) as tasks, each into ``out/<name>`` (or ``folders[name]``); a study
-    whose folder holds a finished run with the same runs and seed is skipped (unless ``restart``) and its
-    summary read back.  Returns {name: summary}."""
+    """Run studies ``names`` (of S0, S1, S2) as tasks, each into ``out/<name>`` (or ``folders[name]``), a
+    :class:`~shipsense.tasks.TaskStore` whose identity is the study, runs and seed.  A study is finished when
+    its folder holds its ``summary.json`` (written last): then it is skipped and its summary read back; another
+    run's folder is refused; ``restart`` runs a study afresh in either.  Returns {name: summary}."""
     from shipsense.atomic import atomic_write_bytes
-    from shipsense.sweep.runner import _close, connect, execute
+    from shipsense.parallel import dask_client
+    from shipsense.sweep.runner import execute
+    from shipsense.tasks import TaskStore
 
-    folders = {n: Path((folders or {}).get(n, Path(out) / n)) for n in names}
     tasks = [StudyTask(n, runs or EXPERIMENTS[n][1], seed) for n in names]
-    todo = [t for t in tasks if restart or not _finished(folders[t.study], t)]
+    stores = {t.study: TaskStore(Path((folders or {}).get(t.study, Path(out) / t.study)), t.identity(),
+                                 what=f"{t.study} run", owns=("summary.json",)) for t in tasks}
+    todo = [t for t in tasks if not (stores[t.study].check(restart) and _summary(stores[t.study]).is_file())]
     if len(todo) < len(tasks):
         log(f"reproduce: {len(tasks) - len(todo)} of {len(tasks)} studies already finished, {len(todo)} to run")
     summaries = {}
 
-    def store(task, result):
-        folder = folders[task.study]
-        folder.mkdir(parents=True, exist_ok=True)
-        (folder / "run.json").unlink(missing_ok=True)   # not finished until every file is written
-        for rel, data in result["files"].items():
-            (folder / rel).parent.mkdir(parents=True, exist_ok=True)
-            atomic_write_bytes(folder / rel, data)
-        atomic_write_bytes(folder / "run.json", (json.dumps(task.identity()) + "\n").encode())
+    def keep(task, result):
+        folder = stores[task.study]
+        folder.begin()   # (a restart's summary removed first: the study is not finished until it is back)
+        files = result["files"]
+        for rel in sorted(files, key=lambda rel: rel == "summary.json"):
+            path = folder.folder / rel
+            path.parent.mkdir(parents=True, exist_ok=True)
+            atomic_write_bytes(path, files[rel])
         summaries[task.study] = result["summary"]
 
-    own = client is None and todo and not (scheduler is None and workers == 0)
-    if own:
-        client = connect(workers, scheduler, log)
     t0 = time.perf_counter()
-    try:
-        execute(todo, run_study, store, client, None if progress else False, key="shipsense-reproduce")
-    finally:
-        if own:
-            _close(client)
+    with dask_client(workers, scheduler, client, needed=bool(todo), log=log) as client:
+        execute(todo, run_study, keep, client, None if progress else False, key="shipsense-reproduce")
     for t in tasks:
         if t.study not in summaries:   # finished before: read back
-            summaries[t.study] = json.loads((folders[t.study] / "summary.json").read_text())
+            summaries[t.study] = json.loads(_summary(stores[t.study]).read_text())
     log(f"reproduce: {', '.join(names)} in {time.perf_counter() - t0:.1f} s")
     return summaries
 
@@ -126,15 +122,11 @@ def run_all(runs=None, out="results", seed=0, progress=True, *, workers=None, sc
             log=print):
     """S0, S1 and S2 side by side, then the wide study's chunks, on one Dask cluster (``workers``: None = one
     per core, 0 = this process); returns {name: summary}."""
+    from shipsense.parallel import dask_client
     from shipsense.reproduce import wide
-    from shipsense.sweep.runner import _close, connect
 
-    client = None if (scheduler is None and workers == 0) else connect(workers, scheduler, log)
-    try:
+    with dask_client(workers, scheduler, log=log) as client:
         out_all = run_studies(STUDIES, runs, out, seed, progress, client=client, workers=0, restart=restart, log=log)
         out_all["WIDE"] = wide.run(runs=runs or EXPERIMENTS["WIDE"][1], out=Path(out) / "wide", seed=seed,
                                    progress=progress, client=client, workers=0, restart=restart, log=log)
-    finally:
-        if client is not None:
-            _close(client)
     return out_all

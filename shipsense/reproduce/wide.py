@@ -70,10 +70,8 @@ from __future__ import annotations
 import importlib.util
 import io
 import json
-import shutil
 import time
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
@@ -81,9 +79,10 @@ from shipsense.config import BankConfig, load_scenario
 from shipsense.models.field_model import model_from_scenario
 from shipsense.reproduce.common import Output, refit_stage, track_global, track_restarting
 from shipsense.simulator import simulate
+from shipsense.tasks import TaskStore, canonical_hash
 from shipsense.trackers.bank.bank import run_bank
 from shipsense.trackers.bank.seeding import seed_hypotheses
-from shipsense.trackers.metrics import converged_until, passage_ends
+from shipsense.trackers.metrics import converged_until, passage_ends, position_crlb_trace, position_nees
 from shipsense.trackers.tracker.settings import resolve_settings
 
 PERIOD, STEPS = 0.5, 330
@@ -149,11 +148,6 @@ def position_bounds(model, truth, P0):
     return {**parts, "pcrlb_pooled": _pooled_bound(model, parts["info_sum"] / len(truth), parts["J0"])}
 
 
-def _trace(model, b):
-    xs2 = model.x_scale[:2] ** 2
-    return b[..., 0, 0] * xs2[0] + b[..., 1, 1] * xs2[1]
-
-
 def _bound_parts(model, truth, P0):
     """The per-passage bounds of :func:`position_bounds`, and what its pooled bound needs from these passages:
     the sum of their measurement information (K, n, n) and the prior information ``J0`` (internal units)."""
@@ -162,15 +156,16 @@ def _bound_parts(model, truth, P0):
     x = model.to_internal(truth)
     J0 = np.linalg.inv(P0 / np.outer(model.x_scale, model.x_scale))
     info = measurement_information(model, x)
-    return {"pcrlb": _trace(model, pcrlb_from_information(model, info, J0)),
-            "crlb_deterministic": _trace(model, pcrlb_from_information(model, info, J0, Q=np.zeros_like(model.Q))),
+    return {"pcrlb": position_crlb_trace(pcrlb_from_information(model, info, J0), model.x_scale),
+            "crlb_deterministic": position_crlb_trace(pcrlb_from_information(model, info, J0, Q=np.zeros_like(model.Q)),
+                                                      model.x_scale),
             "info_sum": info.sum(axis=0), "J0": J0}
 
 
 def _pooled_bound(model, info_mean, J0):
     from shipsense.design.fisher import pcrlb_from_information
 
-    return _trace(model, pcrlb_from_information(model, info_mean[None], J0)[0])
+    return position_crlb_trace(pcrlb_from_information(model, info_mean[None], J0)[0], model.x_scale)
 
 
 def family_passages(name, passages, seed):
@@ -194,18 +189,14 @@ def converged(est, truth, ends):
 def passage_figures(est, covs_pos, truth, ends, status=None):
     """A method's per-passage figures, from which :func:`aggregate` computes its row (so that chunks of
     passages can be pooled): ``conv`` (R,), and (R, K) ``err`` (position error, NaN after each passage's
-    end), ``valid`` (its samples), ``q`` (position NEES, NaN where no covariance is given) and ``track``
-    (the method reports a track: for the Tracker, ``status`` `tracking` or `restarted`; the studies'
-    methods always do)."""
+    end), ``valid`` (its samples), ``q`` (position NEES, :func:`~shipsense.trackers.metrics.position_nees`:
+    NaN where no covariance is given) and ``track`` (the method reports a track: for the Tracker, ``status``
+    `tracking` or `restarted`; the studies' methods always do)."""
     from shipsense.trackers.tracker.results import RESTARTED, TRACKING
 
     conv, err, valid = converged(est, truth, ends)
-    d = est[..., :2] - truth[..., :2]
-    a, b, c = covs_pos[..., 0, 0], covs_pos[..., 0, 1], covs_pos[..., 1, 1]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        q = (c * d[..., 0] ** 2 - 2 * b * d[..., 0] * d[..., 1] + a * d[..., 1] ** 2) / (a * c - b * b)
     track = np.ones_like(valid) if status is None else np.isin(status, (TRACKING, RESTARTED))
-    return {"conv": conv, "err": err, "valid": valid, "q": np.where(np.isfinite(q), q, np.nan), "track": track}
+    return {"conv": conv, "err": err, "valid": valid, "q": position_nees(est, covs_pos, truth), "track": track}
 
 
 def aggregate(fig, ends, bounds, seconds):
@@ -446,50 +437,25 @@ def run_task(task):
     return consistency_of(task.family, task.passages, task.seed, **PARTS[task.part])
 
 
-def _identity(runs, seed, chunk):
-    from shipsense.sweep.spec import canonical_hash
-
-    return canonical_hash({"study": "wide", "format": FORMAT, "runs": runs, "seed": seed, "chunk": chunk})
-
-
-def _prepare(out: Path, digest, restart):
-    """The chunks already in ``out`` for this run (resumed), after refusing (or, with ``restart``, clearing)
-    another run's."""
-    from shipsense.sweep.spec import SweepError
-
-    meta = out / "run.json"
-    chunks = out / "chunks"
-    if meta.is_file():
-        try:
-            old = json.loads(meta.read_text()).get("hash")
-        except (OSError, ValueError):
-            old = None
-        if old != digest:
-            if not restart:
-                raise SweepError(f"--out {out}: holds the chunks of another wide-study run (other --runs, --seed or "
-                                 "version); pass --restart to discard them, or choose another --out")
-            shutil.rmtree(chunks, ignore_errors=True)
-    elif chunks.is_dir() and any(chunks.iterdir()):
-        if not restart:
-            raise SweepError(f"--out {out}: its chunks/ folder has no run.json; pass --restart to discard it")
-        shutil.rmtree(chunks)
-    chunks.mkdir(parents=True, exist_ok=True)
-    return {p.name.rsplit(".", 1)[0] for p in chunks.iterdir() if p.suffix in (".npz", ".json")}
+def wide_store(out, runs, seed, chunk) -> TaskStore:
+    """The study's output folder ``out`` (:class:`~shipsense.tasks.TaskStore`, marked by ``run.json``): the run's
+    identity is the hash of its arguments and :data:`FORMAT` (and the arguments themselves, for the message)."""
+    args = {"runs": runs, "seed": seed, "chunk": chunk}
+    digest = canonical_hash({"study": "wide", "format": FORMAT, **args})
+    return TaskStore(out, {"study": "wide", "hash": digest, **args}, what="wide-study run")
 
 
-def _store(out: Path, task, result):
-    from shipsense.atomic import atomic_write_bytes
-
+def _store(store: TaskStore, task, result):
     if task.part is None:
         buf = io.BytesIO()
         np.savez(buf, **result)
-        atomic_write_bytes(out / "chunks" / f"{task.name}.npz", buf.getvalue())
+        store.write(f"{task.name}.npz", buf.getvalue())
     else:
-        atomic_write_bytes(out / "chunks" / f"{task.name}.json", (json.dumps(result) + "\n").encode())
+        store.write(f"{task.name}.json", (json.dumps(result) + "\n").encode())
 
 
-def _load(out: Path, task):
-    path = out / "chunks" / f"{task.name}.{'npz' if task.part is None else 'json'}"
+def _load(store: TaskStore, task):
+    path = store.path(f"{task.name}.{'npz' if task.part is None else 'json'}")
     if task.part is None:
         with np.load(path) as z:
             return {k: z[k] for k in z.files}
@@ -504,19 +470,18 @@ def run(runs=500, out="results/wide", seed=0, progress=True, *, workers=0, sched
     per family, each with a seed derived from ``seed`` and (family, chunk) (:func:`chunk_seed`), so the
     result does not depend on how the tasks are scheduled; each finished task is written atomically to
     ``out/chunks``, and running the same command again skips the finished ones (another run's chunks are
-    refused unless ``restart``).  ``workers``: 0 runs here (default), N on a local Dask cluster of N
-    single-threaded processes, None on one per core; ``scheduler``: an existing Dask cluster's address.
+    refused unless ``restart``, which starts afresh: :func:`wide_store`).  ``workers``: 0 runs here (default),
+    N on a local Dask cluster of N single-threaded processes, None on one per core; ``scheduler``: an existing
+    Dask cluster's address.
     """
-    from shipsense.atomic import atomic_write_bytes
-    from shipsense.sweep.runner import _close, connect, execute
+    from shipsense.parallel import dask_client
+    from shipsense.sweep.runner import execute
 
     o = Output(out)
     t0 = time.perf_counter()
     todo_all = tasks(runs, seed, chunk)
-    digest = _identity(runs, seed, chunk)
-    done = _prepare(o.dir, digest, restart)
-    atomic_write_bytes(o.dir / "run.json", (json.dumps({"study": "wide", "hash": digest, "runs": runs,
-                                                         "seed": seed, "chunk": chunk}) + "\n").encode())
+    store = wide_store(o.dir, runs, seed, chunk)
+    done = store.finished() if store.check(restart) else set()
     todo = [t for t in todo_all if t.name not in done]
     log(f"wide: {len(todo_all)} tasks ({chunk} passages per family chunk)"
         + (f"; {len(todo_all) - len(todo)} already finished in {o.dir}, {len(todo)} to run" if done else ""))
@@ -524,25 +489,20 @@ def run(runs=500, out="results/wide", seed=0, progress=True, *, workers=0, sched
         log("wide: dask is not installed, running in this process (pip install 'shipsense[sweep]' for a local "
             "cluster)")
         workers = 0
-    own = client is None and todo and not (scheduler is None and workers == 0)
-    if own:
-        client = connect(workers, scheduler, log)
-    try:
-        execute(todo, run_task, lambda t, r: _store(o.dir, t, r), client, None if progress else False,
+    with dask_client(workers, scheduler, client, needed=bool(todo), log=log) as client:
+        store.begin()
+        execute(todo, run_task, lambda t, r: _store(store, t, r), client, None if progress else False,
                 key="shipsense-wide")
-    finally:
-        if own:
-            _close(client)
     summary, rows = {}, []
     for name in FAMILIES:
-        summary[name] = family_rows(name, [_load(o.dir, t) for t in todo_all if t.part is None and t.family == name])
+        summary[name] = family_rows(name, [_load(store, t) for t in todo_all if t.part is None and t.family == name])
         for method, m in summary[name].items():
             rows.append([name, method, m["convergence_rate"], m["mrmse_r_m"], m["rmse_over_pcrlb"],
                          m["rmse_over_pcrlb_pooled"], m["rmse_over_crlb_deterministic"],
                          m["rmse_over_crlb_tracking"], m["untracked_share"], m["nees_mean"],
                          m["seconds_per_passage"]])
     for part in PARTS:
-        summary[part] = {scen: _load(o.dir, WideTask(scen, -1, 0, seed, part))
+        summary[part] = {scen: _load(store, WideTask(scen, -1, 0, seed, part))
                          for scen in CONSISTENCY_SCENARIOS}
     elapsed = time.perf_counter() - t0
     o.csv("consistency.csv", ["scenario", "tracker", "process_noise", "convergence_rate", "nees_mean",

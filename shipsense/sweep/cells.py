@@ -21,7 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
-from shipsense.sweep.spec import MAX_TASKS, LayoutSpec, SweepError, SweepSpec, canonical_hash
+from shipsense.sweep.spec import MAX_TASKS, LayoutSpec, SweepError, SweepSpec
+from shipsense.tasks import canonical_hash
 
 AMBIGUITY_CHUNK = -1
 """Chunk number of a cell's ambiguity check (one per cell, when the metric is asked for)."""

@@ -13,7 +13,8 @@ Per passage (``passage`` is its index in the cell; the columns of a chunk's tabl
 * ``nees_mean``: mean position NEES over the same samples (2 is consistent);
   ``nees_coverage``: the share of them where the truth lies inside the
   reported 95 % ellipse (0.95 is honest; a sample without a covariance
-  counts as not covered);
+  counts as not covered) -- :func:`~shipsense.trackers.metrics.position_nees`
+  and :func:`~shipsense.trackers.metrics.coverage`;
 * ``seconds``: tracking wall time per passage (the one column that depends on
   the machine).
 
@@ -34,9 +35,6 @@ from contextlib import contextmanager
 import numpy as np
 
 from shipsense.sweep.cells import AMBIGUITY_CHUNK, Task
-
-CHI2_95_2DOF = 5.991464547107979
-"""The 95 % quantile of chi-square with 2 degrees of freedom (the position ellipse)."""
 
 PASSAGE_COLUMNS = ("cell", "chunk", "passage", "converged", "rmse_m", "rmse_over_crlb", "nees_mean", "nees_coverage",
                    "seconds")
@@ -82,7 +80,7 @@ def _ambiguity(task):
 def _chunk(task):
     from shipsense.models.field_model import model_from_scenario
     from shipsense.simulator import simulate
-    from shipsense.trackers.metrics import converged_until, passage_ends
+    from shipsense.trackers.metrics import converged_until, coverage, passage_ends, position_nees
 
     sc = _scenario(task)
     model = model_from_scenario(sc)
@@ -101,36 +99,25 @@ def _chunk(task):
         bound = crlb_position_trace(sc, model, truth)
         ratio = rmse / np.sqrt(np.sum(np.where(second, bound, 0.0), axis=1) / n)
     q = position_nees(est, pos_cov, truth)
-    covered = np.where(second, q <= CHI2_95_2DOF, False)   # NaN (no covariance) compares False: not covered
     nees_mean = np.array([np.nanmean(q[r, second[r]]) if np.isfinite(q[r, second[r]]).any() else np.nan
                           for r in range(task.passages)])
     return {"cell": [task.cell.key] * task.passages, "chunk": [task.chunk] * task.passages,
             "passage": list(range(task.first, task.first + task.passages)), "converged": conv.tolist(),
             "rmse_m": rmse.tolist(), "rmse_over_crlb": ratio.tolist(), "nees_mean": nees_mean.tolist(),
-            "nees_coverage": (covered.sum(axis=1) / n).tolist(), "seconds": [seconds] * task.passages}
-
-
-def position_nees(est, pos_cov, truth):
-    """Position NEES (R, K) of estimates (R, K, >= 2) with 2x2 covariances; NaN where there is no valid one."""
-    from shipsense.trackers.metrics import nees
-
-    P = np.asarray(pos_cov, dtype=float)
-    det = P[..., 0, 0] * P[..., 1, 1] - P[..., 0, 1] * P[..., 1, 0]
-    ok = np.isfinite(P).all(axis=(-2, -1)) & (P[..., 0, 0] > 0) & (det > 0)
-    safe = np.where(ok[..., None, None], P, np.eye(2))
-    return np.where(ok, nees(np.asarray(est)[..., :2], safe, np.asarray(truth)[..., :2]), np.nan)
+            "nees_coverage": coverage(q, second, axis=1).tolist(), "seconds": [seconds] * task.passages}
 
 
 def crlb_position_trace(sc, model, truth):
     """Trace (R, K) of the position block of each passage's constant-velocity CRLB, m², with the prior
     information of the tracker's bank (its initial standard deviations)."""
     from shipsense.design.fisher import pcrlb
+    from shipsense.trackers.metrics import position_crlb_trace
     from shipsense.trackers.tracker.settings import resolve_settings
 
     bank = resolve_settings(sc).bank
     J0 = np.diag((bank.state_std(model.labels) / model.x_scale) ** -2.0)
     b = pcrlb(model, model.to_internal(truth), J0, per_run=True, Q=np.zeros_like(model.Q))
-    return b[..., 0, 0] * model.x_scale[0] ** 2 + b[..., 1, 1] * model.x_scale[1] ** 2
+    return position_crlb_trace(b, model.x_scale)
 
 
 def track_passages(method, sc, times, y):

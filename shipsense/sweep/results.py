@@ -25,6 +25,7 @@ import numpy as np
 
 from shipsense.sweep.spec import SweepError
 from shipsense.sweep.store import write_table
+from shipsense.tasks import CHUNKS
 
 Z95 = 1.959963984540054
 METRIC_OF = {"convergence": ["convergence_rate"], "rmse": ["rmse_m"], "rmse_over_crlb": ["rmse_over_crlb"],
@@ -85,7 +86,7 @@ def summarise(spec, cells, out: Path, csv: bool = False):
     """Read every task's file in ``out/chunks`` and write ``results.parquet`` (+ csv) and ``passages.parquet``."""
     import pandas as pd
 
-    chunks = out / "chunks"
+    chunks = out / CHUNKS
     frames = [pd.read_parquet(chunks / f"{c.key}-c{i:05d}.parquet")
               for c in cells for i in range(math.ceil(spec.passages / spec.chunk))]
     passages = pd.concat(frames, ignore_index=True).sort_values(["cell", "passage"], kind="stable")

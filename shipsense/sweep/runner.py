@@ -11,32 +11,27 @@ Output folder ``DIR``::
 Results are written by the process that runs the sweep, as tasks finish
 (a temporary file, then an atomic rename), so workers need no shared
 filesystem and a task that runs twice (a worker lost mid-task) rewrites the
-same file with the same rows.  Rerunning the same sweep into the same
-folder skips the finished tasks; a different sweep is refused unless
-``restart``.
+same file with the same rows.  The folder is a :class:`~shipsense.tasks.TaskStore`
+marked by ``sweep.json``: rerunning the same sweep into the same folder skips
+the finished tasks; a different sweep is refused unless ``restart``, which
+starts afresh.
 """
 
 from __future__ import annotations
 
-import json
-import os
-import shutil
 import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from shipsense.atomic import atomic_write_bytes
+from shipsense.parallel import dask_client
 from shipsense.sweep.cells import Task, build_cells, make_tasks
-from shipsense.sweep.spec import SweepError, SweepSpec, canonical_hash
-from shipsense.sweep.store import write_table
+from shipsense.sweep.spec import SweepError, SweepSpec
+from shipsense.sweep.store import table_bytes
+from shipsense.tasks import TaskStore, canonical_hash
 
-SCHEDULER_TIMEOUT_S = 5.0
-"""How long to wait for a ``--scheduler`` address to answer."""
-ONE_THREAD = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "SHIPSENSE_THREADS": "1"}
-"""A local cluster runs a single-threaded worker per core: BLAS, OpenMP and the compiled filter steps held to one
-thread in each."""
-OWN_FILES = ("sweep.json", "results.parquet", "results.csv", "passages.parquet", "chunks")
+OWN_FILES = ("results.parquet", "results.csv", "passages.parquet", "*.png")
+"""What a sweep writes into its folder beside the marker and the chunks (removed with them on a restart)."""
 
 
 @dataclass
@@ -65,52 +60,23 @@ def sweep_hash(spec: SweepSpec) -> str:
     return canonical_hash({"format": FORMAT, "spec": spec.model_dump(mode="json")})
 
 
-def _versions():
+def _meta(spec: SweepSpec) -> dict:
+    """What ``sweep.json`` records beside the hash: the sweep's name and seed, and the package versions."""
     from importlib.metadata import PackageNotFoundError, version
 
-    out = {"python": sys.version.split()[0]}
+    versions = {"python": sys.version.split()[0]}
     for pkg in ("shipsense", "numpy", "scipy", "dask", "distributed", "pandas", "pyarrow"):
         try:
-            out[pkg] = version(pkg)
+            versions[pkg] = version(pkg)
         except PackageNotFoundError:
-            out[pkg] = None
-    return out
+            versions[pkg] = None
+    return {"name": spec.name, "seed": spec.seed, "versions": versions}
 
 
-def check_folder(out: Path, digest: str, restart: bool) -> bool:
-    """Whether ``out`` can take this sweep: new, or holding its results (resumed), or -- with ``restart`` --
-    another sweep's results (True: they must be removed first).  Anything else is refused.  Reads only."""
-    meta = out / "sweep.json"
-    if out.exists() and not out.is_dir():
-        raise SweepError(f"--out {out}: exists and is not a folder")
-    if meta.is_file():
-        try:
-            old = json.loads(meta.read_text())
-        except (OSError, ValueError) as err:
-            raise SweepError(f"{meta}: unreadable ({err}); remove the folder or choose another --out") from None
-        if old.get("sweep_hash") == digest:
-            return False
-        if restart:
-            return True
-        raise SweepError(f"--out {out}: holds the results of another sweep ({old.get('name')!r}, hash "
-                         f"{str(old.get('sweep_hash'))[:12]}): the sweep file changed or the folder is "
-                         "another sweep's; pass --restart to discard them, or choose another --out")
-    if out.is_dir() and any(out.iterdir()):
-        raise SweepError(f"--out {out}: the folder is not empty and holds no sweep.json (not a sweep's results)")
-    return False
-
-
-def _clear(out: Path) -> None:
-    for name in OWN_FILES:
-        p = out / name
-        shutil.rmtree(p) if p.is_dir() else p.unlink(missing_ok=True)
-    for png in out.glob("*.png"):
-        png.unlink()
-
-
-def _write_meta(out, spec, digest, **fields):
-    data = {"sweep_hash": digest, "name": spec.name, "seed": spec.seed, "versions": _versions(), **fields}
-    atomic_write_bytes(out / "sweep.json", (json.dumps(data, indent=2, default=str) + "\n").encode())
+def sweep_store(out, spec: SweepSpec) -> TaskStore:
+    """The sweep's output folder ``out`` (:class:`~shipsense.tasks.TaskStore`), marked by ``sweep.json``."""
+    return TaskStore(out, {"sweep_hash": sweep_hash(spec)}, marker="sweep.json", what="sweep", owns=OWN_FILES,
+                     error=SweepError)
 
 
 def run_sweep(spec: SweepSpec, base_dir, out, *, workers: int | None = None, scheduler: str | None = None,
@@ -133,7 +99,7 @@ def run_sweep(spec: SweepSpec, base_dir, out, *, workers: int | None = None, sch
     client : distributed.Client, optional
         An existing client (overrides ``workers`` and ``scheduler``).
     restart : bool
-        Discard another sweep's results found in ``out``.
+        Start afresh in a folder holding this sweep's or another sweep's results (discarding them).
     csv : bool
         Also write ``results.csv``.
     progress : bool, optional
@@ -144,31 +110,21 @@ def run_sweep(spec: SweepSpec, base_dir, out, *, workers: int | None = None, sch
     out = Path(out)
     cells = build_cells(spec, Path(base_dir))
     tasks = make_tasks(spec, cells)
-    digest = sweep_hash(spec)
-    stale = check_folder(out, digest, restart)
-    done = set() if stale else {p.stem for p in (out / "chunks").glob("*.parquet")}
+    store = sweep_store(out, spec)
+    done = store.finished() if store.check(restart) else set()
     todo = [t for t in tasks if t.name not in done]
     skipped = len(tasks) - len(todo)
     log(f"sweep {spec.name!r}: {len(cells)} cells, {len(tasks)} tasks"
         + (f"; {skipped} already finished in {out}, {len(todo)} to run" if skipped else ""))
     t0 = time.perf_counter()
-    own = client is None and todo and not (scheduler is None and workers == 0)
-    if own:   # before anything is written: a scheduler that does not answer leaves no folder behind
-        client = connect(workers, scheduler, log)
-    try:
-        if stale:
-            _clear(out)
-        (out / "chunks").mkdir(parents=True, exist_ok=True)
-        _write_meta(out, spec, digest, status="running", cells=len(cells), tasks=len(tasks))
-        task_seconds, n_workers = _execute(todo, out, client, progress)
-    finally:
-        if own:
-            _close(client)
+    # the client first: a scheduler that does not answer leaves no folder behind
+    with dask_client(workers, scheduler, client, needed=bool(todo), log=log) as client:
+        store.begin(**_meta(spec), status="running", cells=len(cells), tasks=len(tasks))
+        task_seconds, n_workers = _execute(todo, store, client, progress)
     wall = time.perf_counter() - t0
     summarise(spec, cells, out, csv=csv)
-    _write_meta(out, spec, digest, status="complete", cells=len(cells), tasks=len(tasks), skipped=skipped,
-                ran=len(todo), wall_seconds=wall, task_seconds=task_seconds, workers=n_workers,
-                sweep=spec.model_dump(mode="json"))
+    store.mark(**_meta(spec), status="complete", cells=len(cells), tasks=len(tasks), skipped=skipped, ran=len(todo),
+               wall_seconds=wall, task_seconds=task_seconds, workers=n_workers, sweep=spec.model_dump(mode="json"))
     return SweepRun(out, len(cells), len(tasks), skipped, len(todo), wall, task_seconds, n_workers)
 
 
@@ -179,24 +135,24 @@ def _progress_bar(total, enabled):
                 disable=(not enabled) if enabled is not None else not sys.stderr.isatty())
 
 
-def _store(out: Path, task: Task, table: dict) -> float:
-    write_table(out / "chunks" / f"{task.name}.parquet", table)
+def _store(store: TaskStore, task: Task, table: dict) -> float:
+    store.write(f"{task.name}.parquet", table_bytes(table))
     return float(sum(table["seconds"])) if task.chunk < 0 else float(table["seconds"][0]) * task.passages
 
 
-def _execute(todo, out, client, progress):
+def _execute(todo, store, client, progress):
     """Run the sweep's tasks ``todo`` and store each result as it arrives; returns (task seconds, workers)."""
     from shipsense.sweep.evaluate import run_task
 
     spent = [0.0]
 
-    def store(task, table):
-        spent[0] += _store(out, task, table)
+    def keep(task, table):
+        spent[0] += _store(store, task, table)
 
     def describe(task):
         return f"task {task.name} (layout {task.cell.layout!r}, condition {task.cell.condition})"
 
-    workers = execute(todo, run_task, store, client, progress, describe=describe, key="shipsense-sweep")
+    workers = execute(todo, run_task, keep, client, progress, describe=describe, key="shipsense-sweep")
     return spent[0], workers
 
 
@@ -233,37 +189,3 @@ def execute(tasks, run, store, client=None, progress=None, *, describe=None, key
         return n_workers
     finally:
         bar.close()
-
-
-def _close(client):
-    cluster = getattr(client, "cluster", None)
-    client.close()
-    if cluster is not None:
-        cluster.close()
-
-
-def connect(workers: int | None, scheduler: str | None, log=print):
-    """A Dask client: on ``scheduler`` (answering within :data:`SCHEDULER_TIMEOUT_S`), or on a new local
-    cluster of ``workers`` single-threaded processes (default: the cores), BLAS pinned to one thread each."""
-    import logging
-
-    try:
-        import dask
-        from distributed import Client, LocalCluster
-    except ImportError:
-        raise SweepError("running on Dask needs the sweep extra: pip install 'shipsense[sweep]' "
-                         "(or --workers 0 to run serially)") from None
-    if scheduler is not None:
-        try:
-            client = Client(scheduler, timeout=f"{SCHEDULER_TIMEOUT_S}s")
-        except (OSError, TimeoutError, ValueError) as err:
-            raise SweepError(f"--scheduler {scheduler}: no Dask scheduler answered within "
-                             f"{SCHEDULER_TIMEOUT_S:g} s ({type(err).__name__}: {err})") from None
-    else:
-        n = workers if workers is not None else (os.cpu_count() or 1)
-        with dask.config.set({"distributed.nanny.pre-spawn-environ": ONE_THREAD}):
-            cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, silence_logs=logging.ERROR,
-                                   dashboard_address=":0")
-        client = Client(cluster)
-    log(f"dask: {len(client.scheduler_info().get('workers', {}))} workers, dashboard {client.dashboard_link}")
-    return client

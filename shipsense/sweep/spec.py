@@ -30,7 +30,6 @@ loaded, so a bad cell is refused before any work starts.  Errors raise
 
 from __future__ import annotations
 
-import hashlib
 import json
 import math
 import tomllib
@@ -206,8 +205,3 @@ def load_sweep(path) -> tuple[SweepSpec, Path]:
     except tomllib.TOMLDecodeError as err:
         raise SweepError(f"{path}: not valid TOML ({err})") from None
     return parse_sweep(data, str(path)), path.resolve().parent
-
-
-def canonical_hash(obj) -> str:
-    """SHA-256 of an object's canonical JSON (sorted keys, no whitespace): the identity of a sweep or cell."""
-    return hashlib.sha256(json.dumps(obj, sort_keys=True, separators=(",", ":")).encode()).hexdigest()

@@ -1,6 +1,7 @@
-"""Tracking metrics (shared/spec/trackers.md §4).
+"""Tracking metrics: position error, RMSE, convergence, NEES and 95 % ellipse coverage, and the position
+bound the errors are compared with.
 
-Conventions: estimates and truth are (runs, steps, >= 2) with (x, y) first;
+Conventions: estimates and truth are (runs, steps, >= 2) with (x, y) first, in metres;
 "error" is the horizontal position error.
 """
 
@@ -10,6 +11,9 @@ import numpy as np
 
 CONVERGENCE_THRESHOLD_M = 10.0
 """Default convergence threshold on the final position error (m)."""
+CHI2_2DOF_95 = 5.991464547107979
+"""The 95 % quantile of chi-square with 2 degrees of freedom, ``-2 ln 0.05``: a position whose NEES is at most
+this lies inside the reported 95 % ellipse."""
 
 
 def position_error(means, truth):
@@ -93,14 +97,56 @@ def converged_until(means, truth, ends, threshold=CONVERGENCE_THRESHOLD_M, hold=
 
 
 def nees(means, covs, truth, components=(0, 1)):
-    """Normalised estimation error squared over ``components`` (default position), shape (..., steps).
+    """Normalised estimation error squared over ``components`` (default position: :func:`position_nees`),
+    shape (..., steps).
 
     Its mean over runs of a consistent filter is ``len(components)``.
     """
+    if tuple(components) == (0, 1):
+        return position_nees(means, covs, truth)
     idx = list(components)
     e = np.asarray(means)[..., idx] - np.asarray(truth)[..., idx]
     P = np.asarray(covs)[..., idx, :][..., :, idx]
     return np.einsum("...i,...i->...", e, np.linalg.solve(P, e[..., None])[..., 0])
+
+
+def position_nees(means, covs, truth):
+    """Position NEES ``d^T P^-1 d`` (..., steps), dimensionless: ``d`` the horizontal error (m) of estimates
+    ``means`` against ``truth`` (..., steps, >= 2), ``P`` the (x, y) block (m²) of ``covs`` (..., steps, >= 2,
+    >= 2: position covariances or whole state covariances).  Its mean is 2 for a consistent tracker.
+
+    In closed form, ``(P_yy d_x² - 2 P_xy d_x d_y + P_xx d_y²) / (P_xx P_yy - P_xy²)``; NaN where ``P`` is not a
+    finite positive-definite matrix (no covariance reported)."""
+    d = np.asarray(means)[..., :2] - np.asarray(truth)[..., :2]
+    P = np.asarray(covs, dtype=float)
+    a, b, c = P[..., 0, 0], P[..., 0, 1], P[..., 1, 1]
+    det = a * c - b * b
+    ok = np.isfinite(P[..., :2, :2]).all(axis=(-2, -1)) & (a > 0) & (det > 0)
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        q = (c * d[..., 0] ** 2 - 2 * b * d[..., 0] * d[..., 1] + a * d[..., 1] ** 2) / det
+    return np.where(ok, q, np.nan)
+
+
+def coverage(q, where=None, axis=None, limit=CHI2_2DOF_95):
+    """95 % ellipse coverage: the share (dimensionless, 0 to 1) of the samples ``where`` (a mask broadcast
+    against ``q``; None: all) whose position NEES ``q`` (:func:`position_nees`) is at most ``limit`` -- the
+    truth inside the reported ellipse.  A NaN NEES (no covariance) counts as not covered.  Summed over
+    ``axis`` (None: all samples): the shape of ``q`` without it (NaN where ``where`` selects no sample)."""
+    inside = np.asarray(q) <= limit
+    if where is None:
+        where = np.ones_like(inside)
+    return np.sum(inside & where, axis=axis) / np.sum(where, axis=axis)
+
+
+def position_crlb_trace(bounds, x_scale=None):
+    """Trace of the position block of error-covariance bounds ``bounds`` (..., n, n) (a CRLB or PCRLB): the
+    least mean square horizontal position error, m², ``B_xx s_x² + B_yy s_y²`` with ``s = x_scale[:2]`` the SI
+    value of one internal unit of x and y (None: the bounds are in SI units already).  Shape (...)."""
+    b = np.asarray(bounds)
+    if x_scale is None:
+        return b[..., 0, 0] + b[..., 1, 1]
+    xs2 = np.asarray(x_scale)[:2] ** 2
+    return b[..., 0, 0] * xs2[0] + b[..., 1, 1] * xs2[1]
 
 
 def selection_accuracy(selected, hypothesis_trmse):

@@ -4,11 +4,15 @@ import numpy as np
 import pytest
 
 from shipsense.trackers.metrics import (
+    CHI2_2DOF_95,
     converged,
     convergence_rate,
+    coverage,
     mrmse,
     nees,
+    position_crlb_trace,
     position_error,
+    position_nees,
     rmse_k,
     selection_accuracy,
     trmse,
@@ -69,3 +73,74 @@ def test_position_error_is_the_norm_of_the_horizontal_difference_under_broadcast
     np.testing.assert_array_equal(position_error(np.array([[3, 0]]), np.array([[0, 4]])), [5.0])
     assert position_error([3.0, 0.0], [0.0, 4.0]) == 5.0                    # one state
     assert position_error(means.astype(np.float32), truth.astype(np.float32)).dtype == np.float32
+
+
+def _covariances(rng, shape, n):
+    """Random symmetric positive-definite matrices (*shape, n, n), metres-sized."""
+    A = rng.normal(size=shape + (n, n)) * 5.0
+    return A @ np.swapaxes(A, -1, -2) + 0.1 * np.eye(n)
+
+
+def test_position_nees_is_the_quadratic_form_of_the_inverse_block_and_nan_without_a_valid_covariance():
+    """Against a dense ``d @ inv(P) @ d`` sample by sample, for position covariances and for whole state
+    covariances (their (x, y) block); NaN where the block is not finite and positive definite."""
+    rng = np.random.default_rng(1)
+    R, K = 3, 7
+    truth, est = rng.normal(size=(R, K, 4)) * 50, rng.normal(size=(R, K, 4)) * 50
+    full = _covariances(rng, (R, K), 4)
+    want = np.empty((R, K))
+    for r in range(R):
+        for k in range(K):
+            d = est[r, k, :2] - truth[r, k, :2]
+            want[r, k] = d @ np.linalg.inv(full[r, k, :2, :2]) @ d
+    np.testing.assert_allclose(position_nees(est, full, truth), want, rtol=1e-10)
+    np.testing.assert_allclose(position_nees(est, full[..., :2, :2], truth), want, rtol=1e-10)
+    np.testing.assert_array_equal(nees(est, full, truth), position_nees(est, full, truth))  # the one position NEES
+    bad = full[..., :2, :2].copy()
+    bad[0, 0] = np.nan                                    # no covariance reported
+    bad[0, 1] = [[1.0, 2.0], [2.0, 1.0]]                  # indefinite
+    bad[0, 2] = [[1.0, 1.0], [1.0, 1.0]]                  # singular
+    bad[0, 3] = -np.eye(2)                                # negative definite (its determinant is positive)
+    q = position_nees(est, bad, truth)
+    assert np.isnan(q[0, :4]).all()
+    np.testing.assert_allclose(q[0, 4:], want[0, 4:], rtol=1e-10)
+    np.testing.assert_allclose(q[1:], want[1:], rtol=1e-10)
+
+
+def test_nees_of_other_components_is_still_the_dense_quadratic_form():
+    rng = np.random.default_rng(2)
+    truth, est = rng.normal(size=(4, 5, 4)), rng.normal(size=(4, 5, 4))
+    P = _covariances(rng, (4, 5), 4)
+    d = est[..., 2:] - truth[..., 2:]
+    want = [[d[r, k] @ np.linalg.inv(P[r, k, 2:, 2:]) @ d[r, k] for k in range(5)] for r in range(4)]
+    np.testing.assert_allclose(nees(est, P, truth, components=(2, 3)), want, rtol=1e-10)
+
+
+def test_coverage_counts_the_samples_inside_the_95_percent_ellipse():
+    """Against a count sample by sample: NEES at most the quantile, over the masked samples, per row and over
+    all; NaN (no covariance) is outside; the quantile is chi-square's with 2 degrees of freedom."""
+    assert CHI2_2DOF_95 == pytest.approx(-2.0 * np.log(0.05), rel=1e-15)
+    rng = np.random.default_rng(3)
+    q = rng.chisquare(2, size=(6, 40))
+    q[rng.random(q.shape) < 0.1] = np.nan
+    q[0, :3] = CHI2_2DOF_95                               # on the limit: inside
+    where = rng.random(q.shape) < 0.7
+    rows = [sum(1 for k in range(40) if where[r, k] and q[r, k] <= CHI2_2DOF_95) / where[r].sum() for r in range(6)]
+    np.testing.assert_allclose(coverage(q, where, axis=1), rows, rtol=1e-15)
+    total = sum(1 for v, w in zip(q.ravel(), where.ravel()) if w and v <= CHI2_2DOF_95) / where.sum()
+    assert coverage(q, where) == pytest.approx(total, rel=1e-15)
+    assert coverage(q) == pytest.approx(np.sum(q <= CHI2_2DOF_95) / q.size, rel=1e-15)
+    assert coverage(np.array([1.0, 3.0, 7.0]), limit=2.0) == pytest.approx(1 / 3)
+
+
+def test_position_crlb_trace_is_the_si_trace_of_the_position_block():
+    """Against the trace of the (x, y) block of the bounds scaled to SI (``S B S``, S the internal units' SI
+    values) by ``np.trace``, and of SI bounds without a scale."""
+    rng = np.random.default_rng(4)
+    B = _covariances(rng, (3, 5), 5)
+    scale = np.array([2.0, 0.5, 1.0, 1.0, 1e6])
+    S = np.diag(scale)
+    want = np.trace((S @ B @ S)[..., :2, :2], axis1=-2, axis2=-1)
+    np.testing.assert_allclose(position_crlb_trace(B, scale), want, rtol=1e-14)
+    np.testing.assert_allclose(position_crlb_trace(B), np.trace(B[..., :2, :2], axis1=-2, axis2=-1), rtol=1e-14)
+    assert position_crlb_trace(B).shape == (3, 5)
