@@ -4,12 +4,11 @@ A batched filter step over thousands of hypotheses makes a few dozen numpy
 temporaries of 0.1-3 MB each.  glibc serves allocations above its mmap
 threshold (128 KiB at start, adapted upwards as chunks are freed) with fresh
 ``mmap`` pages and returns free heap above its trim threshold to the kernel,
-so each step pays page faults on memory it just gave back.  Measured with
-the bank-observed vector environment at 64 envs (``python benchmarks/envs.py
---observer bank --allocator tuned|default``, README "Benchmarks"): +21 % steps/s
-after the filter steps were compiled (they were ~15 % of the numpy UKF step
-before).  :func:`tune_allocator` raises both thresholds so that freed blocks
-are reused instead.
+so each step pays page faults on memory it just gave back.
+:func:`tune_allocator` raises both thresholds so that freed blocks are reused
+instead.  ``python benchmarks/envs.py --observer bank --allocator
+tuned|default`` measures the difference on the bank-observed vector
+environment (docs: Results).
 
 This changes a process-wide setting, so the library never calls it on
 import.  The ``shipsense`` command and the benchmarks call it; call it

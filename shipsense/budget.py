@@ -26,19 +26,18 @@ TIME_LIMIT_MINUTES = 180.0
 
 # measured rates (reference machine), on the fast side
 SIMULATE_S_PER_VALUE = 2e-8           # per run x step x channel: kernels, noise, envelope chain
-TRACK_S_PER_ROW = 1.5e-4              # the project's tracker on one passage (benchmarks/track_rows.py: ~2e-4)
+TRACK_S_PER_ROW = 1.5e-4              # the project's tracker on one passage (benchmarks/track_rows.py)
 TRACK_BYTES_PER_ROW = 3_000.0         # estimates, covariances, status and the recording's own arrays
 RECORDING_BYTES_PER_LINE = 20.0       # a CSV line "time,sensor,channel,value" is at least this long
 STUDY_S_PER_RUN = {"S0": 0.15, "S1": 0.3, "S2": 0.5}
 STUDY_BYTES_PER_RUN = {"S0": 3e6, "S1": 1e6, "S2": 2e7}
-WIDE_S_PER_PASSAGE = 0.3              # three families, one process (1009 s for 500 passages per family)
+WIDE_S_PER_PASSAGE = 0.3              # three families, one process (shipsense reproduce wide)
 WIDE_BYTES_PER_CHUNK = 5e8            # one chunk of passages in one worker
-CHECK_S_PER_VALUE = 1.5e-4            # ambiguity search per passage x step x channel (S0 1.3e-4 .. S1-P2 5e-4 CPU s)
-PPO_S_PER_STEP = {"scheduling": 4e-3, "placement": 2e-3}   # Passage-v1: 212-385 frames/s at 16 envs (2026-11-25);
-# placement: ArrayDesign-v1, ~65-200 steps/s with PPO
+CHECK_S_PER_VALUE = 1.5e-4            # ambiguity search per passage x step x channel (benchmarks/check.py)
+PPO_S_PER_STEP = {"scheduling": 4e-3, "placement": 2e-3}   # PPO on Passage-v1 (16 envs) and on ArrayDesign-v1
 TRAIN_EVALUATION_S = {"scheduling": 120.0, "placement": 40.0}   # a held-out evaluation, per 200 episodes
-EVALUATE_S_PER_EPISODE = {"convex": 5.0}   # design_array per site (S1-P2, 81 candidates); others below 0.1 s
-DESIGN_S_PER_VALUE = 5e-7             # Fisher build per candidate x passage x step x channel (1600 x 32 of S1-P2: 12 s)
+EVALUATE_S_PER_EPISODE = {"convex": 5.0}   # design_array per site (S1-P2, 81 candidates); the others far less
+DESIGN_S_PER_VALUE = 5e-7             # Fisher build per candidate x passage x step x channel (benchmarks/design.py)
 
 
 class WorkTooLarge(ShipsenseError):

@@ -155,7 +155,8 @@ class SensorConfig(_Model):
 
 
 class MediumConfig(_Model):
-    """Sea water over a seabed half-space (physics.md §2)."""
+    """Sea water of conductivity ``sigma_water`` (S/m) and depth ``water_depth`` (m) over a seabed half-space of
+    conductivity ``sigma_seabed`` (S/m), under insulating air (:class:`shipsense.physics.electric.Medium`)."""
 
     sigma_water: Conductivity = 4.0
     sigma_seabed: Conductivity = 0.04
@@ -203,7 +204,11 @@ class PriorConfig(_Model):
 
 
 class NoiseConfig(_Model):
-    """Measurement noise model (physics.md §5)."""
+    """Measurement noise model (:mod:`shipsense.physics.noise`).
+
+    ``gaussian``: ``N(0, R)`` per component; ``contaminated`` (outliers): ``(1 - eps) N(0, R) + eps N(0,
+    outlier_scale^2 R)`` (Huber 1964).  Either way each component is missing with probability ``dropout``.
+    """
 
     model: Literal["gaussian", "contaminated"] = "gaussian"
     eps: Annotated[Finite, Field(ge=0, lt=1)] = 0.1
@@ -247,7 +252,8 @@ class SeismicConfig(_Model):
 
 
 class ProcessNoiseConfig(_Model):
-    """Process noise of the tracker's motion model (physics.md §4), in **SI units of the state**.
+    """Process noise of the tracker's constant-velocity motion model (:mod:`shipsense.physics.motion`), in **SI
+    units of the state**.
 
     ``identity``: ``sigma_q I``; ``dwna``: white acceleration ``sigma_a`` (m/s²) plus a per-step
     random-walk variance ``param_var`` on each parameter (moment in (A·m²)², z in m², p in
@@ -255,8 +261,8 @@ class ProcessNoiseConfig(_Model):
     A model that scales its state (the trackers keep the moment in 1e6 A·m²) rescales Q with it:
     ``sigma_q = 0.1`` is 0.1 (A·m²)² on the moment, 1e-13 in (1e6 A·m²)².  The defaults (DWNA,
     sigma_a = 1 m/s², a moment walk of 0.85 % of the scenario's moment magnitude per step) are the
-    consistent setting measured on S0 by ``experiments/filter_consistency.py`` (6e11 (A·m²)² there),
-    made relative so that it transfers to ships of other sizes.
+    setting ``experiments/filter_consistency.py`` found consistent on S0 (docs: Results), made relative
+    so that it transfers to ships of other sizes.
     """
 
     model: Literal["identity", "dwna", "diagonal"] = "dwna"
@@ -267,7 +273,8 @@ class ProcessNoiseConfig(_Model):
 
 
 class BankConfig(_Model):
-    """Multiple-initial-value bank: K moment (or p) levels times l bearings (trackers.md §2-3).
+    """Multiple-initial-value bank: K moment (or p) levels times l bearings, run side by side, the hypothesis
+    of largest cumulative innovation log-likelihood selected (the source studies' method).
 
     Seeds are placed at the range implied by the first measured field for each
     level, on each bearing, around the sensor that measured the strongest

@@ -308,7 +308,7 @@ def check_array(model, thetas, steps, *, far=DEFAULT_FAR, chi2_threshold=DEFAULT
 def mirror_screen(model, thetas, steps, *, far=DEFAULT_FAR, stride=2, lines=None):
     """The smallest discrepancy (chi-square units) of a far-apart mirror image of passages ``thetas`` (P, n)
     across the array's own symmetry lines (:func:`mirror_lines`), unrefined: the first stage of
-    :func:`check_array` without its least-squares refinement and random starts, in milliseconds.
+    :func:`check_array` without its least-squares refinement and random starts: a quick screen.
 
     A layout with an exact mirror symmetry for the passages -- e.g. collinear sensors -- scores 0 (exactly
     ambiguous); a value below the threshold is an ambiguity :func:`check_array` would report too, but a value

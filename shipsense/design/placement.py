@@ -10,7 +10,7 @@ deviations :math:`D` of the passage parameters and :math:`\tilde J = D J D`,
 (D-optimal; A: :math:`-\operatorname{tr} M_s^{-1}`; E: :math:`\min_s \lambda_{\min}(M_s)`).
 The problem is normalised by a scalar :math:`c` (``I + X = c (I/c + X/c)``),
 which leaves the optimiser unchanged and keeps the cone solver's data O(1)
-(unscaled, the data span 1e9 to 2e13 on S1 and CLARABEL failed); the prior
+(unscaled, the data span many orders of magnitude and CLARABEL failed on S1); the prior
 term is ``1/c`` exactly (the scenario's prior), unless a floor is asked for
 (see :func:`build_problem`).
 
@@ -139,11 +139,11 @@ def build_problem(model, thetas, steps, k, prior_std, stride=2, prior_floor=None
     ----------
     prior_floor : float, optional
         Floor the scaled prior term at this value (a regulariser: the true
-        prior term is about 1e-12 on S1, and CLARABEL's A- and E-optimal solves
-        were measured inaccurate there).  None (the default): no floor, the
-        scenario's prior as it is.  The floor changes the criterion, not only
-        the numerics: on S0 a floor of 1e-4 picked a design 0.972 as efficient
-        as the Bayes-optimal one.
+        prior term can be tiny against the data, as on S1, where CLARABEL's A-
+        and E-optimal solves were inaccurate).  None (the default): no floor,
+        the scenario's prior as it is.  The floor changes the criterion, not
+        only the numerics: the design it picks can be less efficient than the
+        Bayes-optimal one (docs: Results).
     progress : callable, optional
         Called with the fraction of the Fisher matrices built.
     """
@@ -272,10 +272,10 @@ def solve_convex(problem, criterion="D", cuts=None, return_status=False):
         try:
             prob.solve(solver=cp.CLARABEL)
         except cp.error.SolverError:
-            # CLARABEL can stop with InsufficientProgress on these badly scaled problems (information ~1e-5
-            # beside a prior of ~1e-11), and whether it does can turn on the last bit of the data (seen with
-            # matrices 2e-16 apart). One retry with a stronger static regularisation; its status says
-            # "inaccurate" and the numpy certificate says how far from optimal the weights are.
+            # CLARABEL can stop with InsufficientProgress on these badly scaled problems (information many orders
+            # of magnitude above the prior term), and whether it does can turn on the last bit of the data. One
+            # retry with a stronger static regularisation; its status says "inaccurate" and the numpy
+            # certificate says how far from optimal the weights are.
             try:
                 prob.solve(solver=cp.CLARABEL, static_regularization_constant=1e-7)
             except cp.error.SolverError as err:
@@ -719,7 +719,7 @@ def solve_relaxation(problem, criterion="D", solver="auto", cuts=None, first_ord
             info = {"method": "convex", "solver": "clarabel", "status": status, "converged": status == "optimal",
                     "message": ""}
             if not constrained and status != "optimal":
-                # an inaccurate interior point (the prior term is ~1e-12 of the data): polish it by projected
+                # an inaccurate interior point (the prior term is tiny against the data): polish it by projected
                 # gradient from there, stopped by the duality gap
                 upper, f = certified_bound(problem, w, criterion)
                 if upper - f > 1e-4:

@@ -15,7 +15,7 @@ conditioned: positions in m, velocities in m/s, magnetic moments in units of
 :meth:`FieldModel.to_internal` / :meth:`FieldModel.to_si` convert states, and
 :attr:`FieldModel.y_scale` measurements; users see SI.
 
-State layout (physics.md §4): ``(x, y, v_x, v_y)``, then the magnetic moment
+State layout (:mod:`shipsense.physics.motion`): ``(x, y, v_x, v_y)``, then the magnetic moment
 ``(m_x, m_y, m_z)`` if the array has magnetometers, then ``(z, p)`` if it has
 electrodes (the source height and the scalar dipole along the keel).  A model
 over several sensor types is the fused (stacked) model: its channels are the
@@ -377,7 +377,7 @@ def model_from_scenario(scenario, sensors=None, *, moment_unit=1e6, process_nois
     m/s² and per-step random walks with standard deviation 0.85 % of the
     moment magnitude (the nominal passage's, or the geometric mean of the
     prior's range when there is one), 0 on z and 1e-3 (A·m)² on p -- the
-    consistent setting measured on S0 (README, "Filter consistency").
+    setting ``experiments/filter_consistency.py`` found consistent on S0 (docs: Results).
     """
     from shipsense.config import ProcessNoiseConfig, load_scenario
 

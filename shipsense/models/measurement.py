@@ -33,8 +33,8 @@ _KERNELS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 # The loops over the batch are compiled without numba's reference counting (``_nrt=False``; they allocate
 # nothing: the kernels that call them allocate the scratch).  With it, every array handed to an inlined helper,
 # unpacked from a tuple or sliced as a view costs an atomic increment and decrement that numba does not always
-# prune in a loop with branches: measured, 8x the cost of the measurement function and about three quarters
-# of a UKF update at batch 2400.  ``_nrt`` is a numba option that is not part of its documented API; a numba
+# prune in a loop with branches: several times the cost of the measurement function itself, and most of a UKF
+# update at large batches.  ``_nrt`` is a numba option that is not part of its documented API; a numba
 # without it gets the counted loops (same results, slower).
 try:
     loop_jit = njit(cache=True, error_model="numpy", nogil=True, _nrt=False)

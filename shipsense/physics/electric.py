@@ -17,8 +17,9 @@ dipoles at
     z = z_t - 2nD \quad\text{and}\quad z = -z_t - 2nD, \qquad n \in \mathbb{Z},
 
 each weighted by :math:`\eta^{|n|}` (``n = 0``: the source and its surface
-image).  This is the series of ``shared/spec/physics.md`` §2 written in world
-coordinates (its ``k >= 1`` sum is ``n = -k``, its ``m >= 0`` sum ``n = m``).
+image).  This is the image series of the electric source study (S1) written
+in world coordinates (its sum over ``k >= 1`` is ``n = -k`` here, its sum over
+``m >= 0`` is ``n = m``).
 Each image contributes the full-space dipole potential
 :math:`(p\cdot\rho)/(4\pi\sigma_1 R^3)` and field
 
@@ -44,8 +45,8 @@ Two evaluation paths:
   vertical coordinate ``w`` (``z_s - z_t`` or ``z_s + z_t``), is read from a
   table built once per medium from the series and interpolated (tensor cubic
   Lagrange on a uniform grid in ``asinh(rho/2D)`` and ``w``).  Its error
-  against the series is measured in ``tests/physics/test_electric.py`` and
-  ``benchmarks/physics.py`` (below 1e-6 relative for offsets up to 2 km).
+  against the series is tested to be below 1e-6 relative for offsets up to
+  2 km (``tests/physics/test_electric.py``; ``benchmarks/physics.py`` reports it).
   Beyond the table (20 km) the remainder follows its asymptote.
 
 References: Wait, *Electromagnetic Waves in Stratified Media* (1962); the
@@ -338,9 +339,8 @@ class FastHED:
         remainder is held at its last value, i.e. extrapolated along its
         ``rho^-3`` / ``rho^-5`` asymptote: finite and smooth, so a diverged
         hypothesis far away never costs a series evaluation, but only right
-        in order of magnitude (5-50 % off at 1.5-15 times ``rho_max``, measured
-        for sigma_seabed 0.3 and 0.04).  The tested error bound covers offsets
-        up to 2 km.
+        in order of magnitude.  The tested error bound covers offsets up to
+        2 km.
     hx : float
         Grid step in ``asinh(rho / 2D)``.
     nw_per_depth : int
@@ -444,10 +444,9 @@ _FAST_KERNELS: dict[Medium, FastHED] = {}
 def fast_hed(medium: Medium) -> FastHED:
     """The :class:`FastHED` kernel for ``medium``, built on first use and kept.
 
-    Building the table costs 0.9 s of wall time on two cores for the demo's
-    resistive seabed (eta 0.98: 1,591 shells; 2.9 s before the build was
-    split over the CPUs and done on contiguous scratch, 2026-11-26); the
-    kernels are kept in a module-level dictionary keyed by the (frozen,
+    Building the table sums the series at every grid point, which is costly
+    for a resistive seabed (eta close to 1: over a thousand image shells);
+    the kernels are kept in a module-level dictionary keyed by the (frozen,
     hashable) medium, so every caller of one medium shares one table.
     """
     kernel = _FAST_KERNELS.get(medium)

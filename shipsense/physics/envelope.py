@@ -68,7 +68,7 @@ def extract_envelope(raw, rate_hz, lowpass_hz=0.5, order=4):
     -------
     env : ndarray, same shape as ``raw``
     """
-    from scipy import signal  # (lazily: scipy.signal alone took 0.75 s of `import shipsense`)
+    from scipy import signal  # (lazily: scipy.signal is a slow import; benchmarks/import_time.py)
 
     return _lowpass(np.abs(signal.hilbert(raw, axis=-2)), rate_hz, lowpass_hz, order)
 

@@ -134,9 +134,8 @@ def _sums(rho, zs, zt, table, nx, nw, a, x0, hx, w0, hw, rho_max, D, eta):
 
 
 # hed_field_point and hed_point are called, not inlined, by the compiled filter steps: inlined at each of the
-# steps' call sites they doubled the first compilation of the steps (86 s against 46 s on the 2-core machine,
-# benchmarks/filters.py's first-call probe) and ran no faster (a one-off A/B of S1-P1's h_and_H and PUEKF update
-# when the choice was made; benchmarks/physics.py prints the measurement models' cost per state).
+# steps' call sites they made the steps' first compilation much longer (benchmarks/filters.py's first-call
+# probe) and ran no faster (benchmarks/physics.py prints the measurement models' cost per state).
 @numba.njit(cache=True, nogil=True)
 def hed_field_point(x, y, zs, zt, mx, my, table, nx, nw, a, x0, hx, w0, hw, rho_max, D, eta, c):
     """The HED field ``(E_x, E_y, E_z)`` at one point: ``E_h = c (3 (p.rho) rho K2 - p K1)``,

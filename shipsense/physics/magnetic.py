@@ -51,8 +51,8 @@ def dipole_field(sensors, sources, moments):
     q = np.asarray(sources)
     m = np.asarray(moments)
     dtype = np.result_type(s, q, m, float)
-    # component-wise: every operation runs over the whole batch at unit stride (about 1.6x faster
-    # than working on (..., 3) rows, which matters inside sigma-point filters)
+    # component-wise: every operation runs over the whole batch at unit stride (faster than working
+    # on (..., 3) rows, which matters inside sigma-point filters)
     r = [np.subtract(s[..., i], q[..., i], dtype=dtype) for i in range(3)]
     B = np.empty(np.broadcast_shapes(r[0].shape, m.shape[:-1]) + (3,), dtype=dtype)
     _field_into(B, r, m)

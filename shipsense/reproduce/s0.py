@@ -1,4 +1,7 @@
-"""S0: one vector magnetometer, magnetic dipole, SRCDKF bank (scenarios.md, S0 experiments 1-4)."""
+"""S0: one vector magnetometer, magnetic dipole, SRCDKF bank.
+
+The magnetic source study's experiments 1-4: convergence basin, seeding, selection, filter units.
+"""
 
 from __future__ import annotations
 

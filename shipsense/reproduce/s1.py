@@ -1,4 +1,7 @@
-"""S1: electrode array, shaft-rate envelope, PUEKF bank (scenarios.md, S1 experiments 1-3)."""
+"""S1: electrode array, shaft-rate envelope, PUEKF bank.
+
+The electric source study's experiments 1-3: signal symmetry, array P1 (collinear) vs P2, raw-signal chain.
+"""
 
 from __future__ import annotations
 

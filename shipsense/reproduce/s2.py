@@ -1,4 +1,8 @@
-"""S2: two magnetometers, outliers, seismic bearing fusion (scenarios.md, S2 experiments 1-4)."""
+"""S2: two magnetometers, outliers, seismic bearing fusion.
+
+The seismic–magnetic source study's experiments 1-4: one vs two sensors (EKF vs UKF), outliers (UKF vs Huber-UKF),
+seismic fusion at low SNR, field-trial geometry.
+"""
 
 from __future__ import annotations
 
@@ -29,7 +33,7 @@ road, seeded); the tracker assumes aligned axes."""
 TRIAL_BIASES_DEG = (0.0, 5.0, 10.0, 20.0)
 TRIAL_RUNS = 10
 """Exp. 4's passages per road (at most; fewer when ``runs`` is small): a fused track with biased bearings fails
-its fits and is re-fitted from the global initialiser every few samples, ~2 s per passage."""
+its fits and is re-fitted from the global initialiser every few samples, which makes each passage costly."""
 TRIAL_NEAR_M = 50.0
 """Exp. 4's "near the closest approach": samples within this along-road distance of it."""
 

@@ -64,7 +64,7 @@ def refit_after_peak(model, measurements, gi: GlobalInit, estimates, through_pea
     Levenberg–Marquardt to every sample from ``gi.k0`` to ``e - 1``: a batch
     fit across the closest approach, warm-started from a track that has
     followed it (a fit of that stretch from the window's solution falls into
-    local minima more often, EXPERIMENTS.md).  Returns a :class:`GlobalInit`
+    local minima more often; docs: Results).  Returns a :class:`GlobalInit`
     starting at ``e`` (:func:`~shipsense.trackers.tracker.restarts.refit_at`: the fit,
     ``inflate`` times its inverse Gauss–Newton information, and ``fit_ok``
     from the chi-square test at level ``gof``); ``prior`` as for

@@ -1,4 +1,4 @@
-r"""The multiple-initial-value (MIV) bank with maximum-likelihood selection (trackers.md §2-3).
+r"""The multiple-initial-value (MIV) bank with maximum-likelihood selection (the source studies' method).
 
 All hypotheses of all runs are one flat batch of (run, hypothesis) pairs.
 Each step is one batched predict and update; the cumulative log-likelihood
@@ -376,7 +376,7 @@ def run_bank(unit, model, measurements, seeds, P0, *, prune_nats=None, progress=
         ``positions`` and ``selected`` by default.  A study over many runs
         that reads only the hypotheses' positions, their likelihoods and the
         selected track keeps ``("positions", "loglik", "selected")``: a
-        fraction of the memory (S0's dense bank: 57 MB instead of 245 MB).
+        fraction of the memory.
         ``selected`` is the maximum-likelihood hypothesis's mean at each step,
         chosen as the bank runs (the cumulative log-likelihood at that step).
     """

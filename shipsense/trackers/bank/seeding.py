@@ -2,7 +2,7 @@ r"""Seeding the hypotheses of the multiple-initial-value bank from the first mea
 
 From the first measured field magnitude (the sensor with the largest one:
 a documented choice that picks the sensor nearest the ship) and K assumed
-source strengths, the range formulas of physics.md give K ranges,
+source strengths, the far-field dipole range formulas give K ranges,
 
 * magnetic: :math:`|r| = \sqrt[3]{(\mu_0/4\pi)\, 2 |m| / |B|}` (on-axis;
   off-axis the range is over-estimated by at most a factor cbrt(2));
@@ -11,9 +11,9 @@ source strengths, the range formulas of physics.md give K ranges,
 
 and the horizontal-range correction :math:`\rho = \sqrt{r^2 - \Delta z^2}`
 (zero when ``r < |dz|``).  On each range, ``l`` bearings give ``K l``
-positions around that sensor (trackers.md §2), at bearings measured from +x
+positions around that sensor, at bearings measured from +x
 counter-clockwise (``bearing_convention = "east"``) or clockwise from north,
-+y (``"north"``: the S0 study's bank, scenarios.md).
++y (``"north"``: the bank of the magnetic source study, scenario S0).
 """
 
 from __future__ import annotations

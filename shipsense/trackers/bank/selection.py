@@ -1,4 +1,4 @@
-"""Choosing among hypotheses (trackers.md §3): the mixture of a bank's hypotheses and its mean-square error, and
+"""Choosing among hypotheses: the mixture of a bank's hypotheses and its mean-square error, and
 the tracker's report of every passage's selection (:func:`report`, compiled)."""
 
 from __future__ import annotations

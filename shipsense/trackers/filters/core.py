@@ -138,7 +138,7 @@ def transposed(a):
     """``a^T`` over the last two axes as a contiguous array.
 
     ``np.matmul`` on a batch of small matrices is several times slower when an
-    operand is a transposed view (4x for 768 7x7 products) than copying first.
+    operand is a transposed view than copying first.
     """
     return np.ascontiguousarray(np.swapaxes(a, -1, -2))
 
@@ -230,9 +230,9 @@ def _cholesky_unrolled(P):
     for thousands of 7x7 matrices that per-call cost dominates.  Here the
     entries are computed by the Cholesky-Banachiewicz recursion in a
     workspace with the batch on the last (contiguous) axis, each entry one
-    vector operation over the whole batch (about 2x faster than LAPACK for
-    n = 7 and 3x for n = 3 at a batch of 2400; slower below a few hundred,
-    hence the threshold in :func:`safe_cholesky`).  Reads the lower triangle
+    vector operation over the whole batch (faster than LAPACK for the small
+    n of the trackers' states at batches of thousands; slower for small
+    batches, hence the threshold in :func:`safe_cholesky`).  Reads the lower triangle
     only; an indefinite element gets NaN entries (its caller flags and
     repairs it).
     """

@@ -26,13 +26,13 @@ its noise variances per further iteration), so a compiled element equals the num
 element alone.
 
 One step per batch element, with no Python objects, no temporaries and no
-reference counting in the loop: the per-step cost is about 20 microseconds of
-call overhead plus the arithmetic.  A batch of ``shipsense.parallel.SPLIT_MIN`` (512) elements
+reference counting in the loop: the per-step cost is one call's overhead plus
+the arithmetic.  A batch of ``shipsense.parallel.SPLIT_MIN`` (512) elements
 or more runs as contiguous chunks in threads (:mod:`shipsense.parallel`; the loops
 release the GIL).  The first call compiles (``cache=True``: once per machine, the
 compiled code is kept next to this file and reused by later processes); each filter has its own update
 kernel (:func:`_update_kernel_for`: one source, the filter a constant of each), so a first call compiles
-that filter's statistics and gain only (UKF 11 s instead of 49 s for all six).
+that filter's statistics and gain only, not all six filters'.
 """
 
 from __future__ import annotations

@@ -39,7 +39,7 @@ def sigma_points(x, chol, spread, center=True):
 
     ``L_i`` are the columns of the factor.  Written into one preallocated
     array through flat (..., n*n) blocks, so that every operation has a long
-    contiguous inner loop (2-3x faster than broadcasting rows of length n).
+    contiguous inner loop (faster than broadcasting rows of length n).
     """
     n = x.shape[-1]
     c = int(center)

@@ -105,8 +105,8 @@ def lm_loop(spec, theta, Ak, y, present, w, mu, root, gamma, lo, hi, iterations,
                         acc += N[p, q] * (tt[q] - th[q])
                     pred -= dp * acc
             # (one call site; normal_equations is compiled on its own, not inlined here: numba copies an inlined
-            # function's IR, and copying this one, with the measurement kernel inlined in it, took 3 s of the
-            # loop's first compilation of ~13 (S0's fits); called once a step, it costs nothing at run time)
+            # function's IR, and copying this one, with the measurement kernel inlined in it, was a large share of
+            # the loop's first compilation; called once a step, it costs nothing at run time)
             ct = normal_equations(spec, tt, b, Ak, y, present, w, mu, root, gamma, cv, Nt, gt, x, row, yhat, H, r3,
                                   m3, Bf, dBq, dBm)
             evaluations[b] += 1
@@ -145,8 +145,7 @@ def normal_equations(spec, th, b, Ak, y, present, w, mu, root, gamma, cv, N, g, 
 
     With ``cv`` (:func:`_constant_velocity`: every transition is the identity but ``t`` at (0, 2) and (1, 3)),
     the state ``A_k th`` and the Jacobian rows ``H_i A_k`` take only their nonzero terms: the same numbers
-    (a dense product adds exact zeros to them), a third less time a sample (a recorded S2 batch: 556 -> 356
-    ns)."""
+    (a dense product adds exact zeros to them), in less time a sample."""
     n = th.shape[0]
     K, m = y.shape[1], y.shape[2]
     ia = b if Ak.shape[0] > 1 else 0

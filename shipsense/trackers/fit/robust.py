@@ -16,10 +16,11 @@ from shipsense.defaults import HUBER_GAMMA
 class Huber:
     """Robust (Huber) fits, and what their cost should be under the noise's outlier model.
 
-    The noise of a whitened residual is taken as ``(1 - eps) N(0, 1) + eps N(0, scale^2)`` (physics.md §5;
-    ``eps = 0``: Gaussian).  Fits minimise :func:`huber_cost` with threshold ``gamma``; the goodness-of-fit
-    test compares that cost with its distribution under the noise model: mean ``dof mu`` and variance
-    ``dof sigma^2`` per residual (:attr:`moments`, by Gauss-Hermite quadrature), a normal approximation.
+    The noise of a whitened residual is taken as ``(1 - eps) N(0, 1) + eps N(0, scale^2)`` (the contaminated
+    Gaussian of :mod:`shipsense.physics.noise`; ``eps = 0``: Gaussian).  Fits minimise :func:`huber_cost`
+    with threshold ``gamma``; the goodness-of-fit test compares that cost with its distribution under the
+    noise model: mean ``dof mu`` and variance ``dof sigma^2`` per residual (:attr:`moments`, by
+    Gauss-Hermite quadrature), a normal approximation.
     """
 
     gamma: float = HUBER_GAMMA
@@ -47,8 +48,8 @@ class Huber:
     @property
     def variance_factor(self):
         """``kappa = E[psi^2] / E[psi']^2``: the Huber M-estimate's variance over the nominal (Gaussian) one
-        under the noise model (Huber 1964); 1.05 for Gaussian noise at gamma = 1.345, about 2 with 20 %
-        outliers of ten times the standard deviation.  A robust fit's covariance is ``kappa (J^T J)^-1``."""
+        under the noise model (Huber 1964): for Gaussian noise the reciprocal of the estimate's efficiency
+        (95 % at gamma = 1.345), larger with outliers.  A robust fit's covariance is ``kappa (J^T J)^-1``."""
         return _huber_figures(self.gamma, self.eps, self.scale)[2]
 
     def variance_factor_at(self, threshold):
@@ -82,7 +83,7 @@ class Huber:
 
     def limit(self, dof, gof):
         """Cost (like ``dof``) above which a fit with ``dof`` degrees of freedom fails at level ``gof``."""
-        from scipy.special import ndtri  # -ndtri(q) = scipy.stats.norm.isf(q), without scipy.stats' 40 MB
+        from scipy.special import ndtri  # -ndtri(q) = scipy.stats.norm.isf(q), without importing scipy.stats
 
         mu, var = self.moments
         return np.asarray(dof) * mu - ndtri(gof) * np.sqrt(np.asarray(dof) * var)
@@ -94,7 +95,7 @@ def _huber_figures(gamma, eps, scale):
 
 
 def _normal_pdf(e, sd):
-    """The N(0, sd^2) density (scipy.stats.norm(scale=sd).pdf, without scipy.stats' 40 MB import)."""
+    """The N(0, sd^2) density (scipy.stats.norm(scale=sd).pdf, without importing scipy.stats, a large module)."""
     u = e / sd
     return np.exp(-u**2 / 2.0) / np.sqrt(2.0 * np.pi) / sd
 

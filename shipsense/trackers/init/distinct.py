@@ -36,8 +36,8 @@ def _distinct_walk(chi2, positions, limit2, picks):
     ``picks``; returns their counts (R,).
 
     A row's finite candidates are taken from a binary heap ordered by ``(chi2, index)`` -- the stable sort's
-    order -- only as far as the walk needs them: a grid's 20 picks were among its lowest 250 of 6,912 in
-    every window of 32 tracked passages (a whole stable sort of them cost ~0.5 ms a row)."""
+    order -- only as far as the walk needs them: a grid's picks lie among a small share of its lowest
+    candidates, and a whole stable sort of every row would cost more than the walk."""
     R, M = picks.shape
     C = chi2.shape[1]
     count = np.zeros(R, dtype=np.int64)

@@ -70,13 +70,14 @@ def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, c
         Duration (s) fitted from the detection on (W samples); the grid search
         uses about ``grid_samples`` of them, the refinement all.
     keep : int
-        Distinct minima kept per passage (M): the best ones more than ``distinct_m`` apart (5: on the
-        wide study, 4 lost two-magnetometer passages and 6 cost more than the bank, EXPERIMENTS.md).
+        Distinct minima kept per passage (M): the best ones more than ``distinct_m`` apart (the default was
+        chosen on the wide-prior study's two-magnetometer passages: fewer minima lost passages, more cost
+        time and converged no more often; docs: Results).
     refine : int or sequence of int, optional
         Distinct grid minima refined by the batch fit (default ``keep``); the
         best ``keep`` distinct refined fits seed the bank.  At high SNR the
         global minimum's basin can be narrower than the grid spacing, so it
-        may not be among the ``keep`` best grid points (EXPERIMENTS.md).
+        may not be among the ``keep`` best grid points (docs: Results).
         Increasing counts, e.g. ``(5, 20, 60)``, refine in stages: the first
         count for every passage, each further one only for the passages whose
         best fit so far fails the chi-square test (``gof``), so that the cost
@@ -86,20 +87,20 @@ def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, c
         1 %): a fit whose chi-square exceeds the ``1 - gof`` quantile for
         its degrees of freedom has not explained the data to the noise
         level (a local minimum, or a source the model does not describe).
-        At 0.1 % a single-magnetometer fit 21 m off passed (EXPERIMENTS.md).
-        It drives the staged ``refine`` and gives ``GlobalInit.fit_ok``.
-        (Scaling a failed fit's covariance by its reduced chi-square, the
-        Birge ratio, was tried and dropped: on 500 two-magnetometer passages
-        the first bank from the larger covariances went from 3.8x to 5.2x
-        the constant-velocity bound, EXPERIMENTS.md.)
+        At 0.1 % a single-magnetometer fit far off the truth passed (docs:
+        Results).  It drives the staged ``refine`` and gives
+        ``GlobalInit.fit_ok``.  (Scaling a failed fit's covariance by its
+        reduced chi-square, the Birge ratio, was tried and dropped: it took
+        the first bank of two-magnetometer passages further from the
+        constant-velocity bound; ``experiments/refit_after_peak.py``.)
     explore_samples : int, optional
         The refinement's fits of the grid minima use about this many samples
         of the window, evenly spaced (and the staged test those samples); the
         ``keep`` fits kept are then polished on every sample.  Exploring many
-        minima then costs that much less: on S0 (150-sample windows), 60
-        minima explored on 15 samples missed the global minimum of none of
-        100 passages, where 5, 20 and 60 in stages on every sample missed 16
-        (EXPERIMENTS.md).  None: every sample.
+        minima then costs that much less, and on S0 exploring them on a few
+        samples missed the window's global minimum less often than refining
+        them in stages on every sample (``experiments/staged_refinement.py``,
+        docs: Results).  None: every sample.
     snr_start : float
         The window starts at the first sample with some channel above this SNR (adaptive start).
     inflate : float
@@ -109,7 +110,7 @@ def global_init(model, measurements, *, ranges, speeds, bearing_step_deg=15.0, c
         ``source_z`` (models with electrodes): the batch fits are then MAP fits
         and their covariances include it.  The envelope fits otherwise often
         settle on a wrong depth, the depth and ``p`` trading off in the far
-        field (EXPERIMENTS.md); the studies' bank starts with the same prior
+        field (docs: Results); the studies' bank starts with the same prior
         (``BankConfig.z_std``).
     common_start : bool
         Start every passage's window at the latest detection of the batch, so

@@ -61,7 +61,7 @@ def chi2_limit(model, yfit, prior, gof, huber=None):
     With ``huber`` (robust fits) the statistic is the Huber cost, and its limit the normal approximation of
     its distribution under the noise's outlier model (:meth:`~shipsense.trackers.fit.robust.Huber.limit`).
     """
-    from scipy import special  # chdtri(dof, q) = scipy.stats.chi2.isf(q, dof), without scipy.stats' 40 MB
+    from scipy import special  # chdtri(dof, q) = scipy.stats.chi2.isf(q, dof), without importing scipy.stats
 
     if gof is None:
         return np.full(yfit.shape[0], np.inf)

@@ -30,16 +30,16 @@ approximation (both checked in tests/trackers/tracker/test_consistency.py).
 When the test fails, the tracker refits the passage
 (:class:`~shipsense.trackers.Tracker`'s restarts): a batch fit of every
 sample so far replaces the filter's state and covariance, and the sample is
-reported ``inconsistent``.  Measured on 200 faulty one-magnetometer passages
-(20 % outliers of 10 standard deviations, 30 % dropouts), where the filter
-runs alone for most of the passage after its closest approach: post-
-convergence coverage of the 95 % ellipse 0.837 -> 0.885 (EXPERIMENTS.md).
-Inflating the filter's covariance instead, by the factor the same statistic
-estimates (method of moments, ``1 + (T - dof) / sum_i (sum_k a_ki)^2 /
-sum_k v_ki`` with ``a = g sqrt(P_yy / (P_yy + R))``, ``g`` the mean slope of
-``psi``), reached 0.850: the position error of an optimistic filter shows in
-its innovations less than in its position (the moment and the velocity take
-up part of it).
+reported ``inconsistent``.  On faulty one-magnetometer passages (outliers
+and dropouts), where the filter runs alone for most of the passage after its
+closest approach, the refit raises the post-convergence coverage of the 95 %
+ellipse (``experiments/tracker_consistency.py``; docs: Results).  Inflating
+the filter's covariance instead, by the factor the same statistic estimates
+(method of moments, ``1 + (T - dof) / sum_i (sum_k a_ki)^2 / sum_k v_ki``
+with ``a = g sqrt(P_yy / (P_yy + R))``, ``g`` the mean slope of ``psi``),
+raised it less: the position error of an optimistic filter shows in its
+innovations less than in its position (the moment and the velocity take up
+part of it), and a refit replaces the biased state as well.
 """
 
 from __future__ import annotations
@@ -125,7 +125,7 @@ def quantile_table(level, top):
 @lru_cache(maxsize=32)
 def _quantiles(level, top):
     """``chi2.isf(level, k)`` for k = 0..top (inf at 0), rounded up to a power of two of entries: the tracker
-    asks every sample for a handful of small degrees of freedom (scipy's call costs ~0.1 ms)."""
+    asks every sample for a handful of small degrees of freedom (a table lookup, not a scipy call each time)."""
     size = 1 << int(top).bit_length()
     k = np.arange(size)
     return np.where(k > 0, special.chdtri(np.maximum(k, 1), level), np.inf)     # scipy.stats.chi2.isf

@@ -18,8 +18,8 @@ from shipsense.trackers.filters import FilterUnit, get_filter
 from shipsense.trackers.fit.robust import Huber
 
 FAMILY_SETTINGS = {
-    # the global initialiser's settings per array family, measured on the wide-prior study and the tracker
-    # consistency experiment (the docs' results pages): electrodes also take the bank's depth prior (z_std)
+    # the global initialiser's settings per array family, chosen on the wide-prior study and the tracker
+    # consistency experiment (docs: Results): electrodes also take the bank's depth prior (z_std)
     "electrodes": {"snr_start": 50.0, "refine": (10, 30, 60), "explore_samples": None, "window_s": 15.0,
                    "rescan": False, "grid_samples": 16},
     "one magnetometer": {"snr_start": 50.0, "refine": (20, 60), "explore_samples": 15, "z_std": None,

@@ -22,8 +22,7 @@ What stays in numpy: the hypotheses' covariances ``L L^T`` the time update start
 whose sums a compiled loop does not reproduce to the last bit).  What is not taken here (the caller then
 runs the step by step path): a model without a compiled kernel, the SR-CDKF (its own time update), a pruned
 bank, and the passages of a chunk in which an element fails numerically (nothing of the chunk is written
-before both kernels succeed).  At every batch size this is the faster path (S2, 191 running passages: 1.1
-against 2.6 ms a step; the studies' 12-hypothesis bank, 200 passages and no repeats: 10.5 against 13.7).
+before both kernels succeed).  At every batch size this is the faster path (docs: Results).
 """
 
 from __future__ import annotations
@@ -290,8 +289,7 @@ def prepare_sample(act, t, y, ys, phase, last_t, n, y_hist, t_hist, cons_now, fi
 
 
 THREAD_ROWS = 96
-"""Hypothesis rows (about 0.3 ms of a step) in a chunk of :class:`TrackerStep`'s passages; the chunks are shared
-among the CPUs."""
+"""Hypothesis rows in a chunk of :class:`TrackerStep`'s passages; the chunks are shared among the CPUs."""
 
 STEP_KERNELS = {code: _step_kernel_for(code) for code in (UKF, CDKF, HUBER, EKF, PUEKF)}
 """Each covariance-form filter's compiled step, by its code (compiled at its first call)."""
@@ -337,7 +335,7 @@ class TrackerStep:
         if len(bank.idx) != bank.R * H:
             return runs                     # (a pruned bank: BankState.step says why)
         rows = (runs[:, None] * H + np.arange(H)).ravel()
-        # the covariances the kernel predicts from: of the rows it steps only (it reads no repeat's, 79 % of the
+        # the covariances the kernel predicts from: of the rows it steps only (it reads no repeat's, most of the
         # rows in the environments), each the product it would be in a full batch (numpy multiplies a stack
         # matrix by matrix)
         live = live_rows(bank.cum, runs, H)
