@@ -149,7 +149,7 @@ def queued_rate(venv, actions, cycles=REPEATS):
     vector steps each, more than 16 episodes of every sub-environment) after one untimed cycle.
 
     Its observers' run-ins are done ahead, for every passage queued (a block of ``PASSAGE_BLOCK`` per
-    sub-environment), in one batch (:meth:`~shipsense.envs.passage_v1.PassageV1Core._run_ins`): a run of a
+    sub-environment), in one batch (:meth:`~shipsense.envs.passage_v1.PassageV1Core.run_ins`): a run of a
     few episodes from a reset pays for the run-ins of all the queued passages and uses two of them (the
     first measure of this kind, 200 steps from each of three resets, read 5,498 env-steps/s where this one
     reads 11,246).  After a cycle the sub-environments' queues are at different points of their blocks, and

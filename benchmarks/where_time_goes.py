@@ -145,8 +145,8 @@ def v1cycles(cycles):
 def runins(profile_rows=None):
     venv = _v1_vector(4)
     core = venv.unwrapped.core
-    blocks = [core._block(seed) for seed in range(100, 112)]
-    core._run_ins(core._block(99))                 # compile or load
+    blocks = [core.draw_block(seed) for seed in range(100, 112)]
+    core.run_ins(core.draw_block(99))                 # compile or load
     passages = [entry for block in blocks for entry in block]
 
     def run(size):
@@ -154,7 +154,7 @@ def runins(profile_rows=None):
             entries = passages[i:i + size]
             for entry in entries:
                 entry[2] = None
-            core._run_ins(entries)
+            core.run_ins(entries)
 
     for size in (1, len(blocks[0]), 2 * len(blocks[0]), 6 * len(blocks[0])):
         t0 = time.process_time()

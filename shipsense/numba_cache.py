@@ -19,8 +19,9 @@ from pathlib import Path
 DEPENDS = {
     "envs/features.py": (),
     "envs/passage.py": ("config.py", "envs/arguments.py", "envs/core_env.py", "envs/features.py", "simulator.py"),
-    "envs/passage_v1.py": ("config.py", "envs/arguments.py", "envs/core_env.py", "envs/features.py", "simulator.py",
-                           "trackers/compiled_linalg.py", "trackers/measurement.py", "trackers/tracker.py"),
+    "envs/passage_v1.py": ("config.py", "design/information_gain.py", "envs/arguments.py", "envs/core_env.py",
+                           "envs/features.py", "envs/prefetch.py", "simulator.py", "trackers/tracker.py"),
+    "design/information_gain.py": ("trackers/compiled_linalg.py", "trackers/measurement.py"),
     "physics/kernels.py": ("physics/magnetic.py",),
     "physics/hed_kernel.py": (),
     "trackers/measurement.py": ("parallel.py", "physics/hed_kernel.py", "physics/kernels.py"),

@@ -237,7 +237,7 @@ def test_announced_seeded_resets_give_the_same_episodes(monkeypatch):
     import pickle
     import sys
 
-    from shipsense.envs import passage_v1
+    from shipsense.envs import passage_v1, prefetch
 
     def caller():     # the function that drew a block (not a comprehension inside it)
         frame = sys._getframe(2)
@@ -245,8 +245,8 @@ def test_announced_seeded_resets_give_the_same_episodes(monkeypatch):
             frame = frame.f_back
         return frame.f_code.co_name
 
-    drawn, block = [], passage_v1.PassageV1Core._block
-    monkeypatch.setattr(passage_v1.PassageV1Core, "_block",
+    drawn, block = [], passage_v1.PassageV1Core.draw_block
+    monkeypatch.setattr(passage_v1.PassageV1Core, "draw_block",
                         lambda self, seed: drawn.append(caller()) or block(self, seed))
     monkeypatch.setenv("SHIPSENSE_THREADS", "2")
     seeds = [50 + i for i in range(40)]
@@ -270,9 +270,9 @@ def test_announced_seeded_resets_give_the_same_episodes(monkeypatch):
             pickle.loads(pickle.dumps(env))
             env.expect_seeds(seeds)
             copy.deepcopy(env)
-            assert len(env.core._expected) == 2 * passage_v1.EXPECT_BATCH    # (two batches drawn ahead)
+            assert len(env.core._expected) == 2 * prefetch.EXPECT_BATCH    # (two batches drawn ahead)
             env.reset(seed=seeds[0])
-            assert len(env.core._expected) == 2 * passage_v1.EXPECT_BATCH - 1
+            assert len(env.core._expected) == 2 * prefetch.EXPECT_BATCH - 1
         env.close()
         return out, list(drawn)
 
@@ -319,7 +319,8 @@ def test_the_compiled_gains_equal_the_kalman_form_and_are_zero_where_undefined()
     """information_gains (information form, compiled) against the covariance (Kalman) form on the stacked read
     channels, for random covariances, Jacobians and subsets (the empty one: 0); a singular covariance gives 0
     instead of raising."""
-    from shipsense.envs.passage_v1 import information_gains, subsets
+    from shipsense.design.information_gain import information_gains
+    from shipsense.envs.passage_v1 import subsets
 
     rng = np.random.default_rng(4)
     E, n, first = 6, 7, np.array([0, 3, 6, 7])          # sensors of 3, 3, 1 and 2 channels
@@ -348,7 +349,8 @@ def test_the_gains_at_states_equal_the_gains_of_the_models_jacobians():
     information_gains of model.H bit for bit; a model without a compiled kernel (the series HED path) goes
     through model.H."""
     from shipsense import load_scenario
-    from shipsense.envs.passage_v1 import information_gains, information_gains_at, subsets
+    from shipsense.design.information_gain import information_gains, information_gains_at
+    from shipsense.envs.passage_v1 import subsets
     from shipsense.trackers.models import model_from_scenario
 
     rng = np.random.default_rng(5)
@@ -534,7 +536,7 @@ def test_the_run_ins_in_one_batch_observe_what_one_at_a_time_did(monkeypatch):
         return out
 
     together = run()
-    monkeypatch.setattr(passage_v1.PassageV1Core, "_run_ins", one_at_a_time)
+    monkeypatch.setattr(passage_v1.PassageV1Core, "run_ins", one_at_a_time)
     for a, b in zip(together, run(), strict=True):
         np.testing.assert_array_equal(a, b)
 
@@ -579,8 +581,8 @@ def test_run_ins_left_to_the_background_change_nothing(monkeypatch):
 
     from shipsense.envs import passage_v1
 
-    drawn, block = [], passage_v1.PassageV1Core._block
-    monkeypatch.setattr(passage_v1.PassageV1Core, "_block",
+    drawn, block = [], passage_v1.PassageV1Core.draw_block
+    monkeypatch.setattr(passage_v1.PassageV1Core, "draw_block",
                         lambda self, seed: drawn.append(sys._getframe(1).f_code.co_name) or block(self, seed))
     monkeypatch.setenv("SHIPSENSE_THREADS", "2")
     venv, ahead = _vector_rollout(800)
@@ -647,7 +649,7 @@ def test_work_in_flight_when_the_process_forks_is_done_in_the_child():
     import threading
     import time
 
-    from shipsense.envs.passage_v1 import _Later
+    from shipsense.envs.prefetch import _Later
 
     parent, gate = os.getpid(), threading.Event()
     running = _Later(lambda: os.getpid() if os.getpid() != parent else (gate.wait(30), os.getpid())[1])
@@ -775,7 +777,7 @@ def test_a_failure_in_the_background_is_done_again_where_the_work_is_needed(monk
 
     monkeypatch.setenv("SHIPSENSE_THREADS", "2")
     _, clean = _vector_rollout(500)
-    calls, run_ins = [0], passage_v1.PassageV1Core._run_ins
+    calls, run_ins = [0], passage_v1.PassageV1Core.run_ins
 
     def flaky(self, entries):
         if threading.current_thread().name == "shipsense-background":
@@ -784,7 +786,7 @@ def test_a_failure_in_the_background_is_done_again_where_the_work_is_needed(monk
                 raise RuntimeError("a passing failure")
         return run_ins(self, entries)
 
-    monkeypatch.setattr(passage_v1.PassageV1Core, "_run_ins", flaky)
+    monkeypatch.setattr(passage_v1.PassageV1Core, "run_ins", flaky)
     _, failing = _vector_rollout(500)
     assert calls[0] >= 3
     for a, b in zip(clean, failing, strict=True):
