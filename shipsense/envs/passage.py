@@ -207,6 +207,9 @@ class PassageCore:
                 "reads": reads, "trimmed": trimmed, "error_term": error_term, "energy_term": energy_term}
         return rewards, self.k >= self.K - 1, info
 
+    def observe(self):
+        return self._observe()
+
     def _observe(self):
         obs = np.empty((self.E, self.obs_dim), dtype=np.float32)
         _observe(self.last.estimate, self.last.cov, self.tracker.bank.cum, self._snr_obs, self.k, self.last_read,
@@ -339,14 +342,9 @@ class PassageVectorEnv(CoreVectorEnv):
 
     def __init__(self, num_envs=1, scenario="S2", overrides=None, filter=None, max_reads=None, energy_cost=0.01,
                  error_scale=10.0, render_mode=None, observer="tracker"):
-        self._check_render_mode(render_mode)
-        self.num_envs = int(num_envs)
-        self.core = PassageCore(self.num_envs, scenario, overrides, filter, max_reads, energy_cost, error_scale,
-                                observer)
-        self._batch(_spaces(self.core), render_mode)
-
-    def _observation(self):
-        return self.core._observe()
+        self.check_render_mode(render_mode)
+        core = PassageCore(int(num_envs), scenario, overrides, filter, max_reads, energy_cost, error_scale, observer)
+        super().__init__(core, _spaces(core), render_mode)
 
     def step(self, actions):
         actions = np.asarray(actions).reshape(self.num_envs, -1)

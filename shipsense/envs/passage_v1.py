@@ -346,8 +346,8 @@ class PassageV1Core(PassagePrefetch):
 
     def step(self, actions, envs=None):
         """Advance environments ``envs`` (default all) by one sample with actions (E,) (indices of
-        :attr:`subsets`).  Returns rewards, terminated (E,) and an info dict of (E,) arrays; entries of
-        environments that did not step are meaningless."""
+        :attr:`subsets`).  Returns rewards, terminated, truncated (E,; never truncated) and an info dict of (E,)
+        arrays; entries of environments that did not step are meaningless."""
         actions = np.asarray(actions)
         if actions.dtype.kind not in "iu":                    # (not bool, not fractions)
             raise ValueError(f"actions must be integers in [0, {len(self.subsets)}), got {actions.dtype} values")
@@ -369,7 +369,7 @@ class PassageV1Core(PassagePrefetch):
         info = {"error": error, "nees": nees, "inside95": nees <= CHI2_2_95, "reads": reads,
                 "error_term": error_term, "energy_term": energy_term, "status": self.last.status.copy(),
                 "truth": self.truth[self._rows, self.k, :2].copy(), "estimate": self.last.estimate[:, :2].copy()}
-        return rewards, self.k >= self.K - 1, info
+        return rewards, self.k >= self.K - 1, np.zeros(self.E, dtype=bool), info
 
     def episode_metrics(self, envs):
         """The episodes' metrics of ``envs`` (at their last sample): dict of (len(envs),) arrays."""
@@ -605,7 +605,7 @@ class PassageV1Env(RebuiltOnUnpickle, ClosesItsFigure, gym.Env):
             raise RuntimeError("the passage has ended: call reset()")
         if not (0 <= action < self.action_space.n if type(action) is int else self.action_space.contains(action)):
             raise ValueError(f"action must be an integer in [0, {self.action_space.n}), got {action!r}")
-        rewards, terminated, info = self.core.step(np.array([int(action)]))
+        rewards, terminated, _, info = self.core.step(np.array([int(action)]))
         obs = self.core.observe()[0]
         info = {k: v[0] for k, v in info.items()}
         done = bool(terminated[0])
@@ -646,19 +646,14 @@ class PassageV1Env(RebuiltOnUnpickle, ClosesItsFigure, gym.Env):
 
 class PassageV1VectorEnv(CoreVectorEnv):
     """Native vector version of ``shipsense/Passage-v1``: one :class:`PassageV1Core` (one batched tracker) for
-    all sub-environments.
+    all sub-environments, on :class:`~shipsense.envs.core_env.CoreVectorEnv` (next-step autoreset, gymnasium's
+    vector ``info`` with ``_key`` masks, an int or a list of seeds, the partial reset
+    ``reset(options={"reset_mask": mask})`` that SB3's adapter, :class:`~shipsense.envs.sb3.VectorEnvAdapter`,
+    calls in the step an episode ends).
 
     Sub-environment ``i`` reset with an integer ``seed`` behaves exactly like a single :class:`PassageV1Env`
-    reset with ``seed + i``; ``seed`` may also be a list of ``num_envs`` seeds (``None`` entries draw fresh
-    entropy).  **Autoreset mode: next step** (``AutoresetMode.NEXT_STEP``, gymnasium 1.x): the step after a
-    sub-environment terminated resets it, ignores its action and returns its first observation with reward 0,
-    ``terminated`` and ``truncated`` False.  ``info`` holds, per key, an (num_envs,) array and the ``_key``
-    mask of the sub-environments it is valid for (those that stepped); ``info["episode_metrics"]`` (with its
-    own masks) for those that terminated.  ``reset(options={"reset_mask": mask})`` (gymnasium's partial reset)
-    resets only the masked sub-environments, each from its own stream: SB3's adapter
-    (:class:`~shipsense.envs.sb3.VectorEnvAdapter`) calls it in the step an episode ends.  With a ``seed`` it
-    reseeds only them, as gymnasium's ``SyncVectorEnv`` does; the others' streams and the run-ins done ahead
-    for them are kept.
+    reset with ``seed + i``.  A seeded partial reset reseeds only the masked sub-environments; the others'
+    streams and the run-ins done ahead for them are kept.
     """
 
     BASELINES = BASELINES
@@ -667,39 +662,10 @@ class PassageV1VectorEnv(CoreVectorEnv):
 
     def __init__(self, num_envs=1, scenario="S2", overrides=None, k=1, energy_cost=0.01, error_scale=1.0,
                  render_mode=None):
-        self._check_render_mode(render_mode)
-        self.core = PassageV1Core(num_envs, scenario, overrides, k, energy_cost, error_scale)
-        self.num_envs = self.core.E
-        self.subsets = self.core.subsets
-        self._batch(_spaces(self.core), render_mode)
-
-    def _observation(self):
-        return self.core.observe()
-
-    def step(self, actions):
-        actions = np.asarray(actions).reshape(self.num_envs)
-        if actions.dtype.kind not in "iu" or np.any((actions < 0) | (actions >= len(self.subsets))):
-            raise ValueError(f"actions must be integers in [0, {len(self.subsets)})")
-        done = self._autoreset()
-        live = ~done
-        rewards, terminated, info = self.core.step(np.where(live, actions, 0),
-                                                   envs=np.flatnonzero(live) if done.any() else None)
-        rewards = np.where(live, rewards, 0.0)
-        terminated = terminated & live
-        infos = {}
-        for key, v in info.items():
-            infos[key], infos["_" + key] = v, live.copy()
-        if terminated.any():
-            ended = np.flatnonzero(terminated)
-            metrics = {}
-            for key, v in self.core.episode_metrics(ended).items():
-                full = np.zeros(self.num_envs)
-                full[ended] = v
-                metrics[key], metrics["_" + key] = full, terminated.copy()
-            infos["episode_metrics"], infos["_episode_metrics"] = metrics, terminated.copy()
-        self._prev_done = terminated.copy()
-        return (self.core.observe(), rewards.astype(np.float64), terminated,
-                np.zeros(self.num_envs, dtype=bool), infos)
+        self.check_render_mode(render_mode)
+        core = PassageV1Core(num_envs, scenario, overrides, k, energy_cost, error_scale)
+        super().__init__(core, _spaces(core), render_mode)
+        self.subsets = core.subsets
 
     def close_extras(self, **kwargs):
         self.core.drop_pending()
