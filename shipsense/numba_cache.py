@@ -18,7 +18,6 @@ from pathlib import Path
 
 DEPENDS = {
     "envs/features.py": (),
-    "envs/passage.py": ("config.py", "envs/arguments.py", "envs/core_env.py", "envs/features.py", "simulator.py"),
     "envs/passage_v1.py": ("config.py", "design/information_gain.py", "envs/arguments.py", "envs/core_env.py",
                            "envs/features.py", "envs/prefetch.py", "simulator.py", "trackers/tracker.py"),
     "design/information_gain.py": ("trackers/compiled_linalg.py", "trackers/measurement.py"),

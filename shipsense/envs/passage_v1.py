@@ -35,10 +35,10 @@ expressed.  ``A = sum_{j <= k} C(S, j)``.
 | 9+S .. 8+2S | per sensor: its predicted information gain ``g / (1 + g)`` (below) |
 
 ``g`` is the drop (nats) of the log-det of the position covariance if that
-sensor alone were read at the next step, linearised at the observer's
-one-step prediction with the observer's own noise model; 0 while the
-observer has no track (its estimate is then the prior's mean, where a
-linearisation means nothing).
+sensor alone were read at the next step (:mod:`shipsense.design.information_gain`),
+linearised at the observer's one-step prediction with the observer's own
+noise model; 0 while the observer has no track (its estimate is then the
+prior's mean, where a linearisation means nothing).
 
 ## Rewards
 
@@ -60,15 +60,14 @@ sensor from the first sample until it reports a track (its detection and the
 global fit of its first window, 15 s of samples for magnetometers); the
 agent's control starts there (the observation's elapsed
 fraction says where).  While the observer has no track its estimate is the
-prior's mean whatever is read, so those samples would add the same 50-100 m
-errors to every policy's return and hide the scheduling (measured on S2
-before the run-in: the first 30 of 80 samples made up most of every
-baseline's return).  A passage that never gets a track leaves the agent one
-step.  The run-in does not depend on the agent, so the environment does the
-run-ins of its next passages ahead, in batches, on the process's background
-thread while the agent steps (:meth:`PassageV1Core.reset_envs`; episodes are
-the same to the bit; ``SHIPSENSE_THREADS=1`` keeps everything on the calling
-thread).
+prior's mean whatever is read, so those samples would add the same large
+errors to every policy's return and hide the scheduling (on S2, before the
+run-in, they made up most of every baseline's return: EXPERIMENTS.md).  A
+passage that never gets a track leaves the agent one step.  The run-in does
+not depend on the agent, so the environment does the run-ins of its next
+passages ahead, in batches, on the process's background thread while the
+agent steps (:mod:`shipsense.envs.prefetch`; episodes are the same to the
+bit; ``SHIPSENSE_THREADS=1`` keeps everything on the calling thread).
 
 ## Episode end
 
@@ -131,9 +130,11 @@ its whole ``overrides`` dict.
   sub-environments (gymnasium's ``SyncVectorEnv`` rule; it reseeded all, so
   the others' later blocks of passages came from the new seeds): no
   version bump, as the dynamics, reward and spaces are unchanged.
-* v0 (``shipsense/Passage-v0``, :mod:`shipsense.envs.passage`): a
-  ``MultiBinary`` action trimmed to ``max_reads``, the error reward capped at
-  100 m; kept registered for comparison with earlier results.
+* v0 (``shipsense/Passage-v0``): a ``MultiBinary`` action trimmed to
+  ``max_reads``, the error reward capped at 100 m, the hypotheses'
+  likelihoods and the SNRs of the sensors read observed.  Retired on
+  2026-11-28: its module, registration and tests removed (it could not run
+  on v1's core as arguments); EXPERIMENTS.md keeps its figures.
 """
 
 from __future__ import annotations

@@ -10,7 +10,8 @@ from reference import odd_observer_outputs
 
 import shipsense  # noqa: F401  (registers the environments)
 from shipsense.envs import PASSAGE_V1_VARIANTS
-from shipsense.envs.passage_v1 import CHI2_2_95, PASSAGE_BLOCK, PassageV1Env, PassageV1VectorEnv
+from shipsense.envs.passage_v1 import CHI2_2_95, PassageV1Env, PassageV1VectorEnv
+from shipsense.envs.prefetch import PASSAGE_BLOCK
 
 EASY = "shipsense/PassageEasy-v1"
 KW = {"scenario": "S2", "overrides": {"steps": 50}}   # S2: the run-in ends near sample 30, ~20 agent steps
@@ -27,14 +28,45 @@ def _rollout(env, seed, policy_seed=0):
             return out
 
 
-def test_variants_registered_with_vector_entry_points_and_v0_kept():
-    assert "shipsense/Passage-v0" in gym.registry
+def test_variants_registered_with_vector_entry_points_and_v0_retired():
+    from shipsense.envs import register_envs
+
+    register_envs()                                          # (idempotent: registered already on import)
+    assert "shipsense/Passage-v0" not in gym.registry
     for vid in PASSAGE_V1_VARIANTS:
         spec = gym.registry[vid]
         assert spec.entry_point.endswith("PassageV1Env") and spec.vector_entry_point.endswith("PassageV1VectorEnv")
         assert spec.reward_threshold is not None
     envs = gym.make_vec(EASY, num_envs=2, vectorization_mode="vector_entry_point", overrides={"steps": 50})
     assert isinstance(envs.unwrapped, PassageV1VectorEnv)
+
+
+def _make_in_child(queue):
+    import gymnasium as gym_
+
+    env = gym_.make("shipsense:shipsense/PassageEasy-v1", overrides={"steps": 50})
+    obs, _ = env.reset(seed=1)
+    queue.put(obs.shape)
+
+
+def test_make_in_a_spawned_process():
+    import multiprocessing as mp
+
+    ctx = mp.get_context("spawn")
+    q = ctx.Queue()
+    p = ctx.Process(target=_make_in_child, args=(q,))
+    p.start()
+    shape = q.get(timeout=120)
+    p.join(timeout=60)
+    assert p.exitcode == 0 and shape == PassageV1Env(**KW).observation_space.shape
+
+
+def test_resets_with_missing_first_samples_never_crash():
+    """S0 with 30 % dropouts: passages whose first samples are missing reset to finite observations."""
+    env = PassageV1Env(scenario="S0", overrides={"noise": {"dropout": 0.3}, "steps": 40})
+    for seed in range(25):
+        obs, _ = env.reset(seed=seed)
+        assert np.isfinite(obs).all() and env.observation_space.contains(obs)
 
 
 def test_gymnasium_checker_passes_without_warnings():

@@ -224,5 +224,5 @@ def test_training_defaults_are_the_measured_best_where_the_environment_allows_th
 
     assert training_defaults("scheduling", "shipsense/Passage-v1") == (1.0, "greedy")
     assert training_defaults("scheduling", "shipsense/Passage-v1", 0.0, "none") == (0.0, None)
-    assert training_defaults("scheduling", "shipsense/Passage-v0") == (0.0, None)   # no potential, no greedy
+    assert training_defaults("scheduling", "shipsense/ArrayDesign-v0") == (0.0, None)   # no potential, no greedy
     assert training_defaults("placement", "shipsense/ArrayDesign-v1") == (0.0, None)
