@@ -298,8 +298,7 @@ class PassageV1Core(PassagePrefetch):
             trk = self.tracker.sibling(R)
             y = np.stack([entry[0] for entry in part])
             rows, k = np.arange(R), np.zeros(R, dtype=int)
-            last = trk._prior_sample()
-            _copy_outputs(trk.update(self.times[0], y[:, 0]), rows, last)
+            last = trk.update(self.times[0], y[:, 0])      # (a fresh Sample of every passage: the run-ins' record)
             waiting = rows[self._blind_status(last.status) & (k < self.K - 2)]
             while waiting.size:
                 k[waiting] += 1
