@@ -6,7 +6,7 @@ Each figure is the median wall time of a fresh interpreter running
 ``import X`` (so every run pays the imports cold in the interpreter, warm in
 the filesystem cache), minus the median of an interpreter that imports
 nothing.  ``import shipsense`` registers the gymnasium environments (so
-``gymnasium.make("shipsense/Passage-v0")`` works after it) and imports
+``gymnasium.make("shipsense/Passage-v1")`` works after it) and imports
 nothing else: the public names (``load_scenario``, ``simulate``, ...) are
 imported on first use.  Target: under 0.3 s (issue 19); the ratio to
 ``import gymnasium`` is the figure that transfers between machines.

@@ -8,12 +8,10 @@ Run:  PYTHONPATH=. python benchmarks/run.py [--steps 20] [--env-steps 2000] [--s
    filter unit at batch 1, 24 and 2400 through the compiled steps users get, and at 2400 once more in one
    thread (``SHIPSENSE_THREADS=1``; a batch of 512 or more is otherwise split across the CPUs); in brackets
    the speed-up over FilterPy's ``UnscentedKalmanFilter`` looped per filter, timed in the same process.
-2. Environments: steps per second of Passage-v0 (the tracker as observer) and Passage-v1, single and native
-   vector (64 envs), autoresets included, as a fraction of CartPole-v1 timed in the same process.  A Passage
-   episode's cost depends on its passage (how often the tracker refits), so a single env's timed runs are
-   ``--env-steps`` 2,000 steps (25 episodes of S2) each: runs of 400 (5 episodes) read 3,427-3,469 steps/s
-   where runs of 2,000 read 4,181-4,292 for the same code (2026-11-26; the first 5 episodes of seed 0
-   refit three times as often as the next 5).
+2. Environments: steps per second of Passage-v1, single and native vector (64 envs), autoresets included, as
+   a fraction of CartPole-v1 timed in the same process.  A Passage episode's cost depends on its passage (how
+   often the tracker refits), so a single env's timed runs are ``--env-steps`` 2,000 steps each: short runs
+   weigh the episodes of a few passages (EXPERIMENTS.md, "Performance log").
 3. Studies: ``shipsense reproduce NAME`` for each of ``--studies`` (default S0), each in a fresh process:
    wall seconds, CPU seconds and peak resident memory.
 
@@ -62,17 +60,15 @@ def filter_table(steps, batches=(1, 24, 2400)):
 
 def env_table(steps, n=64):
     print(f"\n2. Environments: steps per second (autoresets included; {env_bench.REPEATS} runs together after an "
-          f"untimed one, from seeds 0, 1, ...; Passage-v0's vector env over whole episodes, Passage-v1's over "
-          f"{env_bench.REPEATS} block cycles after an untimed one)")
+          f"untimed one, from seeds 0, 1, ...; Passage-v1's vector env over {env_bench.REPEATS} block cycles after "
+          f"an untimed one)")
     cart = env_bench.single_rate(gym.make("CartPole-v1"), steps, 1)
     cart_vec = env_bench.vector_rate(gym.make_vec("CartPole-v1", num_envs=n, vectorization_mode="vector_entry_point"),
                                      steps // 10, np.ones(n, dtype=np.int64))
-    single, vec, single1, vec1 = env_bench.passage_rates(steps, n)
+    single, vec = env_bench.passage_rates(steps, n)
     rows = [("CartPole-v1 (single)", cart, cart), (f"CartPole-v1 (native vector, {n} envs)", cart_vec, cart_vec),
-            ("shipsense/Passage-v0 (single, tracker)", single, cart),
-            (f"shipsense/Passage-v0 (native vector, {n} envs)", vec, cart_vec),
-            ("shipsense/Passage-v1 (single)", single1, cart),
-            (f"shipsense/Passage-v1 (native vector, {n} envs)", vec1, cart_vec)]
+            ("shipsense/Passage-v1 (single)", single, cart),
+            (f"shipsense/Passage-v1 (native vector, {n} envs)", vec, cart_vec)]
     print(f"{'environment':<46}{'steps/s':>12}{'/ CartPole':>14}")
     for name, rate, ref in rows:
         print(f"{name:<46}{rate:>12,.0f}{rate / ref:>14.4f}")

@@ -1,7 +1,7 @@
 """Where the time and memory go: the probes behind the README's "what stands in the way" figures.
 
 Run:  PYTHONPATH=. python benchmarks/where_time_goes.py stages S0|S1          # each stage's peak memory
-      PYTHONPATH=. python benchmarks/where_time_goes.py passage [--steps 1500]  # cProfile of Passage-v0 steps
+      PYTHONPATH=. python benchmarks/where_time_goes.py passage [--steps 1500]  # cProfile of Passage-v1 steps
       PYTHONPATH=. python benchmarks/where_time_goes.py wide                    # one wide-study task of each kind
       PYTHONPATH=. python benchmarks/where_time_goes.py v1cycles [--cycles 3]   # Passage-v1 vector: who is busy
       PYTHONPATH=. python benchmarks/where_time_goes.py runins [--profile]      # Passage-v1 run-ins by batch size
@@ -73,17 +73,13 @@ def _profile(fn, rows):
 
 
 def passage(steps, rows):
-    import warnings
-
     import gymnasium as gym
-    import numpy as np
 
     import shipsense.envs  # noqa: F401  (registers the environments)
 
-    warnings.filterwarnings("ignore", category=DeprecationWarning)
-    env = gym.make("shipsense/Passage-v0")
+    env = gym.make("shipsense/Passage-v1")
     env.reset(seed=0)
-    action = np.ones(3, dtype=np.int8)
+    action = int(env.unwrapped.core.full[0])                # the first k-subset, as benchmarks/envs.py
 
     def run(n):
         for _ in range(n):
@@ -93,7 +89,7 @@ def passage(steps, rows):
 
     run(200)                                                # compile or load, first episodes
     _profile(lambda: run(steps), rows)
-    print(f"({steps} steps of Passage-v0, all sensors read)")
+    print(f"({steps} steps of Passage-v1, the first k-subset read)")
 
 
 def wide(rows):
@@ -119,7 +115,7 @@ def _v1_vector(num_envs=64):
 def v1cycles(cycles):
     import numpy as np
 
-    from shipsense.envs.passage_v1 import PASSAGE_BLOCK
+    from shipsense.envs.prefetch import PASSAGE_BLOCK
 
     venv = _v1_vector()
     core = venv.unwrapped.core
@@ -145,8 +141,8 @@ def v1cycles(cycles):
 def runins(profile_rows=None):
     venv = _v1_vector(4)
     core = venv.unwrapped.core
-    blocks = [core._block(seed) for seed in range(100, 112)]
-    core._run_ins(core._block(99))                 # compile or load
+    blocks = [core.draw_block(seed) for seed in range(100, 112)]
+    core.run_ins(core.draw_block(99))                 # compile or load
     passages = [entry for block in blocks for entry in block]
 
     def run(size):
@@ -154,7 +150,7 @@ def runins(profile_rows=None):
             entries = passages[i:i + size]
             for entry in entries:
                 entry[2] = None
-            core._run_ins(entries)
+            core.run_ins(entries)
 
     for size in (1, len(blocks[0]), 2 * len(blocks[0]), 6 * len(blocks[0])):
         t0 = time.process_time()

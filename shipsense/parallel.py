@@ -148,7 +148,7 @@ def in_turns(fn, n):
     """``fn(i, i + 1)`` for every ``i`` in ``range(n)``, each item taken by whichever thread is free next: the
     calling thread and up to :func:`threads` - 1 threads of the shared pool (itself at most ``min(32, CPUs +
     4)`` threads) take the next item as they finish their last.  For a few items of unequal cost
-    (Levenberg-Marquardt fits: 4 to 41 cost evaluations each, median 12, in Passage-v0's vector env), where
+    (Levenberg-Marquardt fits of very different numbers of cost evaluations), where
     :func:`in_chunks`' contiguous halves leave one CPU idle.  A single item, or a single thread, runs here
     (``fn(0, n)``).  ``fn`` must release the GIL (a ``nogil`` kernel) and write only its item's results: the
     order in which the items run then changes nothing.

@@ -261,7 +261,7 @@ def test_import_shipsense_is_light_and_its_names_arrive_on_use():
     """``import shipsense`` registers the environments and imports neither the simulator nor scipy.signal; the
     public names load on first use (benchmarks/import_time.py measures the time)."""
     code = ("import sys, shipsense, gymnasium as gym; "
-            "assert 'shipsense/Passage-v0' in gym.registry; "
+            "assert 'shipsense/Passage-v1' in gym.registry; "
             "assert 'scipy.signal' not in sys.modules and 'shipsense.simulator' not in sys.modules; "
             "assert callable(shipsense.simulate) and shipsense.load_scenario('S2').name == 'S2'; "
             "from shipsense import Scenario, STATE_LABELS")

@@ -67,8 +67,8 @@ def _valid(command, flag, text):
     return lo <= v <= (2**63 - 1 if flag == "--seed" else 10**6)
 
 
-ENV_ARGS = {"PassageEnv": {"max_reads": (1, 3, True), "energy_cost": (0.0, 1e6, False),
-                           "error_scale": (1e-3, 1e6, False)},
+ENV_ARGS = {"PassageV1Env": {"k": (1, 3, True), "energy_cost": (0.0, 1e6, False),
+                             "error_scale": (1e-6, 1e6, False)},
             "ArrayDesignEnv": {"k": (1, 81, True), "half_width": (0.5, 1e5, False),
                                "passages": (1, 10_000, True), "shaping": (0.0, 1e6, False)},
             "SiteDesignEnv": {"k": (1, 81, True), "half_width": (5.0, 1e4, False), "passages": (1, 1000, True),
@@ -92,13 +92,13 @@ def test_a_bad_environment_argument_is_one_error_naming_it(env, data):
     """The environments' constructor arguments: a bad one (a string, NaN, a float count, out of range) is one
     ValueError naming the argument, before any passage is simulated."""
     from shipsense.envs.array_design import ArrayDesignEnv
-    from shipsense.envs.passage import PassageEnv
+    from shipsense.envs.passage_v1 import PassageV1Env
     from shipsense.envs.site_design import SiteDesignEnv
 
     name = data.draw(st.sampled_from(sorted(ENV_ARGS[env])))
     lo, hi, integer = ENV_ARGS[env][name]
     value = data.draw(BAD_ARG.filter(lambda v: not _accepted(v, lo, hi, integer) and v is not None))
-    cls = {"PassageEnv": PassageEnv, "ArrayDesignEnv": ArrayDesignEnv, "SiteDesignEnv": SiteDesignEnv}[env]
+    cls = {"PassageV1Env": PassageV1Env, "ArrayDesignEnv": ArrayDesignEnv, "SiteDesignEnv": SiteDesignEnv}[env]
     try:
         cls(**{name: value})
     except ValueError as err:

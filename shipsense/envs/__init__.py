@@ -1,11 +1,8 @@
-"""Gymnasium environments of ship passages past a sensor array (shared/spec/design.md section 4).
+"""Gymnasium environments of ship passages past a sensor array.
 
 * ``shipsense/Passage-v1`` (:class:`~shipsense.envs.passage_v1.PassageV1Env`, native vector version
   :class:`~shipsense.envs.passage_v1.PassageV1VectorEnv`): read ``k`` of the array's sensors per step, with
   the variants ``shipsense/PassageEasy-v1`` and ``shipsense/PassageHard-v1`` (:data:`PASSAGE_V1_VARIANTS`).
-* ``shipsense/Passage-v0`` (:class:`~shipsense.envs.passage.PassageEnv`, native vector version
-  :class:`~shipsense.envs.passage.PassageVectorEnv`): the old version (a trimmed ``MultiBinary`` action, an
-  error reward capped at 100 m), kept registered to compare with earlier results.
 * ``shipsense/ArrayDesign-v1`` (:class:`~shipsense.envs.site_design.SiteDesignEnv`, native vector version
   :class:`~shipsense.envs.site_design.SiteDesignVectorEnv`): place k sensors at a site drawn per episode;
   variants ``shipsense/ArrayDesignSmall-v1`` (k = 3 of 25 candidates) and ``shipsense/ArrayDesignLarge-v1``
@@ -14,12 +11,13 @@
   registered: place k sensors for one fixed scenario, judged by the tracker on 8 fixed passages.
 
 All are registered when ``shipsense`` is imported (idempotently), so
-``gymnasium.make("shipsense:shipsense/Passage-v1")`` works in a fresh process.
+``gymnasium.make("shipsense:shipsense/Passage-v1")`` works in a fresh process.  Every native vector version is
+a :class:`~shipsense.envs.core_env.CoreVectorEnv` (next-step autoreset).  ``shipsense/Passage-v0`` is retired
+(Passage-v1's version history).
 """
 
 from __future__ import annotations
 
-PASSAGE_ID = "shipsense/Passage-v0"
 PASSAGE_V1_ID = "shipsense/Passage-v1"
 DESIGN_ID = "shipsense/ArrayDesign-v0"
 DESIGN_V1_ID = "shipsense/ArrayDesign-v1"
@@ -68,10 +66,6 @@ def register_envs() -> None:
     """Register the environments with gymnasium (a no-op when they already are)."""
     import gymnasium as gym
 
-    if PASSAGE_ID not in gym.registry:
-        gym.register(id=PASSAGE_ID, entry_point="shipsense.envs.passage:PassageEnv",
-                     vector_entry_point="shipsense.envs.passage:PassageVectorEnv",
-                     kwargs={"scenario": "S2"})
     for env_id, kwargs in PASSAGE_V1_VARIANTS.items():
         if env_id not in gym.registry:
             gym.register(id=env_id, entry_point="shipsense.envs.passage_v1:PassageV1Env",
@@ -87,5 +81,4 @@ def register_envs() -> None:
                          kwargs=kwargs, reward_threshold=threshold)
 
 
-__all__ = ["DESIGN_ID", "DESIGN_V1_ID", "DESIGN_V1_VARIANTS", "PASSAGE_ID", "PASSAGE_V1_ID", "PASSAGE_V1_VARIANTS",
-           "register_envs"]
+__all__ = ["DESIGN_ID", "DESIGN_V1_ID", "DESIGN_V1_VARIANTS", "PASSAGE_V1_ID", "PASSAGE_V1_VARIANTS", "register_envs"]

@@ -1,5 +1,5 @@
-"""What the environments built on a batched core share: pickling by rebuilding, closing a figure, and the
-native vector envs' partial reset."""
+"""What the environments built on a batched core share: pickling by rebuilding, closing a figure, and the native
+vector envs' base (:class:`CoreVectorEnv`: one autoreset convention, gymnasium's vector info, list seeds)."""
 
 from __future__ import annotations
 
@@ -81,25 +81,54 @@ def seed_ahead(rng, j):
     return int(twin.integers(SEED_HIGH))
 
 
-class CoreVectorEnv(VectorEnv):
-    """A native vector env on one batched core: one generator per sub-environment (:func:`stream_generators`),
-    ``reset`` of all or of the masked sub-environments (:func:`reset_rows`), next-step autoreset
-    (:meth:`_autoreset`) and ``rgb_array`` rendering.
+def vector_info(info, live):
+    """gymnasium's vector info from a core's step ``info``: every entry ``info[key]`` (an (E,) array) with its mask
+    ``info["_key"]`` -- the sub-environments that stepped (``live``), and of those the ones the core's own
+    ``info["_key"]`` names, if it gives one (an entry valid only where an episode ended)."""
+    out = {}
+    for key, value in info.items():
+        if not key.startswith("_"):
+            out[key], out["_" + key] = value, (live & info["_" + key] if "_" + key in info else live.copy())
+    return out
 
-    A subclass checks its ``render_mode`` (:meth:`_check_render_mode`, before building anything), sets
-    ``self.core`` (``reset_envs(envs, seeds, fresh=)``, ``render(e)``) and ``self.num_envs``, calls
-    :meth:`_batch` with its single spaces, and defines ``_observation()`` (every sub-environment's) and
-    ``step``.
+
+class CoreVectorEnv(VectorEnv):
+    """The native vector env on one batched core, the base of every shipsense vector env: one generator per
+    sub-environment (:func:`stream_generators`: ``seed`` an int, ``seed + i`` for sub-environment ``i``, or a list
+    of ``num_envs`` seeds), ``reset`` of all or of the masked sub-environments (:func:`reset_rows`), **next-step
+    autoreset** (``AutoresetMode.NEXT_STEP``, gymnasium 1.x's default: the step after a sub-environment's episode
+    ended, by termination or truncation, resets it, ignores its action and returns its first observation with
+    reward 0, ``terminated`` and ``truncated`` False), ``info`` in gymnasium's vector convention (per key an
+    (num_envs,) array and its ``_key`` mask: the sub-environments that stepped; ``info["episode_metrics"]``, with
+    its own masks, for those whose episode ended) and ``rgb_array`` rendering.
+
+    A subclass checks its ``render_mode`` (:meth:`check_render_mode`, before building anything), builds its core
+    and calls ``CoreVectorEnv.__init__(self, core, single_spaces, render_mode)``.  The core has ``E``
+    environments and
+
+    * ``reset_envs(envs, seeds, fresh=)``: new episodes for environments ``envs``, each drawn from its integer
+      seed (one per reset, drawn from the sub-environment's generator) -- or, if the core's
+      ``draws_from_generators`` is true, from the sub-environment's generator itself; ``fresh``: the streams were
+      just (re)seeded.  If its ``looks_ahead`` is true it also takes ``ahead(e, j)``, the seed environment
+      ``e``'s ``j``-th reset from now will get (:func:`seed_ahead`);
+    * ``step(actions, envs=None)``: advance environments ``envs`` (default all; the others' actions ignored),
+      returning rewards, terminated, truncated (E,) and an info dict of (E,) arrays (optionally with their own
+      ``_key`` masks, :func:`vector_info`);
+    * ``episode_metrics(envs)``: the metrics (dict of (len(envs),) arrays) of the episodes of ``envs`` that
+      ended in their last step;
+    * ``observe()`` (E, ...) and ``render(e)``.
     """
 
     metadata = {"render_modes": ["rgb_array"], "autoreset_mode": AutoresetMode.NEXT_STEP}
 
     @classmethod
-    def _check_render_mode(cls, render_mode):
+    def check_render_mode(cls, render_mode):
+        """Refuse a ``render_mode`` the class does not offer (one ``ValueError``)."""
         if render_mode is not None and render_mode not in cls.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {cls.metadata['render_modes']}, got {render_mode!r}")
 
-    def _batch(self, single_spaces, render_mode):
+    def __init__(self, core, single_spaces, render_mode=None):
+        self.core, self.num_envs = core, core.E
         self.single_observation_space, self.single_action_space = single_spaces
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
@@ -107,11 +136,11 @@ class CoreVectorEnv(VectorEnv):
         self._rngs = None
         self._prev_done = np.zeros(self.num_envs, dtype=bool)
 
-    def _reseed(self, seed):
-        self._rngs = stream_generators(seed, self.num_envs, SEED_HIGH)
-
     def _episode_seeds(self, envs):
-        """Each of sub-environments ``envs``'s next episode seed, from its own generator."""
+        """Each of sub-environments ``envs``'s next episode seed, from its own generator (or the generators
+        themselves, for a core that draws from them)."""
+        if getattr(self.core, "draws_from_generators", False):
+            return [self._rngs[i] for i in envs]
         return [int(self._rngs[i].integers(SEED_HIGH)) for i in envs]
 
     def _seed_ahead(self, e, j):
@@ -127,23 +156,49 @@ class CoreVectorEnv(VectorEnv):
         """Reset every sub-environment, or those of ``options={"reset_mask": mask}``.  ``seed`` (an int: ``seed +
         i`` for sub-environment ``i``; or a list of ``num_envs``, None entries fresh entropy) reseeds the
         sub-environments reset, and only those, as gymnasium's ``SyncVectorEnv`` does: the others go on drawing
-        their episodes from their own streams (and the run-ins done ahead for them are still used).  The first
-        reset makes every sub-environment's stream, from ``seed`` (or fresh entropy) whatever the mask."""
+        their episodes from their own streams (and the work done ahead for them is still used).  The first reset
+        makes every sub-environment's stream, from ``seed`` (or fresh entropy) whatever the mask."""
         envs = reset_rows(options, self.num_envs)
         fresh = seed is not None or self._rngs is None
         if self._rngs is None:
-            self._reseed(seed)
+            self._rngs = stream_generators(seed, self.num_envs, SEED_HIGH)
         elif seed is not None:
             streams = stream_generators(seed, self.num_envs, SEED_HIGH)
             for e in envs.tolist():
                 self._rngs[e] = streams[e]
         self._reset_core(envs, fresh)
         self._prev_done[envs] = False
-        return self._observation(), {}
+        return self.core.observe(), {}
+
+    def step(self, actions):
+        """One step of every sub-environment (``actions``: integers, one per sub-environment), those whose episode
+        ended in the last step reset instead (next-step autoreset: the class docstring)."""
+        n = self.single_action_space.n
+        actions = np.asarray(actions).reshape(self.num_envs)
+        if actions.dtype.kind not in "iu" or np.any((actions < 0) | (actions >= n)):
+            raise ValueError(f"actions must be integers in [0, {n})")
+        done = self._autoreset()
+        live = ~done
+        rewards, terminated, truncated, info = self.core.step(np.where(live, actions, 0),
+                                                              envs=np.flatnonzero(live) if done.any() else None)
+        rewards = np.where(live, rewards, 0.0)
+        terminated, truncated = terminated & live, truncated & live
+        ended = terminated | truncated
+        info = vector_info(info, live)
+        if ended.any():
+            rows = np.flatnonzero(ended)
+            metrics = {}
+            for key, v in self.core.episode_metrics(rows).items():
+                full = np.zeros(self.num_envs)
+                full[rows] = v
+                metrics[key], metrics["_" + key] = full, ended.copy()
+            info["episode_metrics"], info["_episode_metrics"] = metrics, ended.copy()
+        self._prev_done = ended
+        return self.core.observe(), rewards.astype(np.float64), terminated, truncated, info
 
     def _autoreset(self):
-        """Next-step autoreset: the sub-environments that ended in the last step reset now (and ignore this
-        step's action); returns their mask."""
+        """Next-step autoreset: the sub-environments whose episode ended in the last step reset now (and ignore
+        this step's action); returns their mask."""
         done = self._prev_done
         if done.any():
             self._reset_core(np.flatnonzero(done), False)

@@ -1,4 +1,4 @@
-"""What both Passage environments compute from their observer's output, compiled for their per-environment
+"""What the Passage environment computes from its observer's output, compiled for their per-environment
 kernels (inlined): the track's observation features and its position error and NEES against the truth."""
 
 from __future__ import annotations

@@ -35,10 +35,10 @@ expressed.  ``A = sum_{j <= k} C(S, j)``.
 | 9+S .. 8+2S | per sensor: its predicted information gain ``g / (1 + g)`` (below) |
 
 ``g`` is the drop (nats) of the log-det of the position covariance if that
-sensor alone were read at the next step, linearised at the observer's
-one-step prediction with the observer's own noise model; 0 while the
-observer has no track (its estimate is then the prior's mean, where a
-linearisation means nothing).
+sensor alone were read at the next step (:mod:`shipsense.design.information_gain`),
+linearised at the observer's one-step prediction with the observer's own
+noise model; 0 while the observer has no track (its estimate is then the
+prior's mean, where a linearisation means nothing).
 
 ## Rewards
 
@@ -60,15 +60,14 @@ sensor from the first sample until it reports a track (its detection and the
 global fit of its first window, 15 s of samples for magnetometers); the
 agent's control starts there (the observation's elapsed
 fraction says where).  While the observer has no track its estimate is the
-prior's mean whatever is read, so those samples would add the same 50-100 m
-errors to every policy's return and hide the scheduling (measured on S2
-before the run-in: the first 30 of 80 samples made up most of every
-baseline's return).  A passage that never gets a track leaves the agent one
-step.  The run-in does not depend on the agent, so the environment does the
-run-ins of its next passages ahead, in batches, on the process's background
-thread while the agent steps (:meth:`PassageV1Core.reset_envs`; episodes are
-the same to the bit; ``SHIPSENSE_THREADS=1`` keeps everything on the calling
-thread).
+prior's mean whatever is read, so those samples would add the same large
+errors to every policy's return and hide the scheduling (on S2, before the
+run-in, they made up most of every baseline's return: EXPERIMENTS.md).  A
+passage that never gets a track leaves the agent one step.  The run-in does
+not depend on the agent, so the environment does the run-ins of its next
+passages ahead, in batches, on the process's background thread while the
+agent steps (:mod:`shipsense.envs.prefetch`; episodes are the same to the
+bit; ``SHIPSENSE_THREADS=1`` keeps everything on the calling thread).
 
 ## Episode end
 
@@ -131,17 +130,16 @@ its whole ``overrides`` dict.
   sub-environments (gymnasium's ``SyncVectorEnv`` rule; it reseeded all, so
   the others' later blocks of passages came from the new seeds): no
   version bump, as the dynamics, reward and spaces are unchanged.
-* v0 (``shipsense/Passage-v0``, :mod:`shipsense.envs.passage`): a
-  ``MultiBinary`` action trimmed to ``max_reads``, the error reward capped at
-  100 m; kept registered for comparison with earlier results.
+* v0 (``shipsense/Passage-v0``): a ``MultiBinary`` action trimmed to
+  ``max_reads``, the error reward capped at 100 m, the hypotheses'
+  likelihoods and the SNRs of the sensors read observed.  Retired on
+  2026-11-28: its module, registration and tests removed (it could not run
+  on v1's core as arguments); EXPERIMENTS.md keeps its figures.
 """
 
 from __future__ import annotations
 
 import math
-import os
-import weakref
-from functools import partial
 from itertools import combinations
 
 import gymnasium as gym
@@ -149,30 +147,25 @@ import numpy as np
 from gymnasium import spaces
 from numba import njit
 
-from shipsense import numba_cache, parallel
+from shipsense import numba_cache
 from shipsense.config import load_scenario
+from shipsense.design.information_gain import information_gains_at
 from shipsense.envs.arguments import number
 from shipsense.envs.core_env import SEED_HIGH, ClosesItsFigure, CoreVectorEnv, RebuiltOnUnpickle, seed_ahead
 from shipsense.envs.features import at_least, error_and_nees, track_features
-from shipsense.models.measurement import FIELD, batch_kernel, kernel_of
+from shipsense.envs.prefetch import PASSAGE_BLOCK, PassagePrefetch
 from shipsense.simulator import simulate
 from shipsense.trackers import Tracker
-from shipsense.trackers.fit.linalg import solve_many_in_place
 from shipsense.trackers.tracker.results import INITIALISING, NO_DATA
 
-PASSAGE_BLOCK = 16
-"""Passages simulated per simulator call and environment (see :meth:`PassageV1Core.reset_envs`)."""
-EXPECT_BATCH = 16
-"""Announced seeded resets (:meth:`PassageV1Env.expect_seeds`) whose passages' run-ins are done ahead in one batch;
-at most two batches are drawn ahead."""
 _RECORDED = ("estimate", "cov", "status", "selected")
 """What the environment keeps of its observer's output (:attr:`PassageV1Core.last`)."""
 
 
 def _copy_outputs(sample, rows, into):
     """What the environment keeps of an observer's output ``sample`` (a
-    :class:`~shipsense.trackers.tracker.results.Sample` or a dict of its fields) written into rows ``rows`` of the
-    Sample ``into``."""
+    :class:`~shipsense.trackers.tracker.results.Sample`
+    or a dict of its fields) written into rows ``rows`` of the Sample ``into``."""
     for name in _RECORDED:
         getattr(into, name)[rows] = sample[name] if isinstance(sample, dict) else getattr(sample, name)
 
@@ -193,80 +186,9 @@ def subsets(S, k):
     return np.array(rows)
 
 
-class _Later:
-    """Work left to the background thread (:func:`~shipsense.parallel.background`, under
-    :func:`~shipsense.parallel.serial`): :meth:`result` waits for it, or does it here if it has not started (or
-    if this is a forked child, where the parent's background thread does not exist)."""
-
-    def __init__(self, fn):
-        self._fn, self._done, self._value = fn, False, None
-        self._pid = os.getpid()
-        self._future = parallel.background().submit(self._serial)
-
-    def _serial(self):
-        with parallel.serial():
-            return self._fn()
-
-    def result(self):
-        if not self._done:
-            if self._pid != os.getpid() or self._future.cancel():   # here, with this thread's splits
-                self._value = self._fn()
-            else:
-                self._value = self._future.result()
-            self._done, self._fn, self._future = True, None, None
-        return self._value
-
-    def cancel(self):
-        """Drop the work if it has not started (a later :meth:`result` does it here)."""
-        if not self._done:
-            self._future.cancel()
-
-    def __getstate__(self):
-        return {"_fn": None, "_done": True, "_value": self.result(), "_future": None, "_pid": None}
-
-
-def _rest_of_block(core, entries):
-    """Background work: the run-ins of queue ``entries`` of the core weakly referenced by ``core`` (nothing if it
-    is gone: the queued work does not keep a dropped environment alive)."""
-    core = core()
-    return None if core is None else core._run_ins(entries)
-
-
-def _blocks_ahead(core, seeds, first_only=False):
-    """Background work: blocks drawn from ``seeds``, the run-ins of their passages in one batch (a passage's run-in
-    does not depend on the passages beside it) -- with ``first_only``, of their first passages only (what seeded
-    resets use of a block, :meth:`PassageV1Core.expect`) -- for the core weakly referenced by ``core``."""
-    core = core()
-    if core is None:
-        return None
-    blocks = [core._block(seed) for seed in seeds]
-    core._run_ins([entry for block in blocks for entry in (block[:1] if first_only else block)])
-    return blocks
-
-
-class _Part:
-    """One block's share of work left to the background that draws several blocks (the next blocks of several
-    environments, :meth:`PassageV1Core._leave_ahead`, or announced ones, :meth:`PassageV1Core.expect`):
-    :meth:`result` is its block (waiting for the work, or doing it here if it has not started); :meth:`cancel`
-    drops the share, and the work once every share is dropped.  ``seed``: the block's."""
-
-    def __init__(self, job, index, seed, live):
-        self.job, self.index, self.seed, self._live, self._block = job, index, seed, live, None
-
-    def result(self):
-        if self._block is None:      # (taken out of the work's result: a block used is not kept by the others)
-            blocks = self.job.result()
-            self._block, blocks[self.index] = blocks[self.index], None
-        return self._block
-
-    def cancel(self):
-        self._live[self.index] = False
-        if not any(self._live):
-            self.job.cancel()
-
-
-class PassageV1Core:
-    """State and dynamics of E Passage-v1 environments at once (E = 1 for :class:`PassageV1Env`)."""
+class PassageV1Core(PassagePrefetch):
+    """State and dynamics of E Passage-v1 environments at once (E = 1 for :class:`PassageV1Env`); their passages
+    are queued and their run-ins done ahead (:class:`~shipsense.envs.prefetch.PassagePrefetch`)."""
 
     def __init__(self, num_envs=1, scenario="S2", overrides=None, k=1, energy_cost=0.01, error_scale=1.0):
         num_envs = number("num_envs", num_envs, 1, 100_000, integer=True)
@@ -313,13 +235,8 @@ class PassageV1Core:
         self.last_read = np.zeros((E, self.S), dtype=bool)
         self.last = self.tracker._prior_sample()
         self.gains = np.zeros((E, len(self.subsets)))   # predicted gain (nats) of every action
-        self._passages = {}      # environment -> its queue of passages, [y, truth, run-in, job] each
-        self._next = {}          # environment -> its next block, left to the background (reset_envs): a _Part
-        self._wanted = {}        # environment -> the seed of its next block, not yet left to the background
-        self._expected = {}      # block seed -> its block with the first run-in, left to the background: a _Part
-        self._to_expect = iter(())   # block seeds announced (expect), not yet left to the background
         # (the next blocks of this many environments are left in one piece of work, their run-ins in one batch)
-        self._group = max(1, min(self.E, self.tracker.independent_batch // PASSAGE_BLOCK))
+        PassagePrefetch.__init__(self, max(1, min(self.E, self.tracker.independent_batch // PASSAGE_BLOCK)))
         self._rows = np.arange(E)
         # the observer's noise (internal units) and the one-step transition
         self._Rinv = np.ascontiguousarray(1.0 / self.tracker.filter_model.R, dtype=float)
@@ -333,53 +250,19 @@ class PassageV1Core:
     """:meth:`reset_envs` takes ``ahead`` (:class:`~shipsense.envs.core_env.CoreVectorEnv` passes it)."""
 
     def reset_envs(self, envs, seeds, fresh=False, ahead=None):
-        """Draw new passages for ``envs`` (indices) from integer ``seeds``, each with its observer's run-in
-        done (:meth:`_run_ins`).  Passages are simulated in blocks of :data:`PASSAGE_BLOCK` per environment; an
-        explicit seed (``fresh``) drops the rest of a block first.  Returns the observations of ``envs``.
-
-        ``ahead(e, j)``, optional: the seed environment ``e``'s ``j``-th reset from now will be given.  With it
-        (if :func:`~shipsense.parallel.background_allowed`), a reset that is not ``fresh`` leaves the run-ins its
-        environments need later -- the rest of their blocks, and their next block, drawn from the seed the reset
-        that empties the block will get -- to the process's background thread
-        (:func:`~shipsense.parallel.background`), where they are done while the environments step; the next
-        blocks of several environments go together, their run-ins in one batch (:meth:`_leave_ahead`).  Nothing
-        changes but when they are done: a passage's run-in does not depend on the batch or thread it runs in, a
-        block is used only if its seed is the one that reset draws (else it is drawn again here), and work the
-        background has not started when it is needed is done here."""
+        """Draw new passages for ``envs`` (indices) from integer ``seeds``, each with its observer's run-in done
+        (:meth:`run_ins`), off the environments' queues (:meth:`~shipsense.envs.prefetch.PassagePrefetch.take_passages`:
+        passages are simulated in blocks of :data:`~shipsense.envs.prefetch.PASSAGE_BLOCK` per environment; an
+        explicit seed, ``fresh``, drops the rest of a block first; with ``ahead(e, j)``, the seed environment
+        ``e``'s ``j``-th reset from now will be given, the run-ins needed later are done ahead on the background
+        thread).  Returns the observations of ``envs``."""
         envs = np.asarray(envs, dtype=int)
-        for e, s in zip(envs.tolist(), seeds):   # each environment draws from its own reproducible stream
-            queue = self._passages.setdefault(e, [])
-            if fresh:                            # (the work left for what is dropped: cancelled if not started)
-                for job in self._jobs([e]):
-                    job.cancel()
-                self._next.pop(e, None)
-                self._wanted.pop(e, None)
-                queue.clear()
-            if not queue:
-                queue.extend(self._take_block(e, int(s)))
-        later = ahead is not None and not fresh and parallel.background_allowed()
-        # the run-ins these resets need now; without the background and unless the seeds are fresh (an
-        # evaluation's reset(seed=...) per episode would waste the rest of every block), with those of every
-        # passage queued in any environment, in one batch
-        now = ([self._passages[e][0] for e in envs.tolist()] if fresh or later else
-               [entry for queue in self._passages.values() for entry in queue])
-        self._settle(now)
         states = []
-        for e in envs.tolist():
-            self.y[e], self.truth[e], (self.k[e], record, state), _ = self._passages[e].pop(0)
+        for e, entry in zip(envs.tolist(), self.take_passages(envs, seeds, fresh, ahead)):
+            y, truth, (k, record, state), _ = entry
+            self.y[e], self.truth[e], self.k[e] = y, truth, k
             _copy_outputs(record, e, self.last)
             states.append(state)
-        if later:
-            for e in envs.tolist():
-                queue = self._passages[e]
-                rest = [entry for entry in queue if entry[2] is None and entry[3] is None]
-                if rest:
-                    job = _Later(partial(_rest_of_block, weakref.ref(self), rest))
-                    for entry in rest:
-                        entry[3] = job
-                if e not in self._next and e not in self._wanted:
-                    self._wanted[e] = int(ahead(e, len(queue) + 1))
-            self._leave_ahead()
         self.tracker.set_passage_states(envs, states)
         self.start[envs] = self.k[envs]
         self.since[envs] = 0.0
@@ -390,143 +273,20 @@ class PassageV1Core:
         self._predict_gains(envs)
         return self.observe()[envs]
 
-    def _block(self, seed):
+    def draw_block(self, seed):
         """The queue entries ``[y, truth, run-in, job]`` of a block of passages simulated from ``seed`` (no run-in
         yet)."""
         sim = simulate(self.scenario, runs=PASSAGE_BLOCK, seed=seed, random=True)
         return [[y, truth, None, None] for y, truth in zip(sim.measurements, self.model.state_from_truth(sim.truth))]
 
-    def _leave_ahead(self):
-        """Leave the next blocks wanted (:attr:`_wanted`) to the background, the next blocks of :attr:`_group`
-        environments in one piece of work: once that many want one, or at once when an environment wanting one
-        has half a block or less left.  Their run-ins in one batch cost less a passage than a block's alone
-        (2.8-2.9 against 3.4 ms of CPU, Passage-v1, six blocks against one: ``benchmarks/where_time_goes.py
-        runins``; at 64 envs 19.1-21.3k against 16.7-19.2k env-steps/s: EXPERIMENTS.md, "Performance log")."""
-        while self._wanted and (len(self._wanted) >= self._group or any(
-                len(self._passages.get(e, ())) <= PASSAGE_BLOCK // 2 for e in self._wanted)):
-            envs = list(self._wanted)[:self._group]
-            seeds = [self._wanted.pop(e) for e in envs]
-            job, live = _Later(partial(_blocks_ahead, weakref.ref(self), seeds)), [True] * len(envs)
-            for i, (e, seed) in enumerate(zip(envs, seeds)):
-                self._next[e] = _Part(job, i, seed, live)
-
-    def _take_block(self, e, seed):
-        """Environment ``e``'s next block of queue entries: the one drawn ahead if it was drawn from ``seed``, or
-        the announced one of ``seed`` (:meth:`expect`), if the background did not fail it; else drawn here (as
-        when it was only wanted, not yet left to the background)."""
-        self._wanted.pop(e, None)
-        block = self._next.pop(e, None)
-        if block is not None and block.seed != seed:   # drawn from another seed (a user drew from the generator)
-            block.cancel()
-            block = None
-        if block is None:                    # announced (expect): its first passage's run-in done ahead
-            block = self._expected.pop(seed, None)
-            if block is not None:
-                self._expect_ahead()
-        if block is not None:
-            try:
-                return block.result()
-            except Exception:                # the background's attempt failed: drawn here, as without it
-                pass
-        return self._block(seed)
-
-    def expect(self, seeds):
-        """Announce that the next resets will draw blocks from ``seeds`` (an iterable of block seeds, in order,
-        read as needed) and each use only its first passage, as seeded resets do (an evaluation's episodes):
-        those blocks and their first passages' run-ins are drawn ahead on the background thread,
-        :data:`EXPECT_BATCH` at a time, at most two batches ahead.  Nothing changes but when the work is done: a
-        block is used only by a reset that draws its seed, and a passage's run-in does not depend on its batch.
-        Replaces an earlier announcement; without the background (:func:`~shipsense.parallel.background_allowed`)
-        it does nothing."""
-        self._drop_expected()
-        if parallel.background_allowed():
-            self._to_expect = iter(seeds)
-            self._expect_ahead()
-
-    def _expect_ahead(self):
-        """Leave announced blocks (:meth:`expect`) to the background, a batch at a time, whenever at most one batch's
-        worth is out (so at most two batches are)."""
-        while len(self._expected) <= EXPECT_BATCH:
-            seeds = []
-            try:
-                for seed in self._to_expect:
-                    seed = int(seed)
-                    if seed not in self._expected and seed not in seeds:
-                        seeds.append(seed)
-                    if len(seeds) == EXPECT_BATCH:
-                        break
-                else:                # (read to its end: let it go)
-                    self._to_expect = iter(())
-            except Exception:        # (a seed the announcement cannot read ends it: its reset says what is wrong)
-                self._to_expect = iter(())
-            if not seeds:
-                return
-            job, live = _Later(partial(_blocks_ahead, weakref.ref(self), seeds, first_only=True)), [True] * len(seeds)
-            for i, seed in enumerate(seeds):
-                self._expected[seed] = _Part(job, i, seed, live)
-
-    def _drop_expected(self):
-        """Forget the announced blocks (:meth:`expect`): the work not started is cancelled."""
-        for part in self._expected.values():
-            part.cancel()
-        self._expected.clear()
-        self._to_expect = iter(())
-
-    def _jobs(self, envs):
-        """The work left to the background for environments ``envs``: their queues' and next blocks'."""
-        jobs = [self._next[e] for e in envs if e in self._next]
-        for e in envs:
-            jobs += [entry[3] for entry in self._passages.get(e, ()) if entry[3] is not None]
-        return jobs
-
-    def _settle(self, entries):
-        """Give queue ``entries`` their run-ins: those left to the background waited for (or, not started, done
-        here), the others done here in one batch."""
-        for entry in entries:
-            if entry[3] is not None:
-                try:
-                    entry[3].result()
-                except Exception:            # the background's attempt failed: done here (raising if it fails here)
-                    pass
-                entry[3] = None
-        self._run_ins([entry for entry in entries if entry[2] is None])
-
-    def settle(self):
-        """Finish every run-in left to the background thread (:meth:`reset_envs`; work the background failed
-        is done here): nothing this core will use is then in flight (pickling calls it; work for passages a
-        seeded reset dropped may still be running, for nothing)."""
-        for e, block in list(self._next.items()):
-            try:
-                block.result()
-            except Exception:                # (failed: its reset draws the block itself, from the same seed)
-                del self._next[e]
-        self._settle([entry for queue in self._passages.values() for entry in queue if entry[3] is not None])
-
-    def __getstate__(self):
-        self.settle()
-        # (announced blocks are not part of the state: a reset draws its block itself)
-        return {**self.__dict__, "_expected": {}, "_to_expect": iter(())}
-
-    def __setstate__(self, state):
-        self.__dict__.update({"_expected": {}, "_to_expect": iter(()), **state})
-
-    def drop_pending(self):
-        """Cancel the run-ins left to the background that have not started (``close()`` calls it: an environment
-        closed does not keep the background thread busy); a later reset does what it needs itself."""
-        for job in self._jobs(set(self._passages) | set(self._next)):
-            job.cancel()
-        self._wanted.clear()
-        self._drop_expected()
-
-    def _run_ins(self, entries):
+    def run_ins(self, entries):
         """The observer's run-in of queued passages ``entries`` (``[y, truth, None, ...]`` lists; the run-in is put
         in their third place; returns ``entries``), in batches on a sibling of the observer
         (:meth:`~shipsense.trackers.Tracker.sibling`): a passage's run-in does not depend on the agent (every
         sensor is read) nor on the passages beside it in a batch, so it is the one it would have had in its
-        environment, at a fraction of the cost (its window fits in one batch: 2.8-3.3 ms of CPU a passage in a
-        batch of 16 to 96, 8.7-8.9 alone: ``benchmarks/where_time_goes.py runins``).  A batch holds at most
-        :attr:`~shipsense.trackers.Tracker.independent_batch` passages (102): in a larger one the banks' starts
-        move at rounding.
+        environment, at a fraction of the cost (its window fits in one batch).  A batch holds at most
+        :attr:`~shipsense.trackers.Tracker.independent_batch` passages: in a larger one the banks' starts move at
+        rounding.
 
         Every sensor is read from the first sample until the observer has a track (its detection and its
         first fit): a passage stops at the sample its window completes, and the windows are fitted together
@@ -539,8 +299,7 @@ class PassageV1Core:
             trk = self.tracker.sibling(R)
             y = np.stack([entry[0] for entry in part])
             rows, k = np.arange(R), np.zeros(R, dtype=int)
-            last = trk._prior_sample()
-            _copy_outputs(trk.update(self.times[0], y[:, 0]), rows, last)
+            last = trk.update(self.times[0], y[:, 0])      # (a fresh Sample of every passage: the run-ins' record)
             waiting = rows[self._blind_status(last.status) & (k < self.K - 2)]
             while waiting.size:
                 k[waiting] += 1
@@ -588,8 +347,8 @@ class PassageV1Core:
 
     def step(self, actions, envs=None):
         """Advance environments ``envs`` (default all) by one sample with actions (E,) (indices of
-        :attr:`subsets`).  Returns rewards, terminated (E,) and an info dict of (E,) arrays; entries of
-        environments that did not step are meaningless."""
+        :attr:`subsets`).  Returns rewards, terminated, truncated (E,; never truncated) and an info dict of (E,)
+        arrays; entries of environments that did not step are meaningless."""
         actions = np.asarray(actions)
         if actions.dtype.kind not in "iu":                    # (not bool, not fractions)
             raise ValueError(f"actions must be integers in [0, {len(self.subsets)}), got {actions.dtype} values")
@@ -611,7 +370,7 @@ class PassageV1Core:
         info = {"error": error, "nees": nees, "inside95": nees <= CHI2_2_95, "reads": reads,
                 "error_term": error_term, "energy_term": energy_term, "status": self.last.status.copy(),
                 "truth": self.truth[self._rows, self.k, :2].copy(), "estimate": self.last.estimate[:, :2].copy()}
-        return rewards, self.k >= self.K - 1, info
+        return rewards, self.k >= self.K - 1, np.zeros(self.E, dtype=bool), info
 
     def episode_metrics(self, envs):
         """The episodes' metrics of ``envs`` (at their last sample): dict of (len(envs),) arrays."""
@@ -690,90 +449,6 @@ def observation_potential(obs):
     obs = np.asarray(obs, dtype=float)
     rho2 = np.minimum(obs[..., 6] ** 2, 1.0 - 1e-6)
     return -0.5 * (6.0 * np.log(10.0) * (obs[..., 4] + obs[..., 5]) + np.log1p(-rho2))
-
-
-def information_gains(Hm, Rinv, P, first_channel, subsets):
-    """Drop (nats) of the position block's log-det of covariances ``P`` (E, n, n) when the sensors of each of
-    ``subsets`` (A, S) are read, in information form: Jacobians ``Hm`` (E, m, n), inverse noise variances
-    ``Rinv`` (m,), channels grouped by sensor from ``first_channel`` (S,, increasing; a sensor whose start
-    equals the next one's has no channel).  Returns (E, A): ``log det P_pp - log det ((P^-1 + sum over the
-    read channels of H_i^T H_i / R_i)^-1)_pp`` (``pp`` the position block), 0 where that is negative or not
-    finite (a singular ``P``, a non-finite Jacobian row of a sensor read) and for a subset that reads
-    nothing.  ``subsets`` are booleans (any nonzero entry reads its sensor).  Compiled (:func:`_gains`): the
-    environment calls it every step."""
-    Hm, P = (np.ascontiguousarray(a, dtype=float) for a in (Hm, P))
-    out = np.empty((P.shape[0], len(subsets)))
-    _gains(Hm, np.ascontiguousarray(Rinv, dtype=float), P, np.asarray(first_channel, dtype=np.int64),
-           np.ascontiguousarray(subsets, dtype=np.bool_), out)
-    return out
-
-
-def information_gains_at(model, x, Rinv, P, first_channel, subsets):
-    """:func:`information_gains` with the Jacobians of ``model`` at its internal states ``x`` (E, n): in one
-    compiled call with the model's compiled measurement kernel (the Jacobians :meth:`FieldModel.H` gives, from
-    the same kernel), else through ``model.H``."""
-    spec = kernel_of(model)
-    if spec is None or spec[0] != FIELD:
-        return information_gains(model.H(x), Rinv, P, first_channel, subsets)
-    P = np.ascontiguousarray(P, dtype=float)
-    out = np.empty((P.shape[0], len(subsets)))
-    _gains_at(np.ascontiguousarray(x, dtype=float), spec, np.ascontiguousarray(Rinv, dtype=float), P,
-              np.asarray(first_channel, dtype=np.int64), np.ascontiguousarray(subsets, dtype=np.bool_), out)
-    return out
-
-
-@njit(cache=True, error_model="numpy", nogil=True)
-def _gains_at(X, spec, Rinv, P, first_channel, subsets, out):
-    """:func:`information_gains_at`: the states' Jacobians from the measurement kernel's batch
-    (:func:`~shipsense.models.measurement.batch_kernel`, as ``model.H``), then :func:`_gains`."""
-    E, n = X.shape
-    m = Rinv.shape[0]
-    Hm = np.empty((E, m, n))
-    batch_kernel(X, spec, np.empty((E, m)), Hm, True)
-    _gains(Hm, Rinv, P, first_channel, subsets, out)
-
-
-@njit(cache=True, error_model="numpy", nogil=True)
-def _gains(Hm, Rinv, P, first_channel, subsets, out):
-    E, m, n = Hm.shape
-    S = first_channel.size
-    Js = np.empty((S, n, n))
-    Pinv, M, X = np.empty((n, n)), np.empty((n, n)), np.empty((n, n))
-    reads = np.zeros(subsets.shape[0], dtype=np.bool_)
-    for t in range(subsets.shape[0]):
-        for s in range(S):
-            reads[t] |= subsets[t, s]
-    for e in range(E):
-        for s in range(S):                      # each sensor's information sum_i H_i^T H_i / R_i
-            hi = first_channel[s + 1] if s + 1 < S else m
-            for a in range(n):
-                for b in range(n):
-                    acc = 0.0
-                    for i in range(first_channel[s], hi):
-                        acc += Hm[e, i, a] * Rinv[i] * Hm[e, i, b]
-                    Js[s, a, b] = acc
-        for a in range(n):                      # P^-1: one elimination, the identity's columns
-            for b in range(n):
-                M[a, b] = P[e, a, b]
-                Pinv[a, b] = 1.0 if a == b else 0.0
-        solve_many_in_place(M, Pinv, n, n)
-        before = math.log(abs(P[e, 0, 0] * P[e, 1, 1] - P[e, 0, 1] * P[e, 1, 0]))
-        for t in range(subsets.shape[0]):
-            if not reads[t]:                    # (reading nothing gains nothing)
-                out[e, t] = 0.0
-                continue
-            for a in range(n):                  # the first two columns of (P^-1 + J)^-1
-                for b in range(n):
-                    acc = Pinv[a, b]
-                    for s in range(S):
-                        if subsets[t, s]:
-                            acc += Js[s, a, b]
-                    M[a, b] = acc
-                X[a, 0] = 1.0 if a == 0 else 0.0
-                X[a, 1] = 1.0 if a == 1 else 0.0
-            solve_many_in_place(M, X, n, 2)
-            g = before - math.log(abs(X[0, 0] * X[1, 1] - X[0, 1] * X[1, 0]))
-            out[e, t] = max(g, 0.0) if math.isfinite(g) else 0.0
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
@@ -931,7 +606,7 @@ class PassageV1Env(RebuiltOnUnpickle, ClosesItsFigure, gym.Env):
             raise RuntimeError("the passage has ended: call reset()")
         if not (0 <= action < self.action_space.n if type(action) is int else self.action_space.contains(action)):
             raise ValueError(f"action must be an integer in [0, {self.action_space.n}), got {action!r}")
-        rewards, terminated, info = self.core.step(np.array([int(action)]))
+        rewards, terminated, _, info = self.core.step(np.array([int(action)]))
         obs = self.core.observe()[0]
         info = {k: v[0] for k, v in info.items()}
         done = bool(terminated[0])
@@ -972,19 +647,14 @@ class PassageV1Env(RebuiltOnUnpickle, ClosesItsFigure, gym.Env):
 
 class PassageV1VectorEnv(CoreVectorEnv):
     """Native vector version of ``shipsense/Passage-v1``: one :class:`PassageV1Core` (one batched tracker) for
-    all sub-environments.
+    all sub-environments, on :class:`~shipsense.envs.core_env.CoreVectorEnv` (next-step autoreset, gymnasium's
+    vector ``info`` with ``_key`` masks, an int or a list of seeds, the partial reset
+    ``reset(options={"reset_mask": mask})`` that SB3's adapter, :class:`~shipsense.envs.sb3.VectorEnvAdapter`,
+    calls in the step an episode ends).
 
     Sub-environment ``i`` reset with an integer ``seed`` behaves exactly like a single :class:`PassageV1Env`
-    reset with ``seed + i``; ``seed`` may also be a list of ``num_envs`` seeds (``None`` entries draw fresh
-    entropy).  **Autoreset mode: next step** (``AutoresetMode.NEXT_STEP``, gymnasium 1.x): the step after a
-    sub-environment terminated resets it, ignores its action and returns its first observation with reward 0,
-    ``terminated`` and ``truncated`` False.  ``info`` holds, per key, an (num_envs,) array and the ``_key``
-    mask of the sub-environments it is valid for (those that stepped); ``info["episode_metrics"]`` (with its
-    own masks) for those that terminated.  ``reset(options={"reset_mask": mask})`` (gymnasium's partial reset)
-    resets only the masked sub-environments, each from its own stream: SB3's adapter
-    (:class:`~shipsense.envs.sb3.VectorEnvAdapter`) calls it in the step an episode ends.  With a ``seed`` it
-    reseeds only them, as gymnasium's ``SyncVectorEnv`` does; the others' streams and the run-ins done ahead
-    for them are kept.
+    reset with ``seed + i``.  A seeded partial reset reseeds only the masked sub-environments; the others'
+    streams and the run-ins done ahead for them are kept.
     """
 
     BASELINES = BASELINES
@@ -993,39 +663,10 @@ class PassageV1VectorEnv(CoreVectorEnv):
 
     def __init__(self, num_envs=1, scenario="S2", overrides=None, k=1, energy_cost=0.01, error_scale=1.0,
                  render_mode=None):
-        self._check_render_mode(render_mode)
-        self.core = PassageV1Core(num_envs, scenario, overrides, k, energy_cost, error_scale)
-        self.num_envs = self.core.E
-        self.subsets = self.core.subsets
-        self._batch(_spaces(self.core), render_mode)
-
-    def _observation(self):
-        return self.core.observe()
-
-    def step(self, actions):
-        actions = np.asarray(actions).reshape(self.num_envs)
-        if actions.dtype.kind not in "iu" or np.any((actions < 0) | (actions >= len(self.subsets))):
-            raise ValueError(f"actions must be integers in [0, {len(self.subsets)})")
-        done = self._autoreset()
-        live = ~done
-        rewards, terminated, info = self.core.step(np.where(live, actions, 0),
-                                                   envs=np.flatnonzero(live) if done.any() else None)
-        rewards = np.where(live, rewards, 0.0)
-        terminated = terminated & live
-        infos = {}
-        for key, v in info.items():
-            infos[key], infos["_" + key] = v, live.copy()
-        if terminated.any():
-            ended = np.flatnonzero(terminated)
-            metrics = {}
-            for key, v in self.core.episode_metrics(ended).items():
-                full = np.zeros(self.num_envs)
-                full[ended] = v
-                metrics[key], metrics["_" + key] = full, terminated.copy()
-            infos["episode_metrics"], infos["_episode_metrics"] = metrics, terminated.copy()
-        self._prev_done = terminated.copy()
-        return (self.core.observe(), rewards.astype(np.float64), terminated,
-                np.zeros(self.num_envs, dtype=bool), infos)
+        self.check_render_mode(render_mode)
+        core = PassageV1Core(num_envs, scenario, overrides, k, energy_cost, error_scale)
+        super().__init__(core, _spaces(core), render_mode)
+        self.subsets = core.subsets
 
     def close_extras(self, **kwargs):
         self.core.drop_pending()
@@ -1036,8 +677,7 @@ class PassageV1VectorEnv(CoreVectorEnv):
         return _Policy(self.core, name, seed, single=False)
 
 
-__all__ = ["BASELINES", "PassageV1Core", "PassageV1Env", "PassageV1VectorEnv", "information_gains",
-           "information_gains_at", "observation_potential", "subsets"]
+__all__ = ["BASELINES", "PassageV1Core", "PassageV1Env", "PassageV1VectorEnv", "observation_potential", "subsets"]
 
 
 numba_cache.key_on_sources(globals())   # the caches follow the files these kernels are compiled from

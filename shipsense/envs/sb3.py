@@ -4,9 +4,11 @@ SB3's ``VecEnv`` resets an environment in the step that ends it and hands the la
 ``infos[i]["terminal_observation"]``; a gymnasium 1.x ``VectorEnv`` says how it autoresets in
 ``metadata["autoreset_mode"]``:
 
-* ``SAME_STEP`` (the shipsense vector envs of v1): the observation is already the reset one, the last one is
-  in ``info["final_obs"]`` and its info in ``info["final_info"]``;
-* ``NEXT_STEP`` (gymnasium's default): the adapter resets the ended environments at once with
+* ``SAME_STEP`` (gymnasium's ``SyncVectorEnv`` as training makes it for an environment without a native vector
+  version): the observation is already the reset one, the last one is in ``info["final_obs"]`` and its info in
+  ``info["final_info"]``;
+* ``NEXT_STEP`` (gymnasium's default, every shipsense native vector env:
+  :class:`~shipsense.envs.core_env.CoreVectorEnv`): the adapter resets the ended environments at once with
   ``reset(options={"reset_mask": done})`` (gymnasium's ``SyncVectorEnv`` / ``AsyncVectorEnv`` support it; a
   native env in this mode must too);
 * ``DISABLED``: the same ``reset_mask`` reset.

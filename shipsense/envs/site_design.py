@@ -60,12 +60,12 @@ state component, ``mean_s log det(I + sum_i D J_si D) / n`` (J: Fisher
 information of passage s at candidate i; D: the prior standard deviations;
 the information gained over the prior), a function of the set of chosen
 candidates only: the reward does not depend on the order of the picks.
-``ambiguous``: with ``ambiguity="mirror"`` (default, milliseconds) a mirror
+``ambiguous``: with ``ambiguity="mirror"`` (default, the cheap one) a mirror
 image of one of the first two passages across the layout's symmetry lines is
 far away yet within chi-square 25 (:func:`~shipsense.design.observability.mirror_screen`:
 exact for collinear layouts, a screen otherwise); with ``"full"`` the
 project's ambiguity check (:func:`~shipsense.design.observability.check_array`,
-about a second) says ``ambiguous``.
+batched least-squares fits, far slower) says ``ambiguous``.
 
 ## Starting state
 
@@ -106,10 +106,17 @@ site's scenario, free candidates and passages, then its sensors in turn.
 ## Version history
 
 * v1: a site per episode under the seed, terminal Bayesian D-criterion with an ambiguity penalty (order-free),
-  precomputed Fisher matrices (milliseconds a step), masks through ``gymnasium.make``, a time limit, a native
-  vector version, baselines.
+  precomputed Fisher matrices (a step is a mask update), masks through ``gymnasium.make``, a time limit, a native
+  vector version, baselines.  Since 2026-11-28 the native vector version autoresets in the next step
+  (gymnasium 1.x's default, the convention of every shipsense vector env,
+  :class:`~shipsense.envs.core_env.CoreVectorEnv`: the step after an episode ended resets it, ignores its
+  action and returns reward 0) and offers the partial reset ``reset(options={"reset_mask": mask})``; it reset
+  in the same step, with ``info["final_obs"]`` and ``info["final_info"]``.  Its episodes are the same (each
+  sub-environment draws its sites from its own stream as before), so no version bump: the dynamics, reward
+  and spaces are unchanged.
 * v0 (:class:`shipsense.envs.array_design.ArrayDesignEnv`, still registered): one fixed scenario and 8 fixed
-  passages judged by the tracker (~1.5 steps/s); its seed did nothing and its reward depended on the pick order.
+  passages judged by the tracker (run at every step); its seed did nothing and its reward depended on the pick
+  order.
 """
 
 from __future__ import annotations
@@ -120,14 +127,11 @@ import time
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
-from gymnasium.vector import AutoresetMode, VectorEnv
-from gymnasium.vector.utils import batch_space
 
 from shipsense.envs.arguments import number
-from shipsense.envs.core_env import ClosesItsFigure
+from shipsense.envs.core_env import SEED_HIGH, ClosesItsFigure, CoreVectorEnv
 from shipsense.envs.sites import SITE_FEATURES, Site, sample_site
 
-SEED_HIGH = 2**31 - 1
 SCREEN_PASSAGES = 2
 
 
@@ -193,6 +197,8 @@ class DesignCore:
         self.t = np.zeros(E, dtype=int)
         self.gain = np.zeros((E, N))                   # score rise of each candidate placed next (-inf: not free)
         self.current = np.zeros(E)                     # score of the placed set
+        self.final_ambiguous = np.zeros(E)             # the ended episodes' metrics (episode_metrics)
+        self.final_seconds = np.zeros(E)
         self.features = np.zeros((E, SITE_FEATURES), dtype=np.float32)
         self.started = np.zeros(E)
         self.sites = [None] * E
@@ -205,8 +211,13 @@ class DesignCore:
         self._models = {}
 
     # -- episodes ---------------------------------------------------------------------
-    def reset_envs(self, envs, rngs):
-        """Draw a site (and its passages) for each environment in ``envs`` with the generators ``rngs``."""
+    draws_from_generators = True
+    """:meth:`reset_envs` draws from the environments' generators (:class:`~shipsense.envs.core_env.CoreVectorEnv`
+    passes them)."""
+
+    def reset_envs(self, envs, rngs, fresh=False):
+        """Draw a site (and its passages) for each environment in ``envs`` with the generators ``rngs`` (``fresh``,
+        whether they were just seeded, changes nothing)."""
         from shipsense.design.placement import build_problem
         from shipsense.models.field_model import candidate_model
         from shipsense.simulator import sample_passages
@@ -293,36 +304,49 @@ class DesignCore:
             return check_array(model, self.thetas[e][:4], steps, starts=8).verdict == "ambiguous"
         return mirror_screen(model, self.thetas[e][:SCREEN_PASSAGES], steps) < DEFAULT_CHI2
 
-    def step(self, actions):
-        """Advance every environment by one action; returns rewards, terminated, truncated and per-env infos
-        (the episode metrics of those that ended)."""
+    def step(self, actions, envs=None):
+        """Advance environments ``envs`` (default all) by one action each (``actions`` (E,), the others' ignored).
+        Returns rewards, terminated, truncated (E,) and an info dict of (E,) arrays: ``invalid``, ``placed`` and,
+        with its mask ``_layout``, the ``layout`` of the episodes that ended (their metrics:
+        :meth:`episode_metrics`); entries of environments that did not step are meaningless."""
         a = np.asarray(actions).reshape(self.E).astype(int)
         if np.any((a < 0) | (a >= self.N)):
             raise ValueError(f"actions must be in [0, {self.N}), got {actions}")
-        rows = np.arange(self.E)
+        rows = np.arange(self.E) if envs is None else np.asarray(envs, dtype=int)
+        a = a[rows]
         valid = self.masks()[rows, a]
         self.placed[rows[valid], a[valid]] = True
-        self.count += valid
-        self.t += 1
-        before = self.current.copy()
-        self.current = self._scores(rows, self.placed[:, None])[:, 0]
-        rewards = np.where(valid, self.current - before if self.incremental else 0.0, -1.0)
-        terminated = self.count >= self.k
-        truncated = ~terminated & (self.t >= self.max_steps)
-        infos = [{"invalid": not bool(v), "placed": int(c)} for v, c in zip(valid, self.count)]
-        done = np.flatnonzero(terminated | truncated)
+        self.count[rows] += valid
+        self.t[rows] += 1
+        before = self.current[rows]
+        self.current[rows] = self._scores(rows, self.placed[rows, None])[:, 0]
+        rewards = np.zeros(self.E)
+        rewards[rows] = np.where(valid, self.current[rows] - before if self.incremental else 0.0, -1.0)
+        terminated, truncated = np.zeros(self.E, dtype=bool), np.zeros(self.E, dtype=bool)
+        terminated[rows] = self.count[rows] >= self.k
+        truncated[rows] = ~terminated[rows] & (self.t[rows] >= self.max_steps)
+        invalid = np.zeros(self.E, dtype=bool)
+        invalid[rows] = ~valid
+        ended = terminated | truncated
+        layout = np.empty(self.E, dtype=object)
         self._update_gain(rows)
-        if done.size:
+        if ended.any():
             now = time.perf_counter()
-            for e in done:
+            for e in np.flatnonzero(ended):
                 s = self.current[e]
                 ambiguous = self._ambiguous(e)
                 rewards[e] += (0.0 if self.incremental else s) - self.penalty * ambiguous
-                infos[e]["episode_metrics"] = {"score": float(s), "ambiguous": float(ambiguous),
-                                               "seconds": float(now - self.started[e])}
-                infos[e]["layout"] = np.column_stack(
+                self.final_ambiguous[e], self.final_seconds[e] = float(ambiguous), now - self.started[e]
+                layout[e] = np.column_stack(
                     [self.xy[self.placed[e]], np.full(self.count[e], -self.sites[e].water_depth_m)]).tolist()
-        return rewards, terminated, truncated, infos
+        info = {"invalid": invalid, "placed": self.count.copy(), "layout": layout, "_layout": ended}
+        return rewards, terminated, truncated, info
+
+    def episode_metrics(self, envs):
+        """The metrics (dict of (len(envs),) arrays) of the episodes of ``envs`` that ended in their last step:
+        ``score``, ``ambiguous`` (0 or 1) and ``seconds``."""
+        return {"score": self.current[envs], "ambiguous": self.final_ambiguous[envs],
+                "seconds": self.final_seconds[envs]}
 
     # -- drawing -------------------------------------------------------------------------
     def render(self, e, ax=None):
@@ -409,10 +433,14 @@ class SiteDesignEnv(ClosesItsFigure, gym.Env):
             raise RuntimeError("call reset() before step()")
         if self.core.count[0] >= self.core.k or self.core.t[0] >= self.core.max_steps:
             raise RuntimeError("the episode has ended: call reset()")
-        rewards, terminated, truncated, infos = self.core.step(np.array([int(action)]))
+        rewards, terminated, truncated, batch = self.core.step(np.array([int(action)]))
+        info = {"invalid": bool(batch["invalid"][0]), "placed": int(batch["placed"][0])}
+        if terminated[0] or truncated[0]:
+            info["episode_metrics"] = {k: float(v[0]) for k, v in self.core.episode_metrics([0]).items()}
+            info["layout"] = batch["layout"][0]
         if self.render_mode == "human":
             self.render()
-        return self.core.observe()[0], float(rewards[0]), bool(terminated[0]), bool(truncated[0]), infos[0]
+        return self.core.observe()[0], float(rewards[0]), bool(terminated[0]), bool(truncated[0]), info
 
     def render(self):
         if self.render_mode == "rgb_array":
@@ -482,68 +510,24 @@ class ConvexPolicy:
         return int(np.flatnonzero(mask)[0])
 
 
-class SiteDesignVectorEnv(VectorEnv):
-    """Native vector version of ``shipsense/ArrayDesign-v1``: one :class:`DesignCore` over ``num_envs`` sites.
-
-    Autoreset mode: same step (an environment that ends is reset at once; its last observation and info are
-    in ``info["final_obs"]`` / ``info["final_info"]``).  ``reset(seed=s)`` seeds environment ``i`` with
-    ``s + i``; ``reset(seed=[s0, s1, ...])`` seeds each with its own (None: fresh entropy).  Environment ``i``
-    reset with seed ``s`` draws the same site as :class:`SiteDesignEnv` reset with ``s``.
+class SiteDesignVectorEnv(CoreVectorEnv):
+    """Native vector version of ``shipsense/ArrayDesign-v1``: one :class:`DesignCore` over ``num_envs`` sites, on
+    :class:`~shipsense.envs.core_env.CoreVectorEnv` (next-step autoreset, gymnasium's vector ``info`` with
+    ``_key`` masks, the partial reset ``reset(options={"reset_mask": mask})``).  ``reset(seed=s)`` seeds
+    environment ``i`` with ``s + i``; ``reset(seed=[s0, s1, ...])`` seeds each with its own (None: fresh
+    entropy).  Environment ``i`` reset with seed ``s`` draws the same site as :class:`SiteDesignEnv` reset with
+    ``s``.
     """
-
-    metadata = {"render_modes": ["rgb_array"], "autoreset_mode": AutoresetMode.SAME_STEP}
 
     def __init__(self, num_envs=1, scenario="S1-P2", k=4, half_width=30.0, spacing=7.5, passages=4, stride=4,
                  ambiguity_penalty=2.0, ambiguity="mirror", max_steps=None, site=None, reward="terminal",
                  render_mode=None):
         num_envs = number("num_envs", num_envs, 1, 4096, integer=True)
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
-        self.num_envs = num_envs
-        self.core = DesignCore(num_envs, scenario, k, half_width, spacing, passages, stride, ambiguity_penalty,
-                               ambiguity, max_steps, site, reward)
-        self.single_observation_space, self.single_action_space = _spaces(self.core)
-        self.observation_space = batch_space(self.single_observation_space, num_envs)
-        self.action_space = batch_space(self.single_action_space, num_envs)
-        self.render_mode = render_mode
-        self._rngs = None
-
-    def reset(self, *, seed=None, options=None):
-        if seed is None:
-            seeds = [None] * self.num_envs
-        elif isinstance(seed, (int, np.integer)):
-            seeds = [int(seed) + i for i in range(self.num_envs)]
-        else:
-            seeds = list(seed)
-            if len(seeds) != self.num_envs:
-                raise ValueError(f"seed: a list of {self.num_envs} seeds (one per environment), got {len(seeds)}")
-        if self._rngs is None or seed is not None:
-            self._rngs = [gym.utils.seeding.np_random(s)[0] for s in seeds]
-        self.core.reset_envs(range(self.num_envs), self._rngs)
-        return self.core.observe(), {}
+        self.check_render_mode(render_mode)
+        core = DesignCore(num_envs, scenario, k, half_width, spacing, passages, stride, ambiguity_penalty,
+                          ambiguity, max_steps, site, reward)
+        super().__init__(core, _spaces(core), render_mode)
 
     def action_masks(self):
         """Boolean masks (num_envs, N) of the candidates each environment can take."""
         return self.core.masks().copy()
-
-    def step(self, actions):
-        rewards, terminated, truncated, infos = self.core.step(actions)
-        obs = self.core.observe()
-        done = np.flatnonzero(terminated | truncated)
-        info = {}
-        for e, i in enumerate(infos):
-            info = self._add_info(info, i, e)
-        if done.size:
-            final = {}
-            for e in done:
-                final = self._add_info(final, {"final_obs": obs[e].copy(), "final_info": infos[e]}, e)
-            info["final_obs"], info["_final_obs"] = final["final_obs"], np.isin(np.arange(self.num_envs), done)
-            info["final_info"], info["_final_info"] = final["final_info"], final["_final_info"]
-            self.core.reset_envs(done, [self._rngs[e] for e in done])
-            obs = self.core.observe()
-        return obs, rewards.astype(np.float64), terminated, truncated, info
-
-    def render(self):
-        if self.render_mode == "rgb_array":
-            return tuple(self.core.render(e) for e in range(self.num_envs))
-        return None

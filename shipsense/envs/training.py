@@ -55,8 +55,9 @@ def _require_rl():
 def make_vector_env(env_id, n_envs, env_kwargs=None):
     """The gymnasium vector env training uses: the native one (``vector_entry_point``: one batched tracker
     or Fisher computation for all environments) when the environment has one, else ``SyncVectorEnv`` with
-    same-step autoreset.  A native env that autoresets in the next step serves SB3 through its partial reset
-    (``reset(options={"reset_mask": ...})``, :class:`~shipsense.envs.sb3.VectorEnvAdapter`)."""
+    same-step autoreset.  A native env autoresets in the next step (:class:`~shipsense.envs.core_env.CoreVectorEnv`)
+    and serves SB3 through its partial reset (``reset(options={"reset_mask": ...})``,
+    :class:`~shipsense.envs.sb3.VectorEnvAdapter`)."""
     import gymnasium as gym
     from gymnasium.vector import AutoresetMode
 

@@ -10,7 +10,8 @@ from reference import odd_observer_outputs
 
 import shipsense  # noqa: F401  (registers the environments)
 from shipsense.envs import PASSAGE_V1_VARIANTS
-from shipsense.envs.passage_v1 import CHI2_2_95, PASSAGE_BLOCK, PassageV1Env, PassageV1VectorEnv
+from shipsense.envs.passage_v1 import CHI2_2_95, PassageV1Env, PassageV1VectorEnv
+from shipsense.envs.prefetch import PASSAGE_BLOCK
 
 EASY = "shipsense/PassageEasy-v1"
 KW = {"scenario": "S2", "overrides": {"steps": 50}}   # S2: the run-in ends near sample 30, ~20 agent steps
@@ -27,14 +28,45 @@ def _rollout(env, seed, policy_seed=0):
             return out
 
 
-def test_variants_registered_with_vector_entry_points_and_v0_kept():
-    assert "shipsense/Passage-v0" in gym.registry
+def test_variants_registered_with_vector_entry_points_and_v0_retired():
+    from shipsense.envs import register_envs
+
+    register_envs()                                          # (idempotent: registered already on import)
+    assert "shipsense/Passage-v0" not in gym.registry
     for vid in PASSAGE_V1_VARIANTS:
         spec = gym.registry[vid]
         assert spec.entry_point.endswith("PassageV1Env") and spec.vector_entry_point.endswith("PassageV1VectorEnv")
         assert spec.reward_threshold is not None
     envs = gym.make_vec(EASY, num_envs=2, vectorization_mode="vector_entry_point", overrides={"steps": 50})
     assert isinstance(envs.unwrapped, PassageV1VectorEnv)
+
+
+def _make_in_child(queue):
+    import gymnasium as gym_
+
+    env = gym_.make("shipsense:shipsense/PassageEasy-v1", overrides={"steps": 50})
+    obs, _ = env.reset(seed=1)
+    queue.put(obs.shape)
+
+
+def test_make_in_a_spawned_process():
+    import multiprocessing as mp
+
+    ctx = mp.get_context("spawn")
+    q = ctx.Queue()
+    p = ctx.Process(target=_make_in_child, args=(q,))
+    p.start()
+    shape = q.get(timeout=120)
+    p.join(timeout=60)
+    assert p.exitcode == 0 and shape == PassageV1Env(**KW).observation_space.shape
+
+
+def test_resets_with_missing_first_samples_never_crash():
+    """S0 with 30 % dropouts: passages whose first samples are missing reset to finite observations."""
+    env = PassageV1Env(scenario="S0", overrides={"noise": {"dropout": 0.3}, "steps": 40})
+    for seed in range(25):
+        obs, _ = env.reset(seed=seed)
+        assert np.isfinite(obs).all() and env.observation_space.contains(obs)
 
 
 def test_gymnasium_checker_passes_without_warnings():
@@ -237,7 +269,7 @@ def test_announced_seeded_resets_give_the_same_episodes(monkeypatch):
     import pickle
     import sys
 
-    from shipsense.envs import passage_v1
+    from shipsense.envs import passage_v1, prefetch
 
     def caller():     # the function that drew a block (not a comprehension inside it)
         frame = sys._getframe(2)
@@ -245,8 +277,8 @@ def test_announced_seeded_resets_give_the_same_episodes(monkeypatch):
             frame = frame.f_back
         return frame.f_code.co_name
 
-    drawn, block = [], passage_v1.PassageV1Core._block
-    monkeypatch.setattr(passage_v1.PassageV1Core, "_block",
+    drawn, block = [], passage_v1.PassageV1Core.draw_block
+    monkeypatch.setattr(passage_v1.PassageV1Core, "draw_block",
                         lambda self, seed: drawn.append(caller()) or block(self, seed))
     monkeypatch.setenv("SHIPSENSE_THREADS", "2")
     seeds = [50 + i for i in range(40)]
@@ -270,9 +302,9 @@ def test_announced_seeded_resets_give_the_same_episodes(monkeypatch):
             pickle.loads(pickle.dumps(env))
             env.expect_seeds(seeds)
             copy.deepcopy(env)
-            assert len(env.core._expected) == 2 * passage_v1.EXPECT_BATCH    # (two batches drawn ahead)
+            assert len(env.core._expected) == 2 * prefetch.EXPECT_BATCH    # (two batches drawn ahead)
             env.reset(seed=seeds[0])
-            assert len(env.core._expected) == 2 * passage_v1.EXPECT_BATCH - 1
+            assert len(env.core._expected) == 2 * prefetch.EXPECT_BATCH - 1
         env.close()
         return out, list(drawn)
 
@@ -319,7 +351,8 @@ def test_the_compiled_gains_equal_the_kalman_form_and_are_zero_where_undefined()
     """information_gains (information form, compiled) against the covariance (Kalman) form on the stacked read
     channels, for random covariances, Jacobians and subsets (the empty one: 0); a singular covariance gives 0
     instead of raising."""
-    from shipsense.envs.passage_v1 import information_gains, subsets
+    from shipsense.design.information_gain import information_gains
+    from shipsense.envs.passage_v1 import subsets
 
     rng = np.random.default_rng(4)
     E, n, first = 6, 7, np.array([0, 3, 6, 7])          # sensors of 3, 3, 1 and 2 channels
@@ -348,7 +381,8 @@ def test_the_gains_at_states_equal_the_gains_of_the_models_jacobians():
     information_gains of model.H bit for bit; a model without a compiled kernel (the series HED path) goes
     through model.H."""
     from shipsense import load_scenario
-    from shipsense.envs.passage_v1 import information_gains, information_gains_at, subsets
+    from shipsense.design.information_gain import information_gains, information_gains_at
+    from shipsense.envs.passage_v1 import subsets
     from shipsense.models.field_model import model_from_scenario
 
     rng = np.random.default_rng(5)
@@ -534,7 +568,7 @@ def test_the_run_ins_in_one_batch_observe_what_one_at_a_time_did(monkeypatch):
         return out
 
     together = run()
-    monkeypatch.setattr(passage_v1.PassageV1Core, "_run_ins", one_at_a_time)
+    monkeypatch.setattr(passage_v1.PassageV1Core, "run_ins", one_at_a_time)
     for a, b in zip(together, run(), strict=True):
         np.testing.assert_array_equal(a, b)
 
@@ -579,8 +613,8 @@ def test_run_ins_left_to_the_background_change_nothing(monkeypatch):
 
     from shipsense.envs import passage_v1
 
-    drawn, block = [], passage_v1.PassageV1Core._block
-    monkeypatch.setattr(passage_v1.PassageV1Core, "_block",
+    drawn, block = [], passage_v1.PassageV1Core.draw_block
+    monkeypatch.setattr(passage_v1.PassageV1Core, "draw_block",
                         lambda self, seed: drawn.append(sys._getframe(1).f_code.co_name) or block(self, seed))
     monkeypatch.setenv("SHIPSENSE_THREADS", "2")
     venv, ahead = _vector_rollout(800)
@@ -647,7 +681,7 @@ def test_work_in_flight_when_the_process_forks_is_done_in_the_child():
     import threading
     import time
 
-    from shipsense.envs.passage_v1 import _Later
+    from shipsense.envs.prefetch import _Later
 
     parent, gate = os.getpid(), threading.Event()
     running = _Later(lambda: os.getpid() if os.getpid() != parent else (gate.wait(30), os.getpid())[1])
@@ -718,7 +752,7 @@ def test_a_forked_child_does_not_wait_for_a_cache_lock_another_thread_held():
     import os
     import threading
 
-    from shipsense.trackers.init import grid as initialiser
+    from shipsense.trackers import initialiser
 
     held, release = threading.Event(), threading.Event()
 
@@ -775,7 +809,7 @@ def test_a_failure_in_the_background_is_done_again_where_the_work_is_needed(monk
 
     monkeypatch.setenv("SHIPSENSE_THREADS", "2")
     _, clean = _vector_rollout(500)
-    calls, run_ins = [0], passage_v1.PassageV1Core._run_ins
+    calls, run_ins = [0], passage_v1.PassageV1Core.run_ins
 
     def flaky(self, entries):
         if threading.current_thread().name == "shipsense-background":
@@ -784,7 +818,7 @@ def test_a_failure_in_the_background_is_done_again_where_the_work_is_needed(monk
                 raise RuntimeError("a passing failure")
         return run_ins(self, entries)
 
-    monkeypatch.setattr(passage_v1.PassageV1Core, "_run_ins", flaky)
+    monkeypatch.setattr(passage_v1.PassageV1Core, "run_ins", flaky)
     _, failing = _vector_rollout(500)
     assert calls[0] >= 3
     for a, b in zip(clean, failing, strict=True):

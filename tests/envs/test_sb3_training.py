@@ -28,7 +28,13 @@ def _sync_next_step(n=2):
                         vector_kwargs={"autoreset_mode": gym.vector.AutoresetMode.NEXT_STEP}, **KW)
 
 
-@pytest.mark.parametrize("make", [_native, _sync_next_step], ids=["native-same-step", "sync-next-step"])
+def _sync_same_step(n=2):
+    return gym.make_vec(SMALL_ID, num_envs=n, vectorization_mode="sync",
+                        vector_kwargs={"autoreset_mode": gym.vector.AutoresetMode.SAME_STEP}, **KW)
+
+
+@pytest.mark.parametrize("make", [_native, _sync_next_step, _sync_same_step],
+                         ids=["native-next-step", "sync-next-step", "sync-same-step"])
 def test_adapter_hands_sb3_the_terminal_observation_and_the_reset_one(make):
     from shipsense.envs.sb3 import VectorEnvAdapter
 
@@ -218,5 +224,5 @@ def test_training_defaults_are_the_measured_best_where_the_environment_allows_th
 
     assert training_defaults("scheduling", "shipsense/Passage-v1") == (1.0, "greedy")
     assert training_defaults("scheduling", "shipsense/Passage-v1", 0.0, "none") == (0.0, None)
-    assert training_defaults("scheduling", "shipsense/Passage-v0") == (0.0, None)   # no potential, no greedy
+    assert training_defaults("scheduling", "shipsense/ArrayDesign-v0") == (0.0, None)   # no potential, no greedy
     assert training_defaults("placement", "shipsense/ArrayDesign-v1") == (0.0, None)

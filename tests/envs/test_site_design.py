@@ -177,7 +177,7 @@ def test_bad_arguments_raise_one_value_error_naming_the_argument(kwargs, name):
         SiteDesignEnv(**{**SMALL, **kwargs})
 
 
-def test_vector_env_seeds_match_the_single_env_and_autoreset_in_the_same_step():
+def test_vector_env_seeds_match_the_single_env_and_autoreset_in_the_next_step():
     kwargs = {**SMALL, "site": None, "passages": 1, "stride": 8}
     venv = gym.make_vec("shipsense/ArrayDesignSmall-v1", num_envs=2, vectorization_mode="vector_entry_point",
                         passages=1, stride=8)
@@ -190,11 +190,15 @@ def test_vector_env_seeds_match_the_single_env_and_autoreset_in_the_same_step():
     for step in range(3):
         masks = venv.unwrapped.action_masks()
         obs, rewards, term, trunc, info = venv.step(np.array([np.flatnonzero(m)[step] for m in masks]))
-    assert term.all() and info["_final_obs"].all() and info["final_info"]["_episode_metrics"].all()
-    assert rewards == pytest.approx(info["final_info"]["episode_metrics"]["score"]
-                                    - 2.0 * info["final_info"]["episode_metrics"]["ambiguous"])
-    assert (obs[:, -1] == 0).all() and (info["final_obs"][0][-1] == 1.0)      # the next episode has begun
+    assert term.all() and info["_episode_metrics"].all() and info["episode_metrics"]["_score"].all()
+    assert rewards == pytest.approx(info["episode_metrics"]["score"] - 2.0 * info["episode_metrics"]["ambiguous"])
+    assert (obs[:, -1] == 1.0).all() and info["_layout"].all() and len(info["layout"][0]) == 3   # the last obs
     assert "_placed" in info and info["_placed"].all()
+    obs, rewards, term, trunc, info = venv.step(np.zeros(2, dtype=int))    # the next step resets, actions ignored
+    assert (obs[:, -1] == 0).all() and (rewards == 0).all() and not (term | trunc).any()
+    assert not info["_placed"].any() and "episode_metrics" not in info
+    single.reset(seed=6)
+    assert np.array_equal(obs[1], single.reset()[0])                   # its next site, from its own stream
 
 
 def test_render_draws_the_site():
