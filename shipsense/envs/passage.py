@@ -132,7 +132,7 @@ class PassageCore:
         self.k = np.zeros(self.E, dtype=int)
         self.last_read = np.zeros((self.E, self.S), dtype=bool)
         self.times = sc.times
-        self.last = self.tracker._prior_sample()    # the observer's latest output per environment
+        self.last = self.tracker.prior_sample()    # the observer's latest output per environment
         self._passages = {}   # environment -> passages simulated ahead (measurements, truth)
 
     # -- episodes ---------------------------------------------------------------

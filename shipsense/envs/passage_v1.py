@@ -311,7 +311,7 @@ class PassageV1Core:
         self.start = np.zeros(E, dtype=int)   # the sample the agent's control starts at (after the run-in)
         self.since = np.zeros((E, self.S))
         self.last_read = np.zeros((E, self.S), dtype=bool)
-        self.last = self.tracker._prior_sample()
+        self.last = self.tracker.prior_sample()
         self.gains = np.zeros((E, len(self.subsets)))   # predicted gain (nats) of every action
         self._passages = {}      # environment -> its queue of passages, [y, truth, run-in, job] each
         self._next = {}          # environment -> its next block, left to the background (reset_envs): a _Part
@@ -539,7 +539,7 @@ class PassageV1Core:
             trk = self.tracker.sibling(R)
             y = np.stack([entry[0] for entry in part])
             rows, k = np.arange(R), np.zeros(R, dtype=int)
-            last = trk._prior_sample()
+            last = trk.prior_sample()
             _copy_outputs(trk.update(self.times[0], y[:, 0]), rows, last)
             waiting = rows[self._blind_status(last.status) & (k < self.K - 2)]
             while waiting.size:
