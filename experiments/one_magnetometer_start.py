@@ -87,7 +87,7 @@ def main(argv=None):
                 print(f"    passage {p}: {dist[p, w0[p]]:.0f} m out at sample {w0[p]}, CRLB sd {sd_w0[p]:.1f} m there "
                       f"and {sd[p, ends[p]]:.1f} m at the end; error {err[p, w0[p]]:.1f} m, >= 10 m on {out.size} of "
                       f"the last {ks.size} samples, the last at {last} (CRLB sd {sd[p, last]:.1f} m, reported "
-                      f"{np.sqrt(np.trace(res.position_cov[p, last])):.1f} m); {tr.restarts[p]} restarts")
+                      f"{np.sqrt(np.trace(res.position_cov[p, last])):.1f} m); {tr.state.restarts[p]} restarts")
 
 if __name__ == "__main__":
     main()

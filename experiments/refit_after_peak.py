@@ -56,7 +56,7 @@ def main(argv=None):
         est2, cov2 = res.estimates, res.position_cov
         print(f"tracker: {(time.perf_counter() - t0) / args.runs:.4f} s per passage, "
               f"restarts per passage {np.bincount(restarts)} (count of passages with 0, 1, ...)")
-        start = peak_refit_sample(model, y, tr.k0, tr.k0 + tr.window, wide.REFIT_PEAK)
+        start = peak_refit_sample(model, y, tr.state.k0, tr.state.k0 + tr.window, wide.REFIT_PEAK)
     conv, err, valid = wide.converged(est2, truth, ends)
     k = np.arange(y.shape[1])[None, :]
     second = valid & (k >= (ends // 2)[:, None]) & conv[:, None]

@@ -74,7 +74,7 @@ class TrackSummary:
 
     @property
     def restarts(self):
-        return int(self.tracker.restarts[0])
+        return int(self.tracker.state.restarts[0])
 
 
 def _fmt(col, spec):

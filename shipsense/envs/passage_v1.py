@@ -233,7 +233,7 @@ class PassageV1Core(PassagePrefetch):
         self.start = np.zeros(E, dtype=int)   # the sample the agent's control starts at (after the run-in)
         self.since = np.zeros((E, self.S))
         self.last_read = np.zeros((E, self.S), dtype=bool)
-        self.last = self.tracker._prior_sample()
+        self.last = self.tracker.prior_sample()
         self.gains = np.zeros((E, len(self.subsets)))   # predicted gain (nats) of every action
         # (the next blocks of this many environments are left in one piece of work, their run-ins in one batch)
         PassagePrefetch.__init__(self, max(1, min(self.E, self.tracker.independent_batch // PASSAGE_BLOCK)))

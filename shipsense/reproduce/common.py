@@ -331,7 +331,7 @@ def track_restarting(unit, model, y, sc, **options):
     kw = {} if unit is None else {"unit": unit.name}
     tr = Tracker(sc, passages=len(y), sensors=list(model.array.ids), **kw, **options)
     res = tr.track(sc.times[: y.shape[1]], y)
-    return res, tr.seconds["initialiser"], tr.restarts, tr
+    return res, tr.seconds["initialiser"], tr.state.restarts, tr
 
 
 def refit_stage(unit, model, y, gi, est, cov, refit_peak, z_std=None):

@@ -8,8 +8,7 @@ import shipsense
 
 PACKAGE = Path(shipsense.__file__).parent
 MODULES = sorted(PACKAGE.glob("envs/*.py")) + [PACKAGE / "design/information_gain.py"]
-WAITING = {("envs/passage_v1.py", "_prior_sample"),          # Tracker._prior_sample: a Sample at the prior
-           }
+WAITING = set()
 
 
 def _private_uses(path):

@@ -56,10 +56,10 @@ works: each prediction and each fit uses the samples' times); a gap longer
 than ``gap_limit_s`` is predicted through and reported once.  A refit uses
 at most the last ``history`` samples, so the cost per sample is bounded.
 
-``method="bank"`` runs the source studies' multiple-initial-value bank
-instead (the scenario's filter, process noise and ``[tracker.bank]``),
-seeded per passage from its own first sample with a field value; it is kept
-to reproduce the studies.
+``method="bank"`` gives the source studies' multiple-initial-value bank
+instead (:class:`~shipsense.trackers.tracker.study_bank.StudyBankTracker`: the scenario's filter, process noise
+and ``[tracker.bank]``, seeded per passage from its own first sample with a field value), kept to reproduce
+the studies; it runs this class's loop with its own start, no restarts and no consistency test.
 
 The streaming form, :meth:`Tracker.update`, takes one sample of every passage;
 the batch form, :meth:`Tracker.track`, is the same loop over samples, so the
@@ -77,11 +77,11 @@ import numpy as np
 from shipsense.models.measurement import FIELD, kernel_of
 from shipsense.models.transitions import transitions
 from shipsense.trackers.bank.bank import BankState
-from shipsense.trackers.bank.seeding import seed_hypotheses
 from shipsense.trackers.bank.selection import report
 from shipsense.trackers.filters.core import UNROLL_MIN_BATCH, Belief, symmetrize
 from shipsense.trackers.init.window_fits import depth_prior, window_fits
 from shipsense.trackers.tracker.consistency import quantile_table, window_test
+from shipsense.trackers.tracker.passages import PENDING, PHASES, RUNNING, PassageArrays
 from shipsense.trackers.tracker.restarts import due, refit_window
 from shipsense.trackers.tracker.results import (
     INCONSISTENT,
@@ -97,13 +97,9 @@ from shipsense.trackers.tracker.results import (
 from shipsense.trackers.tracker.settings import TrackerSettings, initial_grid, prior_belief, resolve_settings
 from shipsense.trackers.tracker.step import TrackerStep, prepare_sample
 
-_WAITING, _STARTING, _RUNNING, _PENDING = 0, 1, 2, 3   # phases of a passage (_PENDING: its window fits deferred)
-_PHASES = (_WAITING, _STARTING, _RUNNING, _PENDING)
 BANK_INFLATION_MAX = 100.0   # largest chi-square inflation a failed fit's bank starts from (the rest is reported)
 
 
-_HISTORY = ("y_hist", "t_hist")
-"""The per-passage sample history (:meth:`Tracker.passage_states` keeps its written rows only)."""
 
 
 class Tracker:
@@ -133,6 +129,26 @@ class Tracker:
     ((2, 80, 7), (2, 80, 7, 7), (2, 80))
     """
 
+    MIXTURE = True
+    """The reported covariance is the mixture's mean-square error about the selected estimate (the studies'
+    bank: the selected hypothesis's own)."""
+
+    def __new__(cls, scenario=None, *, settings=None, **options):
+        # ``Tracker(..., method="bank")`` (or a scenario or settings that say so) is the studies' variant, as
+        # ``pathlib.Path`` is its system's path
+        if cls is Tracker and scenario is not None:
+            method = settings.method if settings is not None else options.get("method")
+            if method is None:
+                from shipsense.config import load_scenario
+
+                tracker = load_scenario(scenario).tracker
+                method = tracker.method if tracker is not None else "tracker"
+            if method == "bank":
+                from shipsense.trackers.tracker.study_bank import StudyBankTracker
+
+                return super().__new__(StudyBankTracker)
+        return super().__new__(cls)
+
     def __init__(self, scenario, *, passages=1, sensors=None, settings=None, **options):
         from shipsense.config import load_scenario
         from shipsense.models.field_model import model_from_scenario
@@ -150,7 +166,7 @@ class Tracker:
         self.unit = opts.filter_unit()
         # the project's tracker: a bank without process noise (the passages are straight); the studies' bank
         # keeps the scenario's
-        self.model = model if opts.method == "bank" else model.without_process_noise()
+        self.model = self._bank_model(model)
         self.huber = opts.huber(sc.noise)
         # the bank's noise: with Huber updates the estimate's variance is kappa times the nominal one
         kappa = self.huber.variance_factor if self.huber is not None else 1.0
@@ -166,6 +182,8 @@ class Tracker:
         spec = kernel_of(self.model)
         self._pads_exactly = self.huber is None and spec is not None and spec[0] == FIELD   # (_restart's refits)
         self._R_used = np.ascontiguousarray(self.filter_model.R[None], dtype=float)
+        self._testing = bool(opts.consistency_window) and self.TESTS_CONSISTENCY
+        self._layout = PassageArrays.layout(self.model.m, self.model.n, self.settings, self._history())
         self.reset(passages)
 
     labels = property(lambda self: self.model.labels, doc="State component names.")
@@ -178,11 +196,10 @@ class Tracker:
             raise ValueError(f"passages must be at least 1, got {passages}")
         n, H = self.model.n, self.H
         self.P = P
-        for name, (shape, dtype, value) in self._state_fields().items():
-            setattr(self, name, np.full((P, *shape), value, dtype=dtype))
+        self.state = PassageArrays.fresh(P, self._layout)
         self.gaps = []
         self.seconds = {"initialiser": 0.0, "refits": 0.0}   # time spent in window fits and in refits
-        self._blank = None                                    # the prior Sample of P passages (_prior_sample)
+        self._blank = None                                    # the prior Sample of P passages (prior_sample)
         self.bank = BankState(self.unit, self.filter_model, np.broadcast_to(self._prior[0], (P, H, n)),
                               self._prior[1])
         return self
@@ -190,8 +207,7 @@ class Tracker:
     def reset_passages(self, passages):
         """Start passages ``passages`` (indices) over, leaving the others as they are."""
         idx = np.asarray(passages, dtype=int)
-        for name, (_, _, value) in self._state_fields().items():
-            getattr(self, name)[idx] = value
+        self.state.reset(idx, self._layout)
         H, n = self.H, self.model.n
         self.bank.reset_runs(idx, np.broadcast_to(self._prior[0], (idx.size, H, n)), self._prior[1])
         return self
@@ -216,12 +232,10 @@ class Tracker:
         of this tracker or a sibling (:meth:`sibling`)."""
         idx = self._passage_indices(passages)
         self._check_unpruned()
-        H, size, names = self.H, self.y_hist.shape[1], list(self._state_fields())
+        H = self.H
         out = []
         for p in idx.tolist():
-            hist = int(min(self.n[p], size))
-            fields = {name: np.array(getattr(self, name)[p][:hist] if name in _HISTORY else getattr(self, name)[p])
-                      for name in names}
+            fields, hist = self.state.row(p)
             rows = slice(p * H, (p + 1) * H)
             b = self.bank.belief
             out.append(PassageState(self.model, hist, fields, b.mean[rows].copy(), b.chol[rows].copy(),
@@ -241,17 +255,11 @@ class Tracker:
         if any(not isinstance(st, PassageState) or st.model is not self.model for st in states):
             raise ValueError("passage states must come from this tracker or a sibling (Tracker.sibling)")
         self._check_unpruned()
-        H, b, fresh = self.H, self.bank.belief, self._state_fields()
+        H, b = self.H, self.bank.belief
         moved = set(idx.tolist())
         self.gaps = [g for g in self.gaps if g.passage not in moved]      # (a previous occupant's)
         for p, st in zip(idx.tolist(), states):
-            for name, (_, _, value) in fresh.items():
-                arr = getattr(self, name)
-                if name in _HISTORY:
-                    arr[p] = value
-                    arr[p][:st.hist] = st.fields[name]
-                else:
-                    arr[p] = st.fields[name]
+            self.state.put_row(p, st.fields, st.hist, self._layout)
             rows = slice(p * H, (p + 1) * H)
             b.mean[rows], b.chol[rows], b.ok[rows] = st.mean, st.chol, st.ok
             self.bank.cum[p] = st.loglik
@@ -274,45 +282,30 @@ class Tracker:
         if len(self.bank.idx) != self.bank.R * self.bank.H:
             raise ValueError("passage states need a bank without pruning (the tracker method's)")
 
-    def _state_fields(self):
-        """Per-passage state: name -> (shape after the passage axis, dtype, value at a passage's start)."""
-        m, n = self.model.m, self.model.n
-        hist = self.settings.history if self.settings.method == "tracker" else 1
-        return {
-            "n": ((), int, 0),                      # samples seen: the index of the next one
-            "phase": ((), np.int8, _WAITING),
-            "last_t": ((), float, np.nan),
-            "k0": ((), int, -1),                    # detection sample (-1: none yet)
-            "peak": ((), float, 0.0),
-            "start": ((), int, 0),                  # sample the bank (re)started at
-            "scan": ((), int, 0),                   # sample of the last scheduled refit (or the first window fit)
-            "trusted": ((), bool, True),            # the last fit passed its test
-            "excess": ((), float, 1.0),             # reported / bank covariance of a failed fit (_start_banks)
-            "alarms": ((), int, 0),
-            "restarts": ((), int, 0),
-            "peak_done": ((), bool, False),
-            "ref": ((), float, np.nan),             # position covariance trace at the last (re)start
-            "nis": ((self.settings.nis_window,), float, np.nan),
-            "snr": ((3,), float, np.nan),
-            "win": ((self.settings.keep_init, n), float, np.nan),   # window fits at k0 (internal)
-            "win_t0": ((), float, np.nan),
-            "y_hist": ((hist, m), float, np.nan),
-            "t_hist": ((hist,), float, np.nan),
-            "own": ((), float, np.nan),             # trace of the selected hypothesis's own position covariance
-            # the consistency test's window (consistency.terms of the selected hypothesis), its length, the
-            # samples it failed on, and whether it failed on this one
-            "cons": ((self.settings.consistency_window or 1, 2, m), float, 0.0),
-            "cons_n": ((), int, 0),
-            "cons_tests": ((), int, 0),
-            "cons_fails": ((), int, 0),
-            "cons_now": ((), bool, False),
-        }
+    # -- what the studies' variant changes (StudyBankTracker) ----------------------------------------------------
+    TESTS_CONSISTENCY = True
+    """Whether the windowed innovation consistency test runs (with ``consistency_window``)."""
+
+    def _history(self):
+        """Samples of history a passage keeps (its refits' window)."""
+        return self.settings.history
 
     @property
     def H(self):
         """Hypotheses of a passage's bank."""
-        return self.settings.keep_init if self.settings.method == "tracker" else (
-            len(self.bank_config.levels) * len(self.bank_config.bearings_deg))
+        return self.settings.keep_init
+
+    @staticmethod
+    def _bank_model(model):
+        """The bank's model: without process noise (the passages are straight; the refits restart it)."""
+        return model.without_process_noise()
+
+    def _start_and_restart(self, starting, running, snr, yi, out, defer_fits):
+        """After the step: detection and window fits of the passages ``starting``, restarts of those
+        ``running`` that are due."""
+        self._initialise(starting, snr, out, defer_fits)
+        if running.size:
+            self._restart(running, snr, out)
 
     # -- one sample ---------------------------------------------------------------------------------------------
     def update(self, t, y, passages=None, defer_fits=False) -> Sample:
@@ -332,10 +325,10 @@ class Tracker:
         y = np.asarray(y, dtype=float)
         if y.shape != (act.size, self.model.m):
             raise ValueError(f"y must be (passages, channels) = ({act.size}, {self.model.m}), got {y.shape}")
+        s = self.state
         code, i, yi, dt, snr, starting, running, gap = prepare_sample(
-            act, np.ascontiguousarray(t), np.ascontiguousarray(y), self.model.y_scale, self.phase, self.last_t,
-            self.n, self.y_hist, self.t_hist, self.cons_now, self._snr_field, self._snr_std,
-            float(self.settings.gap_limit_s), _PHASES)
+            act, np.ascontiguousarray(t), np.ascontiguousarray(y), self.model.y_scale, s.phase, s.last_t, s.n,
+            s.y_hist, s.t_hist, s.cons_now, self._snr_field, self._snr_std, float(self.settings.gap_limit_s), PHASES)
         if code == 4:
             raise IndexError(f"index {int(act[i])} is out of bounds for {self.P} passages")
         if code == 5:
@@ -347,27 +340,21 @@ class Tracker:
             raise ValueError("times must be finite numbers")
         if code == 3:
             p = int(act[i])
-            raise ValueError(f"time must increase: passage {p} goes from {self.last_t[p]:.9g} s to {t[i]:.9g} s")
+            raise ValueError(f"time must increase: passage {p} goes from {self.state.last_t[p]:.9g} s to {t[i]:.9g} s")
         if gap:
             step = dt[act]
             for p in act[step > self.settings.gap_limit_s]:
-                self.gaps.append(Gap(int(p), float(self.last_t[p]), float(t[act == p][0])))
+                self.gaps.append(Gap(int(p), float(self.state.last_t[p]), float(t[act == p][0])))
         if self.settings.robust:
             snr = self._robust_snr(snr, yi, act)
-        out = self._prior_sample()
+        out = self.prior_sample()
         out.status[starting] = INITIALISING
         if running.size:
             self._step(running, yi, dt, out)
-        if self.settings.method == "bank":
-            if starting.size:
-                self._seed_bank(starting, yi * self.model.y_scale, out)
-        else:
-            self._initialise(starting, snr, out, defer_fits)
-            if running.size:
-                self._restart(running, snr, out)
+        self._start_and_restart(starting, running, snr, yi, out, defer_fits)
         self._widen_inconsistent(act, out)
-        self.last_t[act] = t
-        self.n[act] += 1
+        self.state.last_t[act] = t
+        self.state.n[act] += 1
         if passages is None or (act.size == self.P and (act[0] == 0 if self.P == 1 else
                                                         np.array_equal(act, np.arange(self.P)))):
             return out                                              # (a fresh Sample: no copy needed)
@@ -379,7 +366,7 @@ class Tracker:
         inconsistent track's own covariance was centimetres to metres while it was 20-150 m off,
         EXPERIMENTS.md); not a failed consistency test whose refit passed its own (that sample has the
         refit's covariance)."""
-        bad = act[(out.status[act] == INCONSISTENT) & ~self.cons_now[act]]
+        bad = act[(out.status[act] == INCONSISTENT) & ~self.state.cons_now[act]]
         if bad.size:
             out.cov[bad] += self._prior[1]
 
@@ -415,15 +402,15 @@ class Tracker:
         """The SNR (P,) of the passages ``act`` with ``robust``: the median of the strongest field channel's
         SNR ``snr`` over their last three samples (an outlier alone neither starts a window nor moves the
         peak)."""
-        ring = np.roll(self.snr[act], -1, axis=1)
+        ring = np.roll(self.state.snr[act], -1, axis=1)
         ring[:, -1] = np.where(np.isfinite(yi[act]).any(axis=1), snr[act], np.nan)
-        self.snr[act] = ring
+        self.state.snr[act] = ring
         with np.errstate(all="ignore"):
             med = np.nanmedian(np.where(np.isfinite(ring).sum(axis=1, keepdims=True) >= 2, ring, 0.0), axis=1)
         snr[act] = np.nan_to_num(med)
         return snr
 
-    def _prior_sample(self):
+    def prior_sample(self):
         """A fresh :class:`Sample` of every passage at the prior (copies of one kept until the next reset)."""
         P = self.P
         if self._blank is None:
@@ -454,10 +441,9 @@ class Tracker:
         sel = np.argmax(self.bank.cum[runs], axis=1)              # (the bank's selected(), of these runs)
         pick = np.arange(runs.size) * H + sel                     # the selected hypotheses' rows of inn
         m_sel = inn.m.reshape(-1)[pick]
-        self.nis[runs, :-1] = self.nis[runs, 1:]                  # the window moves on by one sample
-        self.nis[runs, -1] = np.where(m_sel > 0, inn.nis.reshape(-1)[pick] / np.maximum(m_sel, 1), np.nan)
-        test = self.settings.consistency_window and self.settings.method == "tracker"   # (the bank is the studies')
-        failed = self._consistency(runs, yi, inn, sel) if test else runs[:0]
+        self.state.nis[runs, :-1] = self.state.nis[runs, 1:]                  # the window moves on by one sample
+        self.state.nis[runs, -1] = np.where(m_sel > 0, inn.nis.reshape(-1)[pick] / np.maximum(m_sel, 1), np.nan)
+        failed = self._consistency(runs, yi, inn, sel) if self._testing else runs[:0]
         self._report(runs, out)
         out.status[failed] = INCONSISTENT
 
@@ -465,18 +451,17 @@ class Tracker:
         """:meth:`_step` of passages ``runs`` in compiled calls (``stepped``: the filter model with their
         transitions, irregular sampling); returns the passages it did not step (an element's update failed:
         nothing of theirs written)."""
-        o, h = self.settings, self.huber
+        o, h, s = self.settings, self.huber, self.state
         runs = np.asarray(runs, dtype=np.int64)
-        test = bool(o.consistency_window and o.method == "tracker")
+        test = self._testing
         consistency = (self._R_used, self.model.R,
                        *((float(h.gamma), float(h.eps), float(h.scale)) if h is not None else (np.inf, 0.0, 1.0)),
-                       quantile_table(o.consistency_level, self.model.m), self.cons, self.cons_n, self.cons_tests,
-                       self.cons_fails, self.cons_now)
-        selection = (self.model.x_scale, o.method == "tracker", float(o.report_nats), float(o.report_distance_m),
-                     self.excess, out.estimate, out.cov, self.own, out.gap_nats, out.ambiguous, out.hypotheses,
-                     out.selected)
-        left = self._compiled(runs, yi, self.model.y_scale, self.bank, self.nis, test, consistency, selection,
-                              out.status, self.trusted, (TRACKING, INCONSISTENT), stepped)
+                       quantile_table(o.consistency_level, self.model.m), s.cons, s.cons_n, s.cons_tests, s.cons_fails,
+                       s.cons_now)
+        selection = (self.model.x_scale, self.MIXTURE, float(o.report_nats), float(o.report_distance_m),
+                     s.excess, out.estimate, out.cov, s.own, out.gap_nats, out.ambiguous, out.hypotheses, out.selected)
+        left = self._compiled(runs, yi, self.model.y_scale, self.bank, s.nis, test, consistency, selection,
+                              out.status, s.trusted, (TRACKING, INCONSISTENT), stepped)
         if left.size < runs.size:
             self.bank.belief = Belief(*self.bank.belief)   # (as BankState.step leaves it)
         if left.size == 0:
@@ -493,62 +478,53 @@ class Tracker:
         window_test(np.asarray(runs, dtype=np.int64), np.asarray(sel, dtype=np.int64), self.H, inn.eps, inn.S,
                     np.asarray(R_used, dtype=float), self.model.R, np.isfinite(yi[runs]),
                     *((float(h.gamma), float(h.eps), float(h.scale)) if h is not None else (np.inf, 0.0, 1.0)),
-                    quantile_table(self.settings.consistency_level, self.model.m), self.cons, self.cons_n,
-                    self.cons_tests, self.cons_fails, self.cons_now, failed)
+                    quantile_table(self.settings.consistency_level, self.model.m), self.state.cons, self.state.cons_n,
+                    self.state.cons_tests, self.state.cons_fails, self.state.cons_now, failed)
         return runs[failed]
 
     def _report(self, runs, out):
-        """Selected estimate, its mixture mean-square error (tracker) or own covariance (bank), and the
+        """Selected estimate, its mixture mean-square error (:attr:`MIXTURE`) or own covariance, and the
         selection figures of passages ``runs`` (:func:`~shipsense.trackers.bank.selection.report`)."""
         o, belief = self.settings, self.bank.belief
         report(belief.mean, belief.chol, np.asarray(runs, dtype=np.int64), self.H, self.model.x_scale,
-               self.bank.cum[runs], o.method == "tracker", float(o.report_nats), float(o.report_distance_m),
-               self.excess, out.estimate, out.cov, self.own, out.gap_nats, out.ambiguous, out.hypotheses,
+               self.bank.cum[runs], self.MIXTURE, float(o.report_nats), float(o.report_distance_m),
+               self.state.excess, out.estimate, out.cov, self.state.own, out.gap_nats, out.ambiguous, out.hypotheses,
                out.selected)
-        out.status[runs] = np.where(self.trusted[runs], TRACKING, INCONSISTENT)
-
-    def _seed_bank(self, fresh, y, out):
-        """The studies' bank: seed passages ``fresh`` from this sample (their first with a field value) and
-        update with it."""
-        seeds, P0 = seed_hypotheses(self.model, y[fresh], self.bank_config)
-        self.bank.reset_runs(fresh, seeds, P0)
-        self.bank.step(np.nan_to_num(y), mask=np.isfinite(y), predict=False, runs=fresh)
-        self.phase[fresh] = _RUNNING
-        self._report(fresh, out)
+        out.status[runs] = np.where(self.state.trusted[runs], TRACKING, INCONSISTENT)
 
     def _window(self, runs, first):
         """Samples ``first .. k`` (R,) of passages ``runs`` from the history: y (R, W, m) internal and the times
         after each first sample (R, W); W is the longest, shorter windows padded with missing samples."""
-        hist = self.y_hist.shape[1]
-        cur = self.n[runs]
+        hist = self.state.y_hist.shape[1]
+        cur = self.state.n[runs]
         W = int((cur - first).max()) + 1
         ks = first[:, None] + np.arange(W)[None, :]
         inside = ks <= cur[:, None]
         slots = np.where(inside, ks, cur[:, None]) % hist
-        yw = np.where(inside[..., None], self.y_hist[runs[:, None], slots], np.nan)
-        tw = self.t_hist[runs[:, None], slots]
+        yw = np.where(inside[..., None], self.state.y_hist[runs[:, None], slots], np.nan)
+        tw = self.state.t_hist[runs[:, None], slots]
         taus = np.where(inside, tw - tw[:, :1], tw[:, -1:] - tw[:, :1])
         return yw, taus
 
     def pending(self, passages=None):
         """Whether the passages (indices; default all) have window fits deferred by ``update(...,
         defer_fits=True)``."""
-        return self.phase[slice(None) if passages is None else np.asarray(passages, dtype=int)] == _PENDING
+        return self.state.phase[slice(None) if passages is None else np.asarray(passages, dtype=int)] == PENDING
 
     def fit_pending(self):
         """Fit the deferred windows of every pending passage in one batch (a passage's fits do not depend on
         the passages beside it in a batch) and start their banks as :meth:`update` would have at the sample
         their windows completed.  Returns the passages (indices) and their :class:`Sample` at that sample."""
-        pend = np.flatnonzero(self.phase == _PENDING)
-        out = self._prior_sample()
+        pend = np.flatnonzero(self.state.phase == PENDING)
+        out = self.prior_sample()
         if pend.size:
-            self.n[pend] -= 1                       # back at the sample the window completed at, for its fits
+            self.state.n[pend] -= 1                       # back at the sample the window completed at, for its fits
             try:
                 out.status[pend] = INITIALISING
                 self._fit_windows(pend, out)
                 self._widen_inconsistent(pend, out)            # (as update)
             finally:
-                self.n[pend] += 1
+                self.state.n[pend] += 1
         return pend, out.take(pend)
 
     def _initialise(self, starting, snr, out, defer=False):
@@ -557,18 +533,18 @@ class Tracker:
         if starting.size == 0:
             return
         o = self.settings
-        detect = starting[(self.k0[starting] < 0) & (snr[starting] > o.snr_start)]
-        self.k0[detect] = self.n[detect]
-        seen = starting[self.k0[starting] >= 0]
-        self.peak[seen] = np.maximum(self.peak[seen], snr[seen])
-        have = self.n[seen] - self.k0[seen] + 1
+        detect = starting[(self.state.k0[starting] < 0) & (snr[starting] > o.snr_start)]
+        self.state.k0[detect] = self.state.n[detect]
+        seen = starting[self.state.k0[starting] >= 0]
+        self.state.peak[seen] = np.maximum(self.state.peak[seen], snr[seen])
+        have = self.state.n[seen] - self.state.k0[seen] + 1
         # the window is complete, or the signal has passed its peak: a fit then spans the closest approach
-        passed = (o.through_peak is not None) & (snr[seen] < (o.through_peak or 0.0) * self.peak[seen])
+        passed = (o.through_peak is not None) & (snr[seen] < (o.through_peak or 0.0) * self.state.peak[seen])
         ready = seen[(have >= self.window) | (passed & (have >= max(4, self.window // 5)))]
         if ready.size == 0:
             return
         if defer:
-            self.phase[ready] = _PENDING
+            self.state.phase[ready] = PENDING
             return
         self._fit_windows(ready, out)
 
@@ -577,17 +553,17 @@ class Tracker:
         banks' start, one batch per window length: a passage's fits are those it would have alone (a batch of
         windows of different lengths would pad the shorter ones, and their fits would move at rounding)."""
         o = self.settings
-        have = self.n[ready] - self.k0[ready] + 1
+        have = self.state.n[ready] - self.state.k0[ready] + 1
         for length in np.unique(have):
             group = ready[have == length]
-            yw, taus = self._window(group, self.k0[group])
+            yw, taus = self._window(group, self.state.k0[group])
             t0 = time.perf_counter()
             fits = self._fits(yw, taus)
             self.seconds["initialiser"] += time.perf_counter() - t0
-            self.win[group] = fits.theta
-            self.win_t0[group] = self.t_hist[group, self.k0[group] % self.y_hist.shape[1]]
-            self.scan[group] = self.n[group]
-            self.phase[group] = _RUNNING
+            self.state.win[group] = fits.theta
+            self.state.win_t0[group] = self.state.t_hist[group, self.state.k0[group] % self.state.y_hist.shape[1]]
+            self.state.scan[group] = self.state.n[group]
+            self.state.phase[group] = RUNNING
             self._start_banks(group, fits, taus[:, -1], o.inflate, out)
 
     def _fits(self, yw, taus):
@@ -625,7 +601,7 @@ class Tracker:
         # domain: measured, a one-magnetometer passage went to 1e23 m); the rest of the inflation is
         # reported on top of the bank's covariance until a fit passes
         bank_birge = np.minimum(birge, BANK_INFLATION_MAX)
-        self.excess[runs] = (birge / bank_birge)[:, 0]
+        self.state.excess[runs] = (birge / bank_birge)[:, 0]
         # no start is wider than the passage prior: the fit's information plus the prior's (a weak fit -- the
         # range-moment trade-off of one magnetometer -- otherwise starts a bank kilometres wide)
         scale = (inflate * self.kappa) * bank_birge[..., None, None]
@@ -639,40 +615,41 @@ class Tracker:
             seeds, P0 = np.concatenate([seeds, seeds[pad]], 1), np.concatenate([P0, P0[pad]], 1)
             loglik = np.concatenate([loglik, np.full((len(runs), H - M), -np.inf)], axis=1)
         self.bank.reset_runs(runs, seeds * xs, P0 * np.outer(xs, xs)[None, None], loglik)
-        self.start[runs], self.trusted[runs] = self.n[runs], fits.fit_ok
-        self.ref[runs] = np.trace(P0[np.arange(len(runs)), 0, :2, :2] * np.outer(xs[:2], xs[:2]), axis1=-2, axis2=-1)
-        self.nis[runs] = np.nan
-        self.cons[runs], self.cons_n[runs], self.cons_now[runs] = 0.0, 0, False
+        self.state.start[runs], self.state.trusted[runs] = self.state.n[runs], fits.fit_ok
+        self.state.ref[runs] = np.trace(P0[np.arange(len(runs)), 0, :2, :2] * np.outer(xs[:2], xs[:2]), axis1=-2,
+                                        axis2=-1)
+        self.state.nis[runs] = np.nan
+        self.state.cons[runs], self.state.cons_n[runs], self.state.cons_now[runs] = 0.0, 0, False
         self._report(runs, out)
 
     def _restart(self, runs, snr, out):
         """Refit the passages among ``runs`` whose bank is due (alarms, schedule, peak, collapse, a failed
         consistency test: :func:`~shipsense.trackers.tracker.restarts.due`)."""
-        flags = np.empty((runs.size, 4), dtype=bool)
-        due(np.asarray(runs, dtype=np.int64), self.n, self.start, self.nis, self.trusted, self.alarms, self.peak,
-            self.peak_done, snr, self.scan, self.own, self.ref, self.cons_now, *_restart_options(self.settings),
-            out.status, out.cov, INCONSISTENT, flags)
+        flags, s = np.empty((runs.size, 4), dtype=bool), self.state
+        due(np.asarray(runs, dtype=np.int64), s.n, s.start, s.nis, s.trusted, s.alarms, s.peak, s.peak_done, snr,
+            s.scan, s.own, s.ref, s.cons_now, *_restart_options(self.settings), out.status, out.cov, INCONSISTENT,
+            flags)
         due_, alarm, after_peak, rescan = flags.T
         if due_.any():
             sel = runs[due_]
-            self.scan[runs[rescan]] = self.n[runs[rescan]]
-            self.peak_done[sel] |= after_peak[due_]
-            self.alarms[sel] += alarm[due_]
-            self.restarts[sel] += 1
-            failed_test = self.cons_now[runs]
+            self.state.scan[runs[rescan]] = self.state.n[runs[rescan]]
+            self.state.peak_done[sel] |= after_peak[due_]
+            self.state.alarms[sel] += alarm[due_]
+            self.state.restarts[sel] += 1
+            failed_test = self.state.cons_now[runs]
             self._refit(sel, alarm[due_], rescan[due_], out)
             # a refit after a failed consistency test: the sample is still the test's (inconsistent), with the
             # refit's covariance -- unless the fit failed its own test (then as any failed fit)
-            ok = runs[failed_test & self.trusted[runs]]
-            out.status[ok], self.cons_now[ok] = INCONSISTENT, True
+            ok = runs[failed_test & self.state.trusted[runs]]
+            out.status[ok], self.state.cons_now[ok] = INCONSISTENT, True
 
     def _refit(self, runs, alarm, rescan, out):
         """Batch refits of passages ``runs`` to their samples since the window start (at most ``history``),
         started from the selected estimate, the bank's live hypotheses and (``multistart``) the initial
         window fits; the bank restarts from the ``keep`` best distinct fits."""
         o, H, n = self.settings, self.H, self.model.n
-        first = np.maximum(self.k0[runs], self.n[runs] - self.y_hist.shape[1] + 1)
-        lengths = self.n[runs] - first + 1
+        first = np.maximum(self.state.k0[runs], self.state.n[runs] - self.state.y_hist.shape[1] + 1)
+        lengths = self.state.n[runs] - first + 1
         if not self._pads_exactly and np.unique(lengths).size > 1:
             # one batch pads the shorter windows with missing samples: the compiled least-squares fits and their
             # information skip them (a passage's refit is the one it gets alone), numpy's fits (a model without
@@ -693,8 +670,9 @@ class Tracker:
         starts = np.concatenate([starts[np.arange(runs.size), sel][:, None], np.where(
             (np.arange(H) == sel[:, None])[..., None], np.nan, starts)], axis=1)
         theta = np.einsum("rij,rhj->rhi", back, starts)
-        t_first = self.t_hist[runs, first % self.y_hist.shape[1]]
-        win = np.einsum("rij,rhj->rhi", transitions(self.model, t_first - self.win_t0[runs]), self.win[runs])
+        t_first = self.state.t_hist[runs, first % self.state.y_hist.shape[1]]
+        win = np.einsum("rij,rhj->rhi", transitions(self.model, t_first - self.state.win_t0[runs]),
+                        self.state.win[runs])
         theta = np.concatenate([theta, np.where(alarm[:, None, None], win, np.nan)], axis=1)
         t0 = time.perf_counter()
         multistart = alarm | rescan

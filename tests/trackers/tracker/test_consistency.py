@@ -73,12 +73,12 @@ def test_the_tracker_flags_an_optimistic_filter_and_not_an_honest_one():
     their covariance is inflated (finite, symmetric, positive definite).  At the declared noise it fails on
     no more samples than its level allows (binomial, 1e-3 one-sided)."""
     tr, res = _s2(1, 8, 21)
-    tests, fails = int(tr.cons_tests.sum()), int(tr.cons_fails.sum())
+    tests, fails = int(tr.state.cons_tests.sum()), int(tr.state.cons_fails.sum())
     assert tests > 100
     assert fails <= stats.binom.isf(1e-3, tests, tr.settings.consistency_level), (fails, tests)
     tr3, res3 = _s2(3, 8, 21)
-    assert tr3.cons_fails.sum() > 5 * max(fails, 1), (tr3.cons_fails.sum(), fails)
-    assert (res3.status == INCONSISTENT).sum() >= tr3.cons_fails.sum() // 2
+    assert tr3.state.cons_fails.sum() > 5 * max(fails, 1), (tr3.state.cons_fails.sum(), fails)
+    assert (res3.status == INCONSISTENT).sum() >= tr3.state.cons_fails.sum() // 2
     assert np.isfinite(res3.covs).all()
     assert_positive_definite(res3.covs)
     assert set(np.unique(res.status)) >= {TRACKING}
@@ -94,7 +94,7 @@ def test_faulty_passages_keep_finite_symmetric_positive_definite_covariances():
     res = tr.track(sim.times, sim.measurements)
     assert np.isfinite(res.covs).all() and np.isfinite(res.estimates).all()
     assert_positive_definite(res.covs)
-    assert tr.restarts.sum() > 0 and tr.cons_fails.sum() > 0 and (res.status == INCONSISTENT).any()
+    assert tr.state.restarts.sum() > 0 and tr.state.cons_fails.sum() > 0 and (res.status == INCONSISTENT).any()
 
 
 def assert_positive_definite(c):

@@ -79,7 +79,7 @@ def test_the_filter_collapses_after_a_refit_where_the_batch_fit_does_not_and_the
     # the tracker: with the collapse alarm it re-fits more often, and reports more than the collapsed filter
     tr0, tr1 = Tracker(sc, collapse=None), Tracker(sc)
     res0, res1 = tr0.track(sim.times, y), tr1.track(sim.times, y)
-    assert tr1.restarts[0] > tr0.restarts[0]
+    assert tr1.state.restarts[0] > tr0.state.restarts[0]
     ok = (res0.status[0] >= 2) & (res1.status[0] >= 2)
     spread0 = np.sqrt(np.trace(res0.position_cov[0, ok], axis1=-2, axis2=-1))
     spread1 = np.sqrt(np.trace(res1.position_cov[0, ok], axis1=-2, axis2=-1))

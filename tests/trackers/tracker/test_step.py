@@ -60,7 +60,7 @@ def _running_pair(scenario, runs, seed):
     pair = [Tracker(scenario, passages=runs) for _ in range(2)]
     pair[1]._compiled = None
     k = 0
-    while not (pair[0].phase == 2).all():                          # (2: _RUNNING)
+    while not (pair[0].state.phase == 2).all():                          # (2: _RUNNING)
         for trk in pair:
             trk.update(sim.times[k], sim.measurements[:, k])
         k += 1
@@ -97,14 +97,14 @@ def test_a_failed_element_leaves_the_state_untouched_and_the_numpy_path_takes_th
         trk.bank.belief.chol[0] = np.nan                           # one hypothesis of passage 0 broken
     trk = pair[0]
     names = ("nis", "cons", "cons_n", "cons_tests", "cons_fails", "cons_now", "excess", "own", "trusted")
-    before = {name: np.copy(getattr(trk, name)) for name in names}
+    before = {name: np.copy(getattr(trk.state, name)) for name in names}
     bank = [a.copy() for a in (trk.bank.belief.mean, trk.bank.belief.chol, trk.bank.cum)]
-    out = trk._prior_sample()
+    out = trk.prior_sample()
     blank = [np.copy(getattr(out, f)) for f in ("estimate", "cov", "status")]
     np.testing.assert_array_equal(trk._compiled_step(np.arange(2), sim.measurements[:, k] / trk.model.y_scale, out),
                                   [0, 1])
     for name in names:
-        np.testing.assert_array_equal(getattr(trk, name), before[name], err_msg=name)
+        np.testing.assert_array_equal(getattr(trk.state, name), before[name], err_msg=name)
     for now, was in zip((trk.bank.belief.mean, trk.bank.belief.chol, trk.bank.cum, out.estimate, out.cov,
                          out.status), bank + blank):
         np.testing.assert_array_equal(now, was)
@@ -129,7 +129,7 @@ def test_passages_stepped_in_chunks_on_threads_equal_one_chunk_and_a_failed_chun
     trackers = [Tracker("S2", passages=runs) for _ in range(3)]
     trackers[2]._compiled = None
     k = 0
-    while not (trackers[0].phase == 2).all():                     # (2: _RUNNING)
+    while not (trackers[0].state.phase == 2).all():                     # (2: _RUNNING)
         for trk, threads in zip(trackers, ("2", "1", "1")):
             monkeypatch.setenv("SHIPSENSE_THREADS", threads)
             trk.update(sim.times[k], sim.measurements[:, k])
@@ -215,10 +215,10 @@ def test_a_refused_sample_writes_nothing():
              (fresh, (t, y[:1]), {"passages": 1}, ValueError, "passages must be a sequence"),
              (fresh, (t, y), {"passages": [[0, 1]]}, ValueError, "passages must be a sequence")]
     for trk, args, kwargs, error, message in cases:
-        before = {name: np.copy(getattr(trk, name)) for name in names}
+        before = {name: np.copy(getattr(trk.state, name)) for name in names}
         with pytest.raises(error, match=message):
             trk.update(*args, **kwargs)
         for name in names:
-            np.testing.assert_array_equal(getattr(trk, name), before[name], err_msg=name)
+            np.testing.assert_array_equal(getattr(trk.state, name), before[name], err_msg=name)
     assert fresh.update(t, y[1:], passages=[-1]).status.shape == (1,)      # a negative index, as numpy's
-    assert fresh.n.tolist() == [3, 4]
+    assert fresh.state.n.tolist() == [3, 4]

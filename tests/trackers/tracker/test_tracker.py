@@ -126,7 +126,7 @@ def test_passage_states_carried_into_a_sibling_go_on_as_they_would_have(s2, hist
         np.testing.assert_array_equal(s.estimate, ref.estimates[:, j])
         np.testing.assert_array_equal(s.cov, ref.covs[:, j])
         np.testing.assert_array_equal(s.status, ref.status[:, j])
-    assert other.n[2] == 0 and other.phase[2] == Tracker(sc, passages=1, **opts).phase[0]
+    assert other.state.n[2] == 0 and other.state.phase[2] == Tracker(sc, passages=1, **opts).state.phase[0]
     assert set(np.unique(ref.status[:, k:])) - {INITIALISING, NO_DATA}       # it was tracking by then
     with pytest.raises(ValueError, match="sibling"):
         Tracker(sc, passages=P, **opts).set_passage_states([0], states[:1])
@@ -226,19 +226,19 @@ def test_a_bank_knocked_off_its_track_is_restarted_by_its_alarm(s2, initial_fits
     K = y.shape[1]
     for k in range(K // 2):
         tr.update(t[k], y[:, k])
-    assert np.all(tr.phase == 2)
+    assert np.all(tr.state.phase == 2)
     if initial_fits_too:
         tr.bank.belief.mean[:, 0] += 150.0
         tr.bank.belief.mean[:, 2:4] *= -1.0
-        tr.win[..., 0] += 150.0 / tr.model.x_scale[0]
-        tr.win[..., 2:4] *= -1.0
+        tr.state.win[..., 0] += 150.0 / tr.model.x_scale[0]
+        tr.state.win[..., 2:4] *= -1.0
     else:
         tr.bank.belief.mean[:, 0] += 30.0
     tr.bank.belief = type(tr.bank.belief).from_cov(tr.bank.belief.mean, np.broadcast_to(
         np.eye(tr.model.n) * 1e-4, tr.bank.belief.chol.shape))
     for k in range(K // 2, K):
         s = tr.update(t[k], y[:, k])
-    assert np.all(tr.alarms >= 1)
+    assert np.all(tr.state.alarms >= 1)
     err = np.hypot(*(s.estimate[:, :2] - truth[:, -1, :2]).T)
     assert np.all(err < 1.0), err
 
@@ -272,7 +272,7 @@ def test_passages_step_and_start_over_on_their_own(s2):
         s = tr.update(np.array([t[k], t[k - 10]]), np.stack([y[0, k], y[1, k - 10]]))
     assert _close(s.estimate[0], res.estimates[0, -1], 1e-6) and _close(s.cov[0], res.covs[0, -1], 1e-6)
     tr.reset_passages([0])
-    assert tr.n.tolist() == [0, K - 10]
+    assert tr.state.n.tolist() == [0, K - 10]
     s = tr.update(t[:1], y[0:1, 0], passages=[0])
     assert s.status[0] == INITIALISING and _close(s.estimate, res.estimates[0:1, 0], 1e-12)
 
