@@ -88,6 +88,25 @@ def key_on_sources(namespace, root=PACKAGE, depends=DEPENDS):
     return count
 
 
+def specialised(func, name, jit, **names):
+    """``jit`` of a copy of ``func`` named ``name`` whose globals also hold ``names`` (the kernels it calls,
+    chosen per copy: e.g. one filter's update loop).
+
+    This is how a kernel is specialised per filter and still cached by numba: numba keys a cached function on its
+    qualified name, bytecode and closure, and a kernel held in the closure (a dispatcher, pickled with an id of its
+    process) would never match the cache; a global of the copy is not part of the key.  Each copy has its own
+    qualified name, because numba names a cached function's file and its machine code's symbol after it (with a
+    counter that restarts in every process): two copies of one name compiled in different processes would link to
+    each other's code.  The only place the package builds functions this way.
+    """
+    from types import FunctionType
+
+    copy = FunctionType(func.__code__, {**func.__globals__, **names}, func.__name__, func.__defaults__,
+                        func.__closure__)
+    copy.__qualname__ = name
+    return jit(copy)
+
+
 def cached(*dispatchers):
     """Whether each of ``dispatchers`` has compiled code on disk for its current sources (its first call then
     loads it instead of compiling); False when numba's cache cannot tell."""

@@ -117,3 +117,19 @@ def test_the_check_notice_says_whether_its_kernels_will_compile(tmp_path):
     assert "compiling the least-squares and measurement kernels" in out.stdout and "NUMBA_CACHE_DIR" in out.stdout
     check_scenario("S0", passages=1)
     assert first_use_notice() is None
+
+
+def test_a_specialised_copy_has_its_own_name_and_the_kernels_it_was_given():
+    """numba_cache.specialised: each copy is named as asked and calls the kernel handed to it as a global."""
+    from numba import njit
+
+    one, two = njit(lambda: 1), njit(lambda: 2)
+
+    def template():
+        return _K()  # noqa: F821 - a global of each copy
+
+    a = numba_cache.specialised(template, "_template_one", njit, _K=one)
+    b = numba_cache.specialised(template, "_template_two", njit, _K=two)
+    assert (a(), b()) == (1, 2)
+    assert (a.py_func.__qualname__, b.py_func.__qualname__) == ("_template_one", "_template_two")
+    assert "_K" not in template.__globals__

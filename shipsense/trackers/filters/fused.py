@@ -39,7 +39,6 @@ from __future__ import annotations
 
 import math
 from functools import lru_cache
-from types import FunctionType
 
 import numpy as np
 from numba import njit
@@ -555,18 +554,12 @@ def _update_kernel_for(code):
               mean_out, P_out, L_out, eps_out, S_out, loglik, nis_out, m_out, ok_out, work, ekf)
         return ok_out.all()
 
-    # Each filter's kernel and loop are named for it: numba names a cached function's file and its machine
-    # code's symbol after the qualified name (the symbol with a counter that restarts in every process), so
-    # six functions of one name compiled in different processes would link to each other's code.  The kernel
-    # finds its loop as the global ``_LOOP`` (its own copy of the module's globals, taken at import): numba
-    # keys a cached function on its bytecode and closure, and a loop in the closure (a dispatcher, pickled
-    # with a per-process id) would never match the cache.
+    # each filter's kernel and loop are named for it, the kernel finding its loop as the global ``_LOOP`` of its
+    # own copy (numba_cache.specialised says why)
     loop.__qualname__ = f"_update_loop_{code}"
     loop = loop_jit(loop)
-    kernel = FunctionType(kernel.__code__, {**globals(), "_LOOP": loop}, kernel.__name__, kernel.__defaults__,
-                          kernel.__closure__)
-    kernel.__qualname__ = f"_update_kernel_{code}"
-    return njit(cache=True, error_model="numpy", nogil=True)(kernel), loop
+    return numba_cache.specialised(kernel, f"_update_kernel_{code}", njit(cache=True, error_model="numpy", nogil=True),
+                                   _LOOP=loop), loop
 
 
 _UPDATE_PAIRS = {code: _update_kernel_for(code) for code in (UKF, CDKF, HUBER, EKF, PUEKF, SRCDKF)}
@@ -712,7 +705,7 @@ def _flat(a, batch, tail):
     return a if len(batch) == 1 else a.reshape((-1,) + tail)
 
 
-def _per_element(a, batch, n):
+def per_element(a, batch, n):
     """A transition matrix (n, n) or per-element (..., n, n) as (1 or B, n, n)."""
     a = np.asarray(a, dtype=float)
     if a.ndim == 2:
@@ -739,15 +732,15 @@ def predict(belief: Belief, model, square_root: bool = False):
     else:
         cached = getattr(belief, "_cov", None)
         src = cached if cached is not None else belief.chol @ np.swapaxes(belief.chol, -1, -2)
-        Qf = _per_element(model.Q, batch, n)
-        sqQ = _no_sqrt(n)
+        Qf = per_element(model.Q, batch, n)
+        sqQ = no_sqrt(n)
     X = _flat(mean, batch, (n,))
     B = X.shape[0]
     mean_out = np.empty((B, n))
     P_out = np.empty((B, n, n)) if not square_root else np.empty((1, n, n))
     L_out = np.zeros((B, n, n))
     ok = np.empty(B, dtype=bool)
-    if not _split(predict_kernel, _PREDICT_ROWS, X, _flat(src, batch, (n, n)), _per_element(A, batch, n), Qf, sqQ,
+    if not _split(predict_kernel, _PREDICT_ROWS, X, _flat(src, batch, (n, n)), per_element(A, batch, n), Qf, sqQ,
                   square_root, mean_out, P_out, L_out, ok):
         return None
     mean_out, L_out = _shaped(mean_out, batch), _shaped(L_out, batch)
@@ -776,7 +769,7 @@ def update(name, belief: Belief, y, model, spec, mask=None, **options):
     n, m = mean.shape[-1], y.shape[-1]
     batch = (_batch(mean.shape[:-1], y.shape[:-1]) if mask is None
              else _batch(mean.shape[:-1], y.shape[:-1], np.shape(mask)[:-1]))
-    consts = _constants(name, n, options)
+    consts = filter_constants(name, n, options)
     cov_form = consts[0] != SRCDKF
     P = belief.cov if cov_form else _NO_COV
     X = _flat(mean, batch, (n,))
@@ -795,7 +788,7 @@ def update(name, belief: Belief, y, model, spec, mask=None, **options):
 
 
 def _run_update(consts, X, L, P, y, mask, model, spec):
-    """The update kernel of ``consts`` (:func:`_constants`) on flat (B, ...) arguments: ``(mean, P, L,
+    """The update kernel of ``consts`` (:func:`filter_constants`) on flat (B, ...) arguments: ``(mean, P, L,
     (eps, S, loglik, nis, m))`` (B, ...), or None if an element failed."""
     filt, spread, center, Wm, Wc, h, gamma, iterations, n_pu = consts
     nb, n = X.shape
@@ -809,13 +802,13 @@ def _run_update(consts, X, L, P, y, mask, model, spec):
     nis = np.empty(nb)
     cnt = np.empty(nb, dtype=np.int64)
     ok = np.empty(nb, dtype=bool)
-    if not _split(UPDATE_KERNELS[filt], _UPDATE_ROWS, X, L, P, y, mask, _noise(model), spec, spread, center, Wm, Wc,
-                  h, gamma, iterations, n_pu, mean_out, P_out, L_out, eps, S, loglik, nis, cnt, ok):
+    if not _split(UPDATE_KERNELS[filt], _UPDATE_ROWS, X, L, P, y, mask, noise_variances(model), spec, spread, center,
+                  Wm, Wc, h, gamma, iterations, n_pu, mean_out, P_out, L_out, eps, S, loglik, nis, cnt, ok):
         return None
     return mean_out, P_out, L_out, (eps, S, loglik, nis, cnt)
 
 
-def _constants(name, n, options):
+def filter_constants(name, n, options):
     """The update kernel's constants of filter ``name`` on ``n`` states with keyword ``options``: ``(code,
     spread, center, Wm, Wc, h, gamma, iterations, n_pu)`` (kept for the options' last few values)."""
     if not options:
@@ -851,7 +844,7 @@ def _constants_of(name, n, items):
     return filt, spread, center, Wm, Wc, h, gamma, iterations, n_pu
 
 
-def _noise(model):
+def noise_variances(model):
     """The model's measurement noise variances as a contiguous float array (no copy when they are one)."""
     return np.ascontiguousarray(model.R, dtype=float)
 
@@ -867,7 +860,7 @@ _NO_COV = np.zeros((1, 1, 1))
 
 
 @lru_cache(maxsize=64)
-def _no_sqrt(n):
+def no_sqrt(n):
     """The covariance-form predict's (empty) square root of Q, (1, n, 0)."""
     return np.zeros((1, n, 0))
 

@@ -28,7 +28,6 @@ before both kernels succeed).  At every batch size this is the faster path (docs
 from __future__ import annotations
 
 import math
-from types import FunctionType
 
 import numpy as np
 from numba import njit
@@ -44,10 +43,10 @@ from shipsense.trackers.filters.fused import (
     PUEKF,
     UKF,
     UPDATE_KERNELS,
-    _constants,
-    _no_sqrt,
-    _noise,
-    _per_element,
+    filter_constants,
+    no_sqrt,
+    noise_variances,
+    per_element,
     predict_kernel,
 )
 from shipsense.trackers.init.detection import DOUBLE_MAX, strongest_kernel
@@ -174,11 +173,8 @@ def _step_kernel_for(code):
                 status[runs[p]] = inconsistent
         return True
 
-    kernel.__qualname__ = f"_tracker_step_{code}"
-    kernel = FunctionType(kernel.__code__, {**globals(), "_PREDICT": predict_kernel, "_UPDATE": UPDATE_KERNELS[code]},
-                          kernel.__name__, kernel.__defaults__, kernel.__closure__)
-    kernel.__qualname__ = f"_tracker_step_{code}"
-    return njit(cache=True, error_model="numpy", nogil=True)(kernel)
+    return numba_cache.specialised(kernel, f"_tracker_step_{code}", njit(cache=True, error_model="numpy", nogil=True),
+                                   _PREDICT=predict_kernel, _UPDATE=UPDATE_KERNELS[code])
 
 
 @njit(cache=True, nogil=True)
@@ -308,12 +304,12 @@ class TrackerStep:
 
     def __init__(self, unit, model, H, spec):
         n = model.n
-        consts = _constants(unit.name, n, unit.options)
+        consts = filter_constants(unit.name, n, unit.options)
         self.kernel = STEP_KERNELS[consts[0]]
         self.H = H
         bounds = getattr(model, "state_bounds", None)
         lo, hi = (np.empty(0), np.empty(0)) if bounds is None else (np.asarray(b, dtype=float) for b in bounds)
-        self.fixed = (_per_element(model.A, (1,), n), _per_element(model.Q, (1,), n), _no_sqrt(n), _noise(model),
+        self.fixed = (per_element(model.A, (1,), n), per_element(model.Q, (1,), n), no_sqrt(n), noise_variances(model),
                       spec, *consts[1:])
         self.bounds = (np.ascontiguousarray(lo), np.ascontiguousarray(hi))
         self.ys_bank = np.ascontiguousarray(model.y_scale, dtype=float)
@@ -342,7 +338,7 @@ class TrackerStep:
         C = bank.belief.chol[rows[live]]
         src = np.zeros((rows.size,) + C.shape[1:])
         src[live] = C @ np.swapaxes(C, -1, -2)
-        A, Q = self.fixed[:2] if stepped is None else (_per_element(a, (rows.size,), bank.model.n)
+        A, Q = self.fixed[:2] if stepped is None else (per_element(a, (rows.size,), bank.model.n)
                                                        for a in (stepped.A, stepped.Q))
         per_row = A.shape[0] > 1
 

@@ -18,7 +18,7 @@ from shipsense.trackers.tracker.passages import RUNNING
 from shipsense.trackers.tracker.tracker import Tracker
 
 
-class StudyBankTracker(Tracker):
+class StudyBankTracker(Tracker, method="bank"):
     """The studies' bank over a batch of passages (see the module docstring); built by ``Tracker(...,
     method="bank")`` or from settings whose ``method`` is ``"bank"``."""
 

@@ -134,8 +134,8 @@ class Tracker:
     bank: the selected hypothesis's own)."""
 
     def __new__(cls, scenario=None, *, settings=None, **options):
-        # ``Tracker(..., method="bank")`` (or a scenario or settings that say so) is the studies' variant, as
-        # ``pathlib.Path`` is its system's path
+        # ``Tracker(..., method="bank")`` (or a scenario or settings that say so) is the studies' variant
+        # (:data:`VARIANTS`), as ``pathlib.Path`` is its system's path
         if cls is Tracker and scenario is not None:
             method = settings.method if settings is not None else options.get("method")
             if method is None:
@@ -143,11 +143,18 @@ class Tracker:
 
                 tracker = load_scenario(scenario).tracker
                 method = tracker.method if tracker is not None else "tracker"
-            if method == "bank":
-                from shipsense.trackers.tracker.study_bank import StudyBankTracker
-
-                return super().__new__(StudyBankTracker)
+            if method != "tracker":
+                return super().__new__(Tracker.VARIANTS[method])
         return super().__new__(cls)
+
+    VARIANTS: dict = {}
+    """Tracker classes by ``method`` other than ``"tracker"``: a variant registers itself by its class statement,
+    ``class StudyBankTracker(Tracker, method="bank")``."""
+
+    def __init_subclass__(cls, method=None, **kwargs):
+        super().__init_subclass__(**kwargs)
+        if method is not None:
+            Tracker.VARIANTS[method] = cls
 
     def __init__(self, scenario, *, passages=1, sensors=None, settings=None, **options):
         from shipsense.config import load_scenario
