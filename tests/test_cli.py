@@ -244,13 +244,13 @@ def test_train_scheduling_writes_a_model_and_an_evaluation(tmp_path):
 
 
 def test_an_unexpected_error_is_one_line_and_debug_shows_the_traceback(monkeypatch, capsys):
-    import shipsense.cli as cli
+    from shipsense.cli import common, parser
 
     def broken(args):
         raise ZeroDivisionError("a bug")
 
-    monkeypatch.setattr(cli, "cmd_scenarios", broken)
-    assert main(["scenarios"]) == cli.EXIT_INTERNAL
+    monkeypatch.setattr(parser, "cmd_scenarios", broken)
+    assert main(["scenarios"]) == common.EXIT_INTERNAL
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "internal error: ZeroDivisionError: a bug" in err and "--debug" in err
     with pytest.raises(ZeroDivisionError):
@@ -361,12 +361,12 @@ def test_the_pre_commit_hook_runs_the_check():
 
 
 def test_quiet_turns_the_progress_bars_off(tmp_path):
-    import shipsense.cli as cli
+    from shipsense.cli import common
 
     assert main(["--quiet", "simulate", "S2", "--runs", "1", "--out", str(tmp_path / "s.npz")]) == 0
-    assert cli._progress(3, "x").disable is True
+    assert common.progress_bar(3, "x").disable is True
     assert main(["simulate", "S2", "--runs", "1", "--out", str(tmp_path / "s.npz")]) == 0
-    assert cli._QUIET["on"] is False
+    assert common.QUIET["on"] is False
 
 
 def test_the_memory_estimate_of_a_simulation_covers_what_it_allocates():
@@ -430,7 +430,7 @@ def test_a_terminated_demo_leaves_nothing_behind(tmp_path):
 def test_an_interruption_inside_compiled_code_is_an_interruption(monkeypatch, capsys):
     """A signal handler that raises while a numba kernel runs surfaces as a SystemError caused by the
     KeyboardInterrupt: it is reported as an interruption (exit 130), not an internal error."""
-    import shipsense.cli as cli
+    from shipsense.cli import parser
 
     def interrupted_in_a_kernel(args):
         try:
@@ -438,6 +438,6 @@ def test_an_interruption_inside_compiled_code_is_an_interruption(monkeypatch, ca
         except KeyboardInterrupt as err:
             raise SystemError("CPUDispatcher(<function hed_points>) returned a result with an exception set") from err
 
-    monkeypatch.setattr(cli, "cmd_scenarios", interrupted_in_a_kernel)
+    monkeypatch.setattr(parser, "cmd_scenarios", interrupted_in_a_kernel)
     assert main(["scenarios"]) == 130
     assert "interrupted" in capsys.readouterr().err

@@ -2,6 +2,6 @@
 
 import sys
 
-from shipsense.cli import main
+from shipsense.cli.main import main
 
 sys.exit(main())

@@ -55,11 +55,11 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from shipsense.arguments import number
 from shipsense.config import load_scenario
 from shipsense.design.fisher import passage_fim
 from shipsense.design.observability import check_array
 from shipsense.design.placement import grid_candidates
-from shipsense.envs.arguments import number
 from shipsense.models.field_model import candidate_model, subset_model
 from shipsense.simulator import keel_dipole, sample_passages, simulate
 from shipsense.trackers import Tracker

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from shipsense.envs.arguments import number
+from shipsense.arguments import number
 
 
 def _mean_stderr(values):

@@ -148,9 +148,9 @@ from gymnasium import spaces
 from numba import njit
 
 from shipsense import numba_cache
+from shipsense.arguments import number
 from shipsense.config import load_scenario
 from shipsense.design.information_gain import information_gains_at
-from shipsense.envs.arguments import number
 from shipsense.envs.core_env import SEED_HIGH, ClosesItsFigure, CoreVectorEnv, RebuiltOnUnpickle, seed_ahead
 from shipsense.envs.features import at_least, error_and_nees, track_features
 from shipsense.envs.prefetch import PASSAGE_BLOCK, PassagePrefetch

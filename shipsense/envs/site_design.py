@@ -128,7 +128,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from shipsense.envs.arguments import number
+from shipsense.arguments import number
 from shipsense.envs.core_env import SEED_HIGH, ClosesItsFigure, CoreVectorEnv
 from shipsense.envs.sites import SITE_FEATURES, Site, sample_site
 

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from shipsense.envs.arguments import number
+from shipsense.arguments import number
 
 ALGORITHMS = {"scheduling": "PPO", "placement": "MaskablePPO"}
 DEFAULT_ENVS = {   # kind: (env id, its arguments when --env is not given)

@@ -1,0 +1,162 @@
+"""Commands on passages: ``scenarios``, ``simulate``, ``demo`` and ``track``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from shipsense.cli.common import EXIT_OK, QUIET, BadInput, first_use, progress_bar, within_budget, writable
+
+
+def cmd_scenarios(args) -> int:
+    from shipsense.config import shipped_scenarios
+
+    names = shipped_scenarios()
+    width = max(map(len, names))
+    for name, desc in names.items():
+        print(f"{name:<{width}}  {desc}")
+    return EXIT_OK
+
+
+def cmd_simulate(args) -> int:
+    from contextlib import nullcontext
+
+    from shipsense import budget
+    from shipsense.atomic import atomic_path
+    from shipsense.config import load_scenario
+    from shipsense.simulator import simulate
+
+    sc = load_scenario(args.scenario)
+    if args.out is not None and Path(args.out).suffix not in (".npz", ".csv"):
+        raise BadInput(f"--out must end in .npz or .csv, got {args.out!r}")
+    if args.plot is not None and Path(args.plot).suffix != ".png":
+        raise BadInput(f"--plot must end in .png, got {args.plot!r}")
+    if args.random and sc.prior is None:
+        raise BadInput(f"scenario {sc.name!r} has no [prior] section; --random needs one")
+    within_budget(args, budget.simulation(sc, args.runs or sc.runs))
+    for flag, path in (("--out", args.out), ("--plot", args.plot)):
+        if path is not None:
+            writable(flag, path)
+    bar = progress_bar(3, f"simulate {sc.name}")
+    sim = simulate(sc, runs=args.runs, seed=args.seed, random=args.random)
+    bar.update(1)
+    # both files or neither: each is written to a temporary name and renamed once both are written
+    with (atomic_path(args.out) if args.out else nullcontext()) as out_tmp, \
+            (atomic_path(args.plot) if args.plot else nullcontext()) as plot_tmp:
+        if args.out:
+            bar.set_description(f"write {args.out}")
+            sim.save(out_tmp)
+        bar.update(1)
+        if args.plot:
+            from shipsense.plotting import plot_simulation
+
+            bar.set_description(f"plot {args.plot}")
+            plot_simulation(sim, plot_tmp)
+        bar.update(1)
+    bar.close()
+    _print_summary(sim)
+    for what, path in (("measurements", args.out), ("plot", args.plot)):
+        if path:
+            print(f"wrote {what}: {path}")
+    return EXIT_OK
+
+
+def _print_summary(sim):
+    """A short table per sensor: closest approach, peak field, peak SNR (run 0)."""
+    arr = sim.array
+    pos = sim.positions[0]
+    print(f"scenario {sim.scenario.name}: {sim.runs} run(s) x {sim.times.size} steps of {sim.scenario.period:g} s, "
+          f"{arr.n_channels} channels from {len(arr.ids)} sensors")
+    std = sim.scenario.channel_std
+    print(f"  {'sensor':<10} {'type':<13} {'kind':<9} {'closest [m]':>11} {'peak':>14} {'peak SNR':>9}")
+    display = {"T": (1e9, "nT"), "V/m": (1e6, "uV/m"), "rad": (180 / np.pi, "deg")}
+    for s, sid in enumerate(arr.ids):
+        cols = np.flatnonzero(arr.channel_sensor == s)
+        closest = np.min(np.linalg.norm(pos - arr.positions[s], axis=-1))
+        scale, unit = display[arr.channel_units[cols[0]]]
+        if arr.kinds[s] == "bearing":
+            peak, snr = "-", "-"
+        else:
+            amp = np.abs(sim.clean[0][:, cols]).max(axis=0)
+            peak = f"{scale * amp.max():.3g} {unit}"
+            snr = f"{(amp / std[cols]).max():.3g}"
+        print(f"  {sid:<10} {arr.types[s]:<13} {arr.kinds[s]:<9} {closest:>11.1f} {peak:>14} {snr:>9}")
+
+
+def cmd_demo(args) -> int:
+    from shipsense.atomic import staged_directory
+    from shipsense.cli.track import describe, track_to_files
+    from shipsense.config import load_scenario
+    from shipsense.plotting import plot_simulation, plot_track
+    from shipsense.simulator import simulate
+
+    out = Path(args.out)
+    writable("--out", out, directory=True)
+    sc = load_scenario("demo")
+    first_use("demo")
+    bar = progress_bar(3, "demo: simulate")
+    with staged_directory(out) as stage:   # all of the demo's files, or none
+        sim = simulate(sc, runs=1)
+        bar.update(1)
+        bar.set_description("demo: track")
+        summary = track_to_files(sc, sim.times, sim.measurements[0], stage, truth=sim.truth[0])
+        bar.update(1)
+        bar.set_description("demo: save and plot")
+        sim.save_npz(stage / "passage.npz")
+        plot_simulation(sim, stage / "measurements.png")
+        plot_track(summary, sim.times, stage / "demo.png", truth=sim.truth[0],
+                   title="demo: the project's tracker, fused magnetic + electric + bearing (2-sigma ellipses)")
+        bar.update(1)
+    bar.close()
+    _print_summary(sim)
+    for line in describe(summary, "the simulated passage"):
+        print(line)
+    print(f"wrote {out / 'demo.png'} (track), {out / 'measurements.png'} (traces), {out / 'estimates.csv'}, "
+          f"{out / 'selection_log.csv'} and {out / 'passage.npz'}")
+    return EXIT_OK
+
+
+def cmd_track(args) -> int:
+    from shipsense import budget
+    from shipsense.atomic import staged_directory
+    from shipsense.cli.track import describe, track_to_files
+    from shipsense.config import load_scenario
+    from shipsense.plotting import plot_track
+    from shipsense.recording import RecordingError, read_recording
+    from shipsense.simulator import simulate
+    from shipsense.trackers.filters import FILTER_NAMES
+
+    sc = load_scenario(args.scenario)
+    if args.filter is not None and args.filter not in FILTER_NAMES:
+        raise BadInput(f"--filter must be one of {', '.join(FILTER_NAMES)}, got {args.filter!r}")
+    out = Path(args.out)
+    writable("--out", out, directory=True)
+    truth = None
+    if args.data:
+        within_budget(args, budget.recording(args.data, sc))
+        try:
+            times, y = read_recording(args.data, sc)
+        except RecordingError as err:
+            raise BadInput(str(err)) from None
+        missing = np.isnan(y).mean()
+        source = f"recording {args.data} ({y.shape[0]} samples, {100 * missing:.1f} % of values missing)"
+    else:
+        within_budget(args, budget.tracking(sc, sc.steps, what=f"a simulated passage of {sc.name} ({sc.steps} steps)"))
+        sim = simulate(sc, runs=1, seed=args.seed, random=args.random)
+        times, y, truth = sim.times, sim.measurements[0], sim.truth[0]
+        used_seed = sc.seed if args.seed is None else args.seed
+        source = f"simulated {'random' if args.random else 'nominal'} passage of {sc.name} (seed {used_seed})"
+    first_use("track", args.filter)
+    with staged_directory(out) as stage:   # the tables and the plot, or nothing
+        try:
+            summary = track_to_files(sc, times, y, stage, truth=truth, method=args.method, unit=args.filter,
+                                     progress=not QUIET["on"])
+        except ValueError as err:
+            raise BadInput(str(err)) from None
+        plot_track(summary, times, stage / "track.png", truth=truth,
+                   title=f"{sc.name}: {args.method} (2-sigma ellipses)")
+    for line in describe(summary, source):
+        print(line)
+    print(f"wrote {out / 'estimates.csv'}, {out / 'selection_log.csv'} and {out / 'track.png'}")
+    return EXIT_OK
