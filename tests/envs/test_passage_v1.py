@@ -752,7 +752,7 @@ def test_a_forked_child_does_not_wait_for_a_cache_lock_another_thread_held():
     import os
     import threading
 
-    from shipsense.trackers import initialiser
+    from shipsense.trackers.init import grid as initialiser
 
     held, release = threading.Event(), threading.Event()
 
