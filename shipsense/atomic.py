@@ -27,21 +27,6 @@ def atomic_write_bytes(path: Path, data: bytes) -> None:
         tmp.unlink(missing_ok=True)
 
 
-def atomic_write_files(files: dict) -> None:
-    """Write several files ``{path: bytes}`` atomically each; if one fails, the ones already written are
-    removed. The contents are all in memory before the first write, so a failure while producing them leaves
-    nothing behind either."""
-    written = []
-    try:
-        for path, data in files.items():
-            atomic_write_bytes(Path(path), data)
-            written.append(Path(path))
-    except BaseException:
-        for path in written:
-            path.unlink(missing_ok=True)
-        raise
-
-
 @contextlib.contextmanager
 def atomic_path(path):
     """Yield a temporary path beside ``path`` with its suffix (for writers that take a file name: NumPy,

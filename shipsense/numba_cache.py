@@ -19,8 +19,8 @@ from pathlib import Path
 DEPENDS = {
     "design/information_gain.py": ("models/measurement.py", "trackers/fit/linalg.py"),
     "envs/features.py": (),
-    "envs/passage_v1.py": ("arguments.py", "config.py", "design/information_gain.py", "envs/core_env.py",
-                           "envs/features.py", "envs/prefetch.py", "simulator.py", "trackers/tracker/results.py"),
+    "envs/passage_v1.py": ("arguments.py", "design/information_gain.py", "envs/core_env.py", "envs/features.py",
+                           "envs/prefetch.py", "simulator.py", "trackers/tracker/results.py"),
     "models/measurement.py": ("parallel.py", "physics/hed_kernel.py", "physics/kernels.py"),
     "physics/hed_kernel.py": (),
     "physics/kernels.py": ("physics/magnetic.py",),

@@ -8,7 +8,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from shipsense.config import ScenarioError, _shipped_dir, validate_scenario
+from shipsense.config import ScenarioError, validate_scenario
+from shipsense.config.load import _shipped_dir
 
 BASES = {name: tomllib.loads((_shipped_dir() / f"{name}.toml").read_text()) for name in ("S2", "S1-P2", "demo")}
 

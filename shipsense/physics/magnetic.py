@@ -146,18 +146,6 @@ def earth_field_direction(inclination_deg, declination_deg):
     return np.array([np.cos(inc) * np.sin(dec), np.cos(inc) * np.cos(dec), -np.sin(inc)])
 
 
-def vector_reading(B, orientation=None):
-    """Three-axis reading ``R^T B`` of a sensor with orientation ``R`` (..., 3, 3).
-
-    ``R``'s columns are the sensor axes in world coordinates; ``None`` means
-    the sensor axes are the world axes.
-    """
-    B = np.asarray(B, dtype=float)
-    if orientation is None:
-        return B
-    return np.einsum("...ji,...j->...i", orientation, B)
-
-
 def magnitude_reading(B):
     """Magnitude ``|B|`` of the target field (..., 3) -> (...)."""
     return np.linalg.norm(B, axis=-1)

@@ -392,11 +392,6 @@ def family_rows(name, chunks):
     return rows
 
 
-def run_family(name, passages, seed):
-    """Family ``name``'s rows on ``passages`` passages drawn with ``seed``, in this process (one chunk)."""
-    return family_rows(name, [family_chunk(name, passages, seed)])
-
-
 @dataclass(frozen=True)
 class WideTask:
     """A task of :func:`run`: ``passages`` passages of family ``family`` (chunk number ``chunk``), or -- with
