@@ -80,9 +80,9 @@ def evaluate_layout(scenario, passages=50, seed=HELD_OUT_SEED, filter_name=None,
     half = sc.steps // 2
     err = position_error(est, truth)[:, half:]
     tracked = tracked[:, half:]
-    P0i = P0 / np.outer(model.x_scale, model.x_scale)
+    P0i = model.cov_to_internal(P0)
     bounds = pcrlb(model, model.to_internal(truth), np.linalg.inv(P0i))[half:]
-    trace = np.broadcast_to(position_crlb_trace(bounds, model.x_scale), err.shape)
+    trace = np.broadcast_to(position_crlb_trace(model.cov_to_si(bounds)), err.shape)
     rmse = float(np.sqrt(np.mean(err ** 2)))
     rmse_tracked = float(np.sqrt(np.mean(err[tracked] ** 2))) if tracked.any() else float("nan")
     bound = float(np.sqrt(np.mean(trace[tracked]))) if tracked.any() else float("nan")

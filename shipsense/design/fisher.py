@@ -204,7 +204,7 @@ def bound_map(model, xs, ys, velocity, params, steps=21, per_sensor=True):
 
     def pos_bound(J):
         C = centre @ crlb(J) @ centre.T
-        val = np.sqrt(np.clip(position_crlb_trace(C, model.x_scale), 0, None))
+        val = np.sqrt(np.clip(position_crlb_trace(model.cov_to_si(C)), 0, None))
         rank = np.linalg.matrix_rank(J, hermitian=True)
         return np.where(rank < model.n, np.inf, val)
 

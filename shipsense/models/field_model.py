@@ -150,6 +150,15 @@ class FieldModel:
     def to_si(self, x):
         return np.asarray(x) * self.x_scale
 
+    def cov_to_internal(self, P_si):
+        """A covariance (..., n, n) in SI units in this model's internal units (``P / (s s^T)``, ``s`` the
+        :attr:`x_scale`)."""
+        return np.asarray(P_si, dtype=float) / np.outer(self.x_scale, self.x_scale)
+
+    def cov_to_si(self, P):
+        """A covariance (or a bound) (..., n, n) in internal units in SI units (``P s s^T``)."""
+        return np.asarray(P) * np.outer(self.x_scale, self.x_scale)
+
     def residual(self, a, b):
         """``a - b`` with bearing channels wrapped modulo pi."""
         d = np.asarray(a) - np.asarray(b)

@@ -42,13 +42,13 @@ def track_with_global_init(unit, model, measurements, gi: GlobalInit, store=None
     bank = run_bank(unit, model, aligned, gi.seeds, gi.P0, initial_loglik=gi.loglik, **kw)
     est = unalign(bank.selected_means, start, K)
     best = np.argmax(gi.loglik, axis=1)
-    theta0 = gi.window[np.arange(R), best, 0] / model.x_scale                 # internal, at k0
+    theta0 = model.to_internal(gi.window[np.arange(R), best, 0])                # internal, at k0
     ks = np.arange(K)[None, :] - gi.k0[:, None]                               # steps relative to k0
     # constant velocity forwards and backwards: x_k = x_0 + k T v for the kinematic block
     traj = np.repeat(theta0[:, None, :], K, axis=1)
     traj[..., 0:2] += ks[..., None] * model.period * theta0[:, None, 2:4]
     before = np.arange(K)[None, :] < start[:, None]
-    est[before] = (traj * model.x_scale)[before]
+    est[before] = model.to_si(traj)[before]
     return est, bank
 
 

@@ -154,18 +154,18 @@ def _bound_parts(model, truth, P0):
     from shipsense.design.fisher import measurement_information, pcrlb_from_information
 
     x = model.to_internal(truth)
-    J0 = np.linalg.inv(P0 / np.outer(model.x_scale, model.x_scale))
+    J0 = np.linalg.inv(model.cov_to_internal(P0))
     info = measurement_information(model, x)
-    return {"pcrlb": position_crlb_trace(pcrlb_from_information(model, info, J0), model.x_scale),
-            "crlb_deterministic": position_crlb_trace(pcrlb_from_information(model, info, J0, Q=np.zeros_like(model.Q)),
-                                                      model.x_scale),
+    deterministic = pcrlb_from_information(model, info, J0, Q=np.zeros_like(model.Q))
+    return {"pcrlb": position_crlb_trace(model.cov_to_si(pcrlb_from_information(model, info, J0))),
+            "crlb_deterministic": position_crlb_trace(model.cov_to_si(deterministic)),
             "info_sum": info.sum(axis=0), "J0": J0}
 
 
 def _pooled_bound(model, info_mean, J0):
     from shipsense.design.fisher import pcrlb_from_information
 
-    return position_crlb_trace(pcrlb_from_information(model, info_mean[None], J0)[0], model.x_scale)
+    return position_crlb_trace(model.cov_to_si(pcrlb_from_information(model, info_mean[None], J0)[0]))
 
 
 def family_passages(name, passages, seed):

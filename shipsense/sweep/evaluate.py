@@ -115,9 +115,9 @@ def crlb_position_trace(sc, model, truth):
     from shipsense.trackers.tracker.settings import resolve_settings
 
     bank = resolve_settings(sc).bank
-    J0 = np.diag((bank.state_std(model.labels) / model.x_scale) ** -2.0)
+    J0 = np.diag(model.to_internal(bank.state_std(model.labels)) ** -2.0)
     b = pcrlb(model, model.to_internal(truth), J0, per_run=True, Q=np.zeros_like(model.Q))
-    return position_crlb_trace(b, model.x_scale)
+    return position_crlb_trace(model.cov_to_si(b))
 
 
 def track_passages(method, sc, times, y):

@@ -138,15 +138,12 @@ def coverage(q, where=None, axis=None, limit=CHI2_2DOF_95):
     return np.sum(inside & where, axis=axis) / np.sum(where, axis=axis)
 
 
-def position_crlb_trace(bounds, x_scale=None):
-    """Trace of the position block of error-covariance bounds ``bounds`` (..., n, n) (a CRLB or PCRLB): the
-    least mean square horizontal position error, m², ``B_xx s_x² + B_yy s_y²`` with ``s = x_scale[:2]`` the SI
-    value of one internal unit of x and y (None: the bounds are in SI units already).  Shape (...)."""
+def position_crlb_trace(bounds):
+    """Trace of the position block of error-covariance bounds ``bounds`` (..., n, n) in SI units (a CRLB or
+    PCRLB; a model's ``cov_to_si`` converts one in its internal units): the least mean square horizontal
+    position error ``B_xx + B_yy``, m².  Shape (...)."""
     b = np.asarray(bounds)
-    if x_scale is None:
-        return b[..., 0, 0] + b[..., 1, 1]
-    xs2 = np.asarray(x_scale)[:2] ** 2
-    return b[..., 0, 0] * xs2[0] + b[..., 1, 1] * xs2[1]
+    return b[..., 0, 0] + b[..., 1, 1]
 
 
 def selection_accuracy(selected, hypothesis_trmse):

@@ -134,13 +134,16 @@ def test_coverage_counts_the_samples_inside_the_95_percent_ellipse():
 
 
 def test_position_crlb_trace_is_the_si_trace_of_the_position_block():
-    """Against the trace of the (x, y) block of the bounds scaled to SI (``S B S``, S the internal units' SI
-    values) by ``np.trace``, and of SI bounds without a scale."""
+    """Against ``np.trace`` of the (x, y) block, and of bounds in a model's internal units brought to SI
+    (``S B S``, S the internal units' SI values: the model's ``cov_to_si``)."""
+    from shipsense.models import model_from_scenario
+
     rng = np.random.default_rng(4)
     B = _covariances(rng, (3, 5), 5)
-    scale = np.array([2.0, 0.5, 1.0, 1.0, 1e6])
-    S = np.diag(scale)
-    want = np.trace((S @ B @ S)[..., :2, :2], axis1=-2, axis2=-1)
-    np.testing.assert_allclose(position_crlb_trace(B, scale), want, rtol=1e-14)
     np.testing.assert_allclose(position_crlb_trace(B), np.trace(B[..., :2, :2], axis1=-2, axis2=-1), rtol=1e-14)
+    model = model_from_scenario("S0")                      # moment in 1e6 A m^2: x_scale not all ones
+    Bi = _covariances(rng, (4,), model.n)
+    S = np.diag(model.x_scale)
+    np.testing.assert_allclose(model.cov_to_si(Bi), S @ Bi @ S, rtol=1e-14)
+    np.testing.assert_allclose(model.cov_to_internal(model.cov_to_si(Bi)), Bi, rtol=1e-14)
     assert position_crlb_trace(B).shape == (3, 5)
