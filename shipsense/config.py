@@ -8,7 +8,8 @@ with one message that names the field and the reason.
 
 Units are SI throughout (m, s, T, V/m, A·m², A·m, S/m, rad) except where a
 field name ends in ``_deg`` or ``_hz``.  The file format is documented in
-README.md ("Scenario files").
+the docs: "Scenario files" (the guide) and the scenario reference generated
+from these models.
 """
 
 from __future__ import annotations

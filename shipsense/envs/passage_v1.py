@@ -4,7 +4,7 @@
 
 One episode is one ship passage drawn from the scenario's prior past its
 array.  The project's tracker (:class:`shipsense.trackers.Tracker`, its
-covariance calibrated: EXPERIMENTS.md) runs inside the environment as the
+covariance calibrated: docs: Results) runs inside the environment as the
 observer.  It sees every sensor's first sample (the detection); from then on
 the agent chooses at every step which sensors to read, at most ``k`` of them
 (a seabed node's energy budget), each read costing ``energy_cost``.  The
@@ -13,7 +13,7 @@ would tell it, never the truth.
 
 ## Action space
 
-``Discrete(A)``: an index into :attr:`PassageV1Env.subsets`, every subset of
+``Discrete(A)``: an index into ``PassageV1Env.subsets``, every subset of
 the ``S`` sensors with at most ``k`` members, in order of size then
 lexicographic: action 0 reads nothing, actions ``1 .. S`` read one sensor
 (sensor ``a - 1``), then the pairs, ...  An over-budget choice cannot be
@@ -116,7 +116,7 @@ value raises one ``ValueError`` naming the argument.
   moments 3e3-3e4 A m^2, 120 samples.
 
 Their ``reward_threshold`` is the greedy baseline's mean return on held-out
-passages (EXPERIMENTS.md, ``experiments/passage_baselines.py``); for the hard
+passages (docs: Results, ``experiments/passage_baselines.py``); for the hard
 variant the best baseline's (random), as greedy, which trusts an observer
 that loses most of those passages, scores worse there.  Keyword
 arguments to ``gymnasium.make`` replace a variant's: ``overrides`` replaces
@@ -401,7 +401,7 @@ class PassageV1Core:
         environments in one piece of work: once that many want one, or at once when an environment wanting one
         has half a block or less left.  Their run-ins in one batch cost less a passage than a block's alone
         (2.8-2.9 against 3.4 ms of CPU, Passage-v1, six blocks against one: ``benchmarks/where_time_goes.py
-        runins``; at 64 envs 19.1-21.3k against 16.7-19.2k env-steps/s: EXPERIMENTS.md, "Performance log")."""
+        runins``; at 64 envs 19.1-21.3k against 16.7-19.2k env-steps/s: benchmarks/LOG.md)."""
         while self._wanted and (len(self._wanted) >= self._group or any(
                 len(self._passages.get(e, ())) <= PASSAGE_BLOCK // 2 for e in self._wanted)):
             envs = list(self._wanted)[:self._group]
