@@ -15,7 +15,7 @@ Passage-v1 with its run-in: the observer reads every sensor until its first trac
 three timed runs together, each from its own seed, after one untimed run (:func:`sustained_rate`); a
 Passage-v0 vector env's runs are whole episode cycles (:func:`whole_episodes`); Passage-v1's vector rate is
 three timed block cycles after an untimed one (:func:`queued_rate`).  PPO frames per second are reported by
-``shipsense train`` (see EXPERIMENTS.md).
+``shipsense train`` (see docs: Results).
 """
 
 from __future__ import annotations
