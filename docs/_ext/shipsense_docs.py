@@ -177,6 +177,13 @@ def _unit(model: str, name: str, field, type_unit) -> str | None:
     return UNITS.get((model, name))
 
 
+def _plain(text: str) -> str:
+    """A field's description (plain text) escaped for reStructuredText: ``|p|`` is no substitution."""
+    for ch in "\\|*`_":
+        text = text.replace(ch, "\\" + ch)
+    return text
+
+
 def _default(field) -> str:
     if field.is_required():
         return "**required**"
@@ -260,7 +267,7 @@ def scenario_rst() -> list[str]:
             if unit is None:
                 missing.append(f"{cls.__name__}.{name}")
             seen_keys.add((cls.__name__, name))
-            desc = (field.description or "").replace("\n", " ")
+            desc = _plain(field.description or "").replace("\n", " ")   # plain text, not reStructuredText
             if nested and not desc:
                 desc = "a table: " + ", ".join(f"``{TOML_TABLE.get(n.__name__, n.__name__)}``" for n in nested)
             rng = ", ".join(f"``{c}``" for c in constraints) or "—"
