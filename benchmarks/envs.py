@@ -10,8 +10,8 @@ Passage-v1's actions read the first ``k``-sensor subset (its full budget).  Auto
 run-in: the observer reads every sensor until its first track).  Every rate is over three timed runs
 together, each from its own seed, after one untimed run (:func:`sustained_rate`); the vector rate is three
 timed block cycles after an untimed one (:func:`queued_rate`).  PPO frames per second are reported by
-``shipsense train`` (see EXPERIMENTS.md).  Passage-v0, timed here until it was retired, has its figures in
-EXPERIMENTS.md.
+``shipsense train`` (docs: Results).  Passage-v0, timed here until it was retired, has its figures in
+benchmarks/LOG.md.
 """
 
 from __future__ import annotations

@@ -96,7 +96,7 @@ def study(name):
     them are resident depends on the kernel's page cache, not on the study (S0 with numba 0.68.1 on one machine,
     2026-11-26: 104.5 MiB of it on the day the library was installed, 72.9 MiB hours later, the peak 318 and
     284 MiB; the heap and anonymous memory 165 MiB both times, 137 since the studies draw their figures after
-    their runs; EXPERIMENTS.md, "Performance log").
+    their runs; benchmarks/LOG.md).
     """
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     with tempfile.TemporaryDirectory() as tmp:

@@ -1,4 +1,4 @@
-"""Where the time and memory go: the probes behind the README's "what stands in the way" figures.
+"""Where the time and memory go: the probes behind the figures of benchmarks/LOG.md.
 
 Run:  PYTHONPATH=. python benchmarks/where_time_goes.py stages S0|S1          # each stage's peak memory
       PYTHONPATH=. python benchmarks/where_time_goes.py passage [--steps 1500]  # cProfile of Passage-v1 steps

@@ -106,8 +106,8 @@ def track_distance(model, theta, theta_alt, steps):
 
 
 FIRST_USE = ("compiling the least-squares and measurement kernels on their first use on this machine (about 20-25 s "
-             "on two cores; cached for later runs -- in CI, keep NUMBA_CACHE_DIR between jobs: README, "
-             "\"As a CI gate\")")
+             "on two cores; cached for later runs -- in CI, keep NUMBA_CACHE_DIR between jobs: docs, "
+             "\"Design and the CI gate\")")
 
 
 def first_use_notice():

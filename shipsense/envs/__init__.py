@@ -25,7 +25,7 @@ DESIGN_V1_ID = "shipsense/ArrayDesign-v1"
 DESIGN_V1_VARIANTS = {
     # id: (kwargs, reward_threshold).  The thresholds are the mean return of the sequential greedy baseline on
     # 50 held-out sites, rounded down (`shipsense evaluate ID --policy greedy --episodes 50 --seed 2000000`:
-    # 22.03, 21.47, 22.66; EXPERIMENTS.md): an agent that reaches one designs as well as greedy on average.
+    # 22.03, 21.47, 22.66; docs: Results): an agent that reaches one designs as well as greedy on average.
     DESIGN_V1_ID: ({}, 22.0),
     "shipsense/ArrayDesignSmall-v1": ({"k": 3, "half_width": 20.0, "spacing": 10.0}, 21.4),
     "shipsense/ArrayDesignLarge-v1": ({"k": 6, "half_width": 30.0, "spacing": 5.0}, 22.6),
@@ -57,7 +57,7 @@ PASSAGE_V1_VARIANTS = {
 """Passage-v1's registered variants: id -> constructor kwargs."""
 
 PASSAGE_V1_THRESHOLDS = {"shipsense/PassageEasy-v1": -6.0, PASSAGE_V1_ID: -5.3, "shipsense/PassageHard-v1": -233.2}
-"""``reward_threshold`` per variant: the greedy baseline's mean return on held-out seeds (EXPERIMENTS.md,
+"""``reward_threshold`` per variant: the greedy baseline's mean return on held-out seeds (docs: Results,
 ``experiments/passage_baselines.py``), rounded to 0.1: an agent that reaches it schedules as well as greedy; for
 the hard variant the best baseline's (random: greedy is worse there, its observer loses most passages)."""
 

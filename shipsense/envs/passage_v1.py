@@ -4,7 +4,7 @@
 
 One episode is one ship passage drawn from the scenario's prior past its
 array.  The project's tracker (:class:`shipsense.trackers.Tracker`, its
-covariance calibrated: EXPERIMENTS.md) runs inside the environment as the
+covariance calibrated: docs: Results) runs inside the environment as the
 observer.  It sees every sensor's first sample (the detection); from then on
 the agent chooses at every step which sensors to read, at most ``k`` of them
 (a seabed node's energy budget), each read costing ``energy_cost``.  The
@@ -13,7 +13,7 @@ would tell it, never the truth.
 
 ## Action space
 
-``Discrete(A)``: an index into :attr:`PassageV1Env.subsets`, every subset of
+``Discrete(A)``: an index into ``PassageV1Env.subsets``, every subset of
 the ``S`` sensors with at most ``k`` members, in order of size then
 lexicographic: action 0 reads nothing, actions ``1 .. S`` read one sensor
 (sensor ``a - 1``), then the pairs, ...  An over-budget choice cannot be
@@ -62,7 +62,7 @@ agent's control starts there (the observation's elapsed
 fraction says where).  While the observer has no track its estimate is the
 prior's mean whatever is read, so those samples would add the same large
 errors to every policy's return and hide the scheduling (on S2, before the
-run-in, they made up most of every baseline's return: EXPERIMENTS.md).  A
+run-in, they made up most of every baseline's return: docs: Results).  A
 passage that never gets a track leaves the agent one step.  The run-in does
 not depend on the agent, so the environment does the run-ins of its next
 passages ahead, in batches, on the process's background thread while the
@@ -115,7 +115,7 @@ value raises one ``ValueError`` naming the argument.
   moments 3e3-3e4 A m^2, 120 samples.
 
 Their ``reward_threshold`` is the greedy baseline's mean return on held-out
-passages (EXPERIMENTS.md, ``experiments/passage_baselines.py``); for the hard
+passages (docs: Results, ``experiments/passage_baselines.py``); for the hard
 variant the best baseline's (random), as greedy, which trusts an observer
 that loses most of those passages, scores worse there.  Keyword
 arguments to ``gymnasium.make`` replace a variant's: ``overrides`` replaces
@@ -134,7 +134,7 @@ its whole ``overrides`` dict.
   ``max_reads``, the error reward capped at 100 m, the hypotheses'
   likelihoods and the SNRs of the sensors read observed.  Retired on
   2026-11-28: its module, registration and tests removed (it could not run
-  on v1's core as arguments); EXPERIMENTS.md keeps its figures.
+  on v1's core as arguments); the docs' Results keep its figures.
 """
 
 from __future__ import annotations

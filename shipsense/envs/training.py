@@ -74,9 +74,9 @@ def rollout_steps(timesteps, n_envs):
 
 
 DEFAULT_SHAPING = 1.0
-"""The shaping weight when the environment declares a potential (Passage-v1; EXPERIMENTS.md, "Trained agents")."""
+"""The shaping weight when the environment declares a potential (Passage-v1; docs: Results, Trained agents)."""
 DEFAULT_IMITATION = {"scheduling": "greedy"}
-"""The baseline each kind's agent first clones when the environment offers it (EXPERIMENTS.md: on 100 held-out
+"""The baseline each kind's agent first clones when the environment offers it (docs: Results: on 100 held-out
 Passage-v1 passages PPO from the clone beats round-robin, PPO from scratch in the same budget does not)."""
 
 

@@ -2,7 +2,7 @@
 
 Each study's ``run(runs, out, seed, progress)`` writes ``summary.json``, CSV
 tables and PNG figures into ``out`` and returns the summary.  The keys of
-``summary.json`` are stable (see EXPERIMENTS.md).
+``summary.json`` are stable (see docs: Results).
 
 They run on the sweep's path (:func:`shipsense.sweep.runner.execute`):
 S0, S1 and S2 are one task each -- run in a scratch folder on a worker, their

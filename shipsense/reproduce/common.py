@@ -27,8 +27,8 @@ class Output:
     matplotlib (imported for the figures) and the figures' own memory came on top of the runs' arrays and the
     heap they had grown.  Drawn once the runs' arrays are gone (:func:`finish`), after the heap's free pages
     are given back (:func:`~shipsense.allocator.release_free_memory`), they come on top of much less:
-    ``reproduce S0`` peaked at 321 MiB, now at 284-287, still while its figures are drawn (EXPERIMENTS.md,
-    "Performance log", 2026-11-27)."""
+    ``reproduce S0`` peaked at 321 MiB, now at 284-287, still while its figures are drawn (benchmarks/LOG.md,
+    2026-11-27)."""
 
     def __init__(self, directory):
         self.dir = Path(directory)

@@ -27,7 +27,7 @@ see :func:`position_bounds`), mean position NEES over converged runs
 ``global_init`` also ``init_seconds_per_passage``, the initialiser alone, to
 compare with the bank's time).  The window's SNR start is per family (5 for
 the two magnetometers, 50 for the envelope array, 400 for the single
-magnetometer: measured, EXPERIMENTS.md).
+magnetometer: measured, docs: Results).
 
 ``global_init_refit``: ``global_init`` continued by a refit after the closest
 approach and a bank without process noise (:data:`REFIT_PEAK`).
@@ -105,7 +105,7 @@ TRACKER_SIGMA_A = 0.1
 """White acceleration (m/s²) of :func:`consistency`'s ``dwna`` configuration (global initialiser, one refit
 after the closest approach): 0.1 put S0 and S1-P2 in their NEES bands on the first seed, the library's
 default 1 m/s² neither; since the single magnetometer's explored search S0 is under its band (1.20) with it
-(EXPERIMENTS.md)."""
+(docs: Results)."""
 
 
 def init_options(name, sc):

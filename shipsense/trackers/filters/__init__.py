@@ -7,7 +7,7 @@
 Every unit shares :func:`~shipsense.trackers.filters.core.predict` (the
 motion models are linear) and differs in its measurement update:
 
-========== ===========================================================
+============== ===========================================================
 ``ekf``        extended KF, analytic Jacobians
 ``ukf``        unscented KF (``alpha``, ``beta``, ``kappa``; default 1, 2, 0)
 ``ckf``        cubature KF, 2n equally weighted points
@@ -15,7 +15,7 @@ motion models are linear) and differs in its measurement update:
 ``srcdkf``     square-root CDKF (QR-propagated Cholesky factors)
 ``puekf``      progressive-update EKF (``n_pu`` sub-updates with ``R n_pu``)
 ``huber_ukf``  Huber-robust UKF (``gamma`` = 1.345, iterated reweighting)
-========== ===========================================================
+============== ===========================================================
 """
 
 from __future__ import annotations

@@ -3,7 +3,8 @@ the checks, the histories, the SNR, the passages' phases) and the step of its ru
 
 :meth:`Tracker._step <shipsense.trackers.tracker.tracker.Tracker._step>` predicts and updates the banks of the
 running passages (:meth:`BankState.step <shipsense.trackers.bank.bank.BankState.step>`: the filter's compiled
-predict and update, :func:`shipsense.trackers.filters.fused.step`), moves their NIS windows, runs the
+predict and update, :func:`~shipsense.trackers.filters.fused.predict` and
+:func:`~shipsense.trackers.filters.fused.update`), moves their NIS windows, runs the
 windowed innovation test (:func:`~shipsense.trackers.tracker.consistency.window_test`) and writes their output
 (:func:`~shipsense.trackers.bank.selection.report`).  Each of those is compiled already; between them, about
 thirty numpy calls a sample cost more than the arithmetic for one passage.  :class:`TrackerStep` is the

@@ -37,7 +37,7 @@ batch, the pipeline of this package one sample at a time:
    or a failed fit) also starts from the global initialiser's fits of every
    sample since the detection, so it can leave a wrong track that a local
    refit would stay near (measured with 20 % outliers on two magnetometers:
-   convergence 0.933 -> 0.999 over the same 1,000 passages, EXPERIMENTS.md).
+   convergence 0.933 -> 0.999 over the same 1,000 passages, docs: Results).
    With ``rescan`` (one magnetometer's default) the global initialiser also
    runs every ``refit_every`` samples until the closest approach, counted
    from the last such rescan rather than from the last restart (the collapse
@@ -45,7 +45,7 @@ batch, the pipeline of this package one sample at a time:
    passage): far out, one magnetometer's samples fit a wrong track hundreds
    of metres off as well as the true one, and refits started from the bank's
    hypotheses stayed on it after the data had told the two apart
-   (EXPERIMENTS.md).
+   (docs: Results).
 
 The reported estimate is the maximum-likelihood hypothesis, the reported
 covariance its mean-square-error matrix under the mixture of the bank's
@@ -253,7 +253,7 @@ class Tracker:
     def set_passage_states(self, passages, states):
         """Carry on ``states`` (:meth:`passage_states` of this tracker or a sibling) as passages ``passages``
         (indices, distinct): everything of theirs is replaced, as if they had run here (their gaps in
-        :attr:`gaps` too)."""
+        ``gaps`` too)."""
         idx = self._passage_indices(passages)
         states = list(states)
         if idx.size != len(states) or np.unique(idx).size != idx.size:
@@ -371,7 +371,7 @@ class Tracker:
         """A failed fit or a diverged bank among passages ``act``: the model does not explain the data, so the
         estimate is located no better than the passage prior says (its spread is added to ``out.cov``: an
         inconsistent track's own covariance was centimetres to metres while it was 20-150 m off,
-        EXPERIMENTS.md); not a failed consistency test whose refit passed its own (that sample has the
+        docs: Results); not a failed consistency test whose refit passed its own (that sample has the
         refit's covariance)."""
         bad = act[(out.status[act] == INCONSISTENT) & ~self.state.cons_now[act]]
         if bad.size:

@@ -431,7 +431,7 @@ def test_bad_options_raise_one_error_naming_the_option(bad, match):
 
 def test_the_grid_search_samples_follow_the_array_family():
     """Several magnetometers search their grid on every second sample of S2's 30-sample window (15); one
-    magnetometer and the electrodes keep at least 16 (EXPERIMENTS.md: 15 of S0's 75 lost two of 1,000 faulty
+    magnetometer and the electrodes keep at least 16 (docs: Results: 15 of S0's 75 lost two of 1,000 faulty
     passages); an explicit value wins, and window_fits is called with it."""
     from shipsense.trackers.tracker import tracker as tracker_module
 
