@@ -17,7 +17,7 @@ import hashlib
 from pathlib import Path
 
 DEPENDS = {
-    "design/information_gain.py": ("models/measurement.py", "trackers/fit/linalg.py"),
+    "design/information_gain.py": ("models/measurement.py", "trackers/linalg.py"),
     "envs/features.py": (),
     "envs/passage_v1.py": ("arguments.py", "design/information_gain.py", "envs/core_env.py", "envs/features.py",
                            "envs/prefetch.py", "simulator.py", "trackers/tracker/results.py"),
@@ -25,21 +25,20 @@ DEPENDS = {
     "physics/hed_kernel.py": (),
     "physics/kernels.py": ("physics/magnetic.py",),
     "trackers/bank/selection.py": (),
-    "trackers/filters/fused.py": ("defaults.py", "models/measurement.py", "parallel.py", "trackers/filters/cdkf.py",
-                                  "trackers/filters/core.py", "trackers/filters/ukf.py"),
-    "trackers/fit/linalg.py": (),
-    "trackers/fit/lm.py": ("models/measurement.py", "parallel.py", "trackers/fit/linalg.py"),
+    "trackers/filters/kernels.py": ("models/measurement.py", "trackers/filters/core.py", "trackers/linalg.py"),
+    "trackers/fit/lm.py": ("models/measurement.py", "parallel.py", "trackers/linalg.py"),
     "trackers/init/detection.py": (),
     "trackers/init/distinct.py": (),
     "trackers/init/grid.py": ("models/measurement.py", "models/transitions.py", "trackers/fit/least_squares.py",
-                              "trackers/fit/linalg.py", "trackers/init/distinct.py"),
+                              "trackers/init/distinct.py", "trackers/linalg.py"),
+    "trackers/linalg.py": (),
     "trackers/tracker/consistency.py": (),
     "trackers/tracker/restarts.py": ("models/transitions.py", "trackers/fit/least_squares.py",
                                      "trackers/init/detection.py", "trackers/init/distinct.py",
                                      "trackers/init/global_init.py", "trackers/init/window_fits.py"),
     "trackers/tracker/step.py": ("models/measurement.py", "parallel.py", "trackers/bank/selection.py",
-                                 "trackers/filters/fused.py", "trackers/init/detection.py",
-                                 "trackers/tracker/consistency.py"),
+                                 "trackers/filters/fused.py", "trackers/filters/kernels.py",
+                                 "trackers/init/detection.py", "trackers/tracker/consistency.py"),
 }
 """Each file with compiled kernels (relative to the package) and the package modules it imports at module
 level (tests/test_numba_cache.py checks this against the sources)."""

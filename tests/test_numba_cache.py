@@ -36,9 +36,9 @@ def test_the_dependency_table_lists_every_kernel_file_and_its_imports():
 
 def test_the_package_kernels_are_keyed_on_their_sources():
     from shipsense.models import measurement
-    from shipsense.trackers.filters import fused
+    from shipsense.trackers.filters import kernels as fused
 
-    digest = numba_cache.sources_digest("trackers/filters/fused.py")
+    digest = numba_cache.sources_digest("trackers/filters/kernels.py")
     kernels = [*fused.UPDATE_KERNELS.values(), *fused.UPDATE_LOOPS.values()]      # one per filter, and loops
     assert len(kernels) == 12 and all(k._cache._cache_file._source_stamp == digest for k in kernels)
     assert measurement.batch_kernel._cache._cache_file._source_stamp != digest      # its own sources

@@ -39,7 +39,7 @@ from numba import njit
 
 from shipsense import numba_cache
 from shipsense.models.measurement import FIELD, batch_kernel, kernel_of
-from shipsense.trackers.fit.linalg import solve_many_in_place
+from shipsense.trackers.linalg import solve_many_in_place
 
 
 def information_gains(Hm, Rinv, P, first_channel, subsets):

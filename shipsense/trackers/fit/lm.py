@@ -23,7 +23,7 @@ from numba import njit
 from shipsense import numba_cache
 from shipsense.models.measurement import loop_jit, measure_jacobian, wrap_angle
 from shipsense.parallel import in_turns
-from shipsense.trackers.fit.linalg import solve_in_place
+from shipsense.trackers.linalg import solve_in_place
 
 
 def lm_fits(spec, theta, Ak, y, w, mu, root, gamma, bounds, iterations, tol, information=None):

@@ -23,8 +23,8 @@ from shipsense import numba_cache
 from shipsense.models.measurement import wrap_angle
 from shipsense.models.transitions import powers
 from shipsense.trackers.fit.least_squares import FIT_CHUNK_BYTES
-from shipsense.trackers.fit.linalg import solve_in_place
 from shipsense.trackers.init.distinct import distinct_rows
+from shipsense.trackers.linalg import solve_in_place
 
 
 def _parameter_slots(model):
@@ -365,7 +365,7 @@ def grid_solve_kernel(b, G, A_all, inverses, present, dd, yb, off, std_b, clamp,
     with a ``1e-9`` ridge -- with every sample present the Gram matrix ``A_all``'s, through its ridge
     ``inverses`` (:func:`ridge_inverses`), else ``A_all`` less the missing samples' outer products (or the
     present samples' when fewer) solved by Gaussian elimination with partial pivoting
-    (:func:`~shipsense.trackers.fit.linalg.solve_in_place`) --, the clamp, and the chi-square from the
+    (:func:`~shipsense.trackers.linalg.solve_in_place`) --, the clamp, and the chi-square from the
     normal equations plus the bearings' wrapped residuals."""
     R, K = present.shape
     P = A_all.shape[1]
@@ -466,7 +466,7 @@ def _grid_chi2(x, A, i, b, r, base, P, dd, bear, clamp, chi2, params, c):
 @njit(cache=True, error_model="numpy", nogil=True)
 def ridge_inverses(A):
     """``(A_c + 1e-9 I)^-1`` (C, P, P) of Gram matrices ``A`` (C, P, P), a column at a time by
-    :func:`~shipsense.trackers.fit.linalg.solve_in_place` (the ridge of :func:`grid_fit`'s solves):
+    :func:`~shipsense.trackers.linalg.solve_in_place` (the ridge of :func:`grid_fit`'s solves):
     :func:`grid_terms` keeps them with its Gram matrices."""
     C, P = A.shape[0], A.shape[1]
     out = np.empty((C, P, P))

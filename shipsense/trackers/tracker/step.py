@@ -37,19 +37,8 @@ from shipsense import numba_cache
 from shipsense.models.measurement import kernel_of
 from shipsense.parallel import in_chunks
 from shipsense.trackers.bank.selection import first_max, report
-from shipsense.trackers.filters.fused import (
-    CDKF,
-    EKF,
-    HUBER,
-    PUEKF,
-    UKF,
-    UPDATE_KERNELS,
-    filter_constants,
-    no_sqrt,
-    noise_variances,
-    per_element,
-    predict_kernel,
-)
+from shipsense.trackers.filters.fused import filter_constants, no_sqrt, noise_variances, per_element
+from shipsense.trackers.filters.kernels import CDKF, EKF, HUBER, PUEKF, UKF, UPDATE_KERNELS, predict_kernel
 from shipsense.trackers.init.detection import DOUBLE_MAX, strongest_kernel
 from shipsense.trackers.tracker.consistency import window_test
 

@@ -15,7 +15,7 @@ from shipsense.models.field_model import FieldModel, LinearModel, model_from_sce
 from shipsense.models.measurement import kernel_of
 from shipsense.physics.array import SensorArray
 from shipsense.physics.magnetic import earth_field_direction
-from shipsense.trackers.filters import FILTER_NAMES, UPDATES, Belief, fused, get_filter, predict
+from shipsense.trackers.filters import FILTER_NAMES, UPDATES, Belief, fused, get_filter, kernels, predict
 from shipsense.trackers.filters.core import BeliefWithCov
 
 OPTIONS = {"ukf": {"alpha": 0.7, "beta": 2.0, "kappa": 1.0}, "cdkf": {"h": 1.6}, "srcdkf": {"h": 1.6},
@@ -301,7 +301,7 @@ def test_each_filters_kernel_is_its_own_when_compiled_in_different_processes(tmp
     import subprocess
     import sys
 
-    names = [f.py_func.__qualname__ for d in (fused.UPDATE_KERNELS, fused.UPDATE_LOOPS) for f in d.values()]
+    names = [f.py_func.__qualname__ for d in (kernels.UPDATE_KERNELS, kernels.UPDATE_LOOPS) for f in d.values()]
     assert len(set(names)) == 12
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
     for names in ("ukf", "cdkf,ukf"):

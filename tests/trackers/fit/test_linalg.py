@@ -1,9 +1,9 @@
-"""shipsense.trackers.fit.linalg: the eliminations agree with LAPACK and with each other."""
+"""shipsense.trackers.linalg: the eliminations agree with LAPACK and with each other."""
 
 import numpy as np
 from numba import njit
 
-from shipsense.trackers.fit.linalg import solve_in_place, solve_many_in_place
+from shipsense.trackers.linalg import solve_in_place, solve_many_in_place
 
 
 @njit(cache=False)
