@@ -20,6 +20,15 @@ def figure_to_rgb(fig):
     return img
 
 
+def show_image(path, dpi=110):
+    """A figure showing the PNG ``path`` (a figure a command wrote) at its own size (``dpi`` pixels an inch):
+    how the docs' gallery shows the commands' figures as they wrote them."""
+    image = plt.imread(path)
+    fig = plt.figure(figsize=(image.shape[1] / dpi, image.shape[0] / dpi))
+    fig.figimage(image, resize=True)
+    return fig
+
+
 def draw_array(ax, array, label=True):
     """Sensors of a :class:`~shipsense.physics.array.SensorArray` on a map (x east, y north)."""
     for t, (marker, color) in _MARKERS.items():

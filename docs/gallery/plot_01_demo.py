@@ -16,19 +16,11 @@ Full-size command (the same)::
 import tempfile
 from pathlib import Path
 
-import matplotlib.pyplot as plt
-
 from shipsense.cli import main
+from shipsense.plotting import show_image
 
 out = Path(tempfile.mkdtemp()) / "demo"
 assert main(["--quiet", "demo", "--out", str(out)]) == 0
-
-
-def show(path):
-    """Show a PNG that the command wrote, as it wrote it."""
-    image = plt.imread(path)
-    fig = plt.figure(figsize=(image.shape[1] / 110, image.shape[0] / 110))
-    fig.figimage(image, resize=True)
 
 
 # %%
@@ -36,11 +28,11 @@ def show(path):
 # refits), the sensors and 2-sigma ellipses; on the right the position error against the reported 2-sigma.
 # The estimate starts once the first window has been fitted; an honest tracker's error stays mostly below
 # its 2-sigma.
-show(out / "demo.png")
+show_image(out / "demo.png")
 
 # %%
 # ``measurements.png``: the sensors' traces (field components in SI units, and the bearing).
-show(out / "measurements.png")
+show_image(out / "measurements.png")
 
 # %%
 # ``estimates.csv`` holds the same per sample: state, standard deviations, covariance, status.

@@ -18,9 +18,8 @@ import json
 import tempfile
 from pathlib import Path
 
-import matplotlib.pyplot as plt
-
 from shipsense.cli import main
+from shipsense.plotting import show_image
 
 out = Path(tempfile.mkdtemp()) / "S0"
 assert main(["--quiet", "reproduce", "S0", "--runs", "10", "--out", str(out)]) == 0
@@ -29,25 +28,18 @@ for key in ("basin_radius_m", "seed_nearest_m", "seed_inside_basin_rate", "logli
     print(f"{key:24} {summary.get(key)}")
 
 
-def show(path):
-    """Show a PNG that the command wrote, as it wrote it."""
-    image = plt.imread(path)
-    fig = plt.figure(figsize=(image.shape[1] / 110, image.shape[0] / 110))
-    fig.figimage(image, resize=True)
-
-
 # %%
 # Exp. 1, the convergence basin (``basin_rmse.png``): one SRCDKF started ``dr`` from the truth.
-show(out / "basin_rmse.png")
+show_image(out / "basin_rmse.png")
 
 # %%
 # Exp. 2, the seeding (``seeding.png``): the 12 seeds (3 moment levels x 4 bearings) against the truth.
-show(out / "seeding.png")
+show_image(out / "seeding.png")
 
 # %%
 # Exp. 3, the selection (``selection_bars.png``): each hypothesis's final log-likelihood and error.
-show(out / "selection_bars.png")
+show_image(out / "selection_bars.png")
 
 # %%
 # Exp. 4, the filter units (``units_rmse.png``): the same bank with each unit.
-show(out / "units_rmse.png")
+show_image(out / "units_rmse.png")

@@ -16,36 +16,28 @@ Full-size command::
 import tempfile
 from pathlib import Path
 
-import matplotlib.pyplot as plt
-
 from shipsense.cli import main
+from shipsense.plotting import show_image
 
 out = Path(tempfile.mkdtemp()) / "S1"
 assert main(["--quiet", "reproduce", "S1", "--runs", "10", "--out", str(out)]) == 0
 print((out / "symmetry_table.csv").read_text())
 
 
-def show(path):
-    """Show a PNG that the command wrote, as it wrote it."""
-    image = plt.imread(path)
-    fig = plt.figure(figsize=(image.shape[1] / 110, image.shape[0] / 110))
-    fig.figimage(image, resize=True)
-
-
 # %%
 # Exp. 1, the signal symmetry (``symmetry.png``): the envelopes of four passages mirrored about the axes.
-show(out / "symmetry.png")
+show_image(out / "symmetry.png")
 
 # %%
 # Exp. 2, the arrays (``arrays.png``): P1 (collinear) and P2 (a triangle).
-show(out / "arrays.png")
+show_image(out / "arrays.png")
 
 # %%
 # The banks on P1 and P2 (``P1_bars.png``, ``P2_bars.png``): per hypothesis, how often it converges to the
 # truth or to the mirror track.
-show(out / "P1_bars.png")
-show(out / "P2_bars.png")
+show_image(out / "P1_bars.png")
+show_image(out / "P2_bars.png")
 
 # %%
 # RMSE over time of the selected track on P1 and P2 (``P1_vs_P2_rmse.png``).
-show(out / "P1_vs_P2_rmse.png")
+show_image(out / "P1_vs_P2_rmse.png")

@@ -17,26 +17,18 @@ Full-size command::
 import tempfile
 from pathlib import Path
 
-import matplotlib.pyplot as plt
-
 from shipsense.cli import main
+from shipsense.plotting import show_image
 
 out = Path(tempfile.mkdtemp()) / "S2"
 assert main(["--quiet", "reproduce", "S2", "--runs", "4", "--out", str(out)]) == 0
 print((out / "one_vs_two.csv").read_text())
 
 
-def show(path):
-    """Show a PNG that the command wrote, as it wrote it."""
-    image = plt.imread(path)
-    fig = plt.figure(figsize=(image.shape[1] / 110, image.shape[0] / 110))
-    fig.figimage(image, resize=True)
-
-
 # %%
 # Exp. 1, one against two magnetometers (``one_vs_two_rmse.png``): RMSE over time from each start offset.
-show(out / "one_vs_two_rmse.png")
+show_image(out / "one_vs_two_rmse.png")
 
 # %%
 # Exp. 4, the field trial (``field_trial.png``): the tracked road passages.
-show(out / "field_trial.png")
+show_image(out / "field_trial.png")

@@ -18,9 +18,8 @@ import json
 import tempfile
 from pathlib import Path
 
-import matplotlib.pyplot as plt
-
 from shipsense.cli import main
+from shipsense.plotting import show_image
 
 out = Path(tempfile.mkdtemp()) / "design"
 assert main(["--quiet", "design", "S1-P2", "--k", "3", "--passages", "4", "--bb-seconds", "2",
@@ -35,17 +34,10 @@ code = main(["--quiet", "check", str(out / "layout.toml"), "--passages", "4"])
 print("exit code", code)
 
 
-def show(path):
-    """Show a PNG that the command wrote, as it wrote it."""
-    image = plt.imread(path)
-    fig = plt.figure(figsize=(image.shape[1] / 110, image.shape[0] / 110))
-    fig.figimage(image, resize=True)
-
-
 # %%
 # ``design.png``: the candidates, the relaxed weights and the chosen sensors.
-show(out / "design.png")
+show_image(out / "design.png")
 
 # %%
 # ``bounds.png``: a map of the design's position bound (the CRLB's standard deviation where a ship passes).
-show(out / "bounds.png")
+show_image(out / "bounds.png")
