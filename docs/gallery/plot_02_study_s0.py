@@ -6,7 +6,7 @@ The first source study: a bank of 12 SRCDKF hypotheses seeded from the first sam
 magnetometer, the convergence basin of a single filter, the seeding, the likelihood's selection and the
 filter units.  This page runs ``shipsense reproduce S0`` with 10 runs instead of 200; the numbers it prints
 are the small run's.  The full run's numbers and the verdicts against the study are in
-:doc:`../results/studies`.
+:doc:`../findings/studies`.
 
 Full-size command::
 

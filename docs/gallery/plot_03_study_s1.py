@@ -5,7 +5,7 @@ Study S1: electrode envelopes and the PUEKF bank
 The second source study: envelope electrodes (the shaft-rate electric field's envelope per channel) lose the
 sign of each component, so one sensor cannot tell mirrored passages apart; three sensors on a line (P1) are
 ambiguous, a triangle (P2) is not.  This page runs ``shipsense reproduce S1`` with 10 runs instead of 100; the
-full run's numbers and the verdicts are in :doc:`../results/studies`.
+full run's numbers and the verdicts are in :doc:`../findings/studies`.
 
 Full-size command::
 

@@ -6,7 +6,7 @@ The third source study: one magnetometer against two, the Huber UKF under outlie
 low SNR, and the field trial (three collinear nodes beside a road, misaligned magnetometers, biased bearings)
 tracked by the project's tracker.  This page runs ``shipsense reproduce S2`` with 4 runs instead of 100 (and
 4 instead of 30 for the field trial); the full run's numbers and the verdicts are in
-:doc:`../results/studies`.
+:doc:`../findings/studies`.
 
 Full-size command::
 

@@ -7,7 +7,7 @@ magnetometer, S0; two magnetometers, S2's M1 and M2; electrode envelopes, S1-P2)
 outliers of ten standard deviations and 30 % of the values missing).  For each: convergence, RMSE against the
 CRLB, the mean position NEES (2 is consistent) and the share of samples inside the reported 95 % ellipse.
 This page runs 6 passages per family and condition instead of 1,000; the full table is in
-:doc:`../results/tracker`.
+:doc:`../findings/tracker`.
 
 Full-size command (about an hour on two cores)::
 

@@ -6,7 +6,7 @@ Passages start anywhere in a wide prior (any bearing, a range of start distances
 not near a known point.  Per family (one magnetometer, two magnetometers, electrode envelopes of S1-P2), four
 methods: the studies' multiple-initial-value bank, the global initialiser feeding a bank, the same with a
 refit after the closest approach, and the project's tracker.  This page runs 10 passages per family instead
-of 500, in this process; the full run's table and discussion are in :doc:`../results/wide`.
+of 500, in this process; the full run's table and discussion are in :doc:`../findings/wide`.
 
 Full-size command (about 2 minutes on two local Dask workers)::
 

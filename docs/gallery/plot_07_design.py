@@ -6,7 +6,7 @@ Designing a layout, with a certified bound
 prior-averaged Bayesian D-optimality, certifies how far the design can be from the best k-sensor design, and
 checks it for ambiguity.  This page designs three electrode envelopes for S1-P2 from 4 prior passages
 (8 by default) and checks the result as ``shipsense check`` would.  The reports of the shipped scenarios are in
-:doc:`../results/design`.
+:doc:`../findings/design`.
 
 Full-size command (S0, S1-P2 and S2 at k = 3, as a table)::
 

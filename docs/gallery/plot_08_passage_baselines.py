@@ -6,7 +6,7 @@ The scheduling environment is sound when the baselines order as they should: rea
 predicted information gain (greedy) beats reading them in turn (round-robin), which beats reading at random.
 Every policy plays the same held-out passages (seeds from 1,000,000), so the differences are paired.  This
 page plays 8 passages per policy instead of 200; the full comparison and the trained agents are in
-:doc:`../results/agents`.
+:doc:`../findings/agents`.
 
 Full-size command::
 
