@@ -47,3 +47,17 @@ def gram_reference(G, C, P):
     for g in np.asarray(G).reshape(len(G), C, P):
         A += g[:, :, None] * g[:, None, :]
     return A
+
+
+def linear_gaussian(rng):
+    """A constant-velocity linear-Gaussian model (n = 4, m = 3, C drawn from ``rng``): ``(A, Q, C, R)`` and the
+    :class:`~shipsense.models.field_model.LinearModel` of them, on which every Gaussian filter and bound is the
+    Kalman filter's."""
+    from shipsense.models.field_model import LinearModel
+
+    A = np.eye(4)
+    A[0, 2] = A[1, 3] = 0.5
+    Q = 0.05 * np.eye(4)
+    C = rng.standard_normal((3, 4))
+    R = np.array([0.5, 1.0, 2.0])
+    return (A, Q, C, R), LinearModel(A, Q, C, R)

@@ -2,11 +2,12 @@
 
 import numpy as np
 import pytest
+from reference import linear_gaussian
 
 from shipsense import load_scenario
 from shipsense.design.fisher import bound_map, crlb, passage_fim, pcrlb, trajectory
 from shipsense.design.observability import fit_passages
-from shipsense.models.field_model import LinearModel, model_from_scenario
+from shipsense.models.field_model import model_from_scenario
 
 
 def test_fim_matches_the_covariance_of_maximum_likelihood_estimates():
@@ -40,12 +41,7 @@ def test_fim_is_additive_over_sensors():
 
 def test_pcrlb_equals_the_kalman_covariance_for_a_linear_gaussian_model():
     rng = np.random.default_rng(1)
-    A = np.eye(4)
-    A[0, 2] = A[1, 3] = 0.5
-    Q = 0.05 * np.eye(4)
-    C = rng.standard_normal((3, 4))
-    R = np.array([0.5, 1.0, 2.0])
-    model = LinearModel(A, Q, C, R)
+    (A, Q, C, R), model = linear_gaussian(rng)
     P0 = np.diag([4.0, 4.0, 1.0, 1.0])
     bounds = pcrlb(model, rng.standard_normal((5, 25, 4)), np.linalg.inv(P0))
     P = P0.copy()

@@ -36,8 +36,8 @@ batch, the pipeline of this package one sample at a time:
    allows).  A refit after an alarm (divergence
    or a failed fit) also starts from the global initialiser's fits of every
    sample since the detection, so it can leave a wrong track that a local
-   refit would stay near (measured with 20 % outliers on two magnetometers:
-   convergence 0.933 -> 0.999 over the same 1,000 passages, docs: Results).
+   refit would stay near (``experiments/tracker_consistency.py`` measures it
+   with outliers; docs: Results).
    With ``rescan`` (one magnetometer's default) the global initialiser also
    runs every ``refit_every`` samples until the closest approach, counted
    from the last such rescan rather than from the last restart (the collapse
@@ -605,7 +605,7 @@ class Tracker:
                          np.maximum(1.0, fits.chi2[:, :1] / np.maximum(fits.expected[:, None], 1e-300)))
         # the bank starts from at most BANK_INFLATION_MAX times the fit's covariance (a nonlinear filter
         # started from a covariance 1e6 times too wide throws its sigma points far outside the model's
-        # domain: measured, a one-magnetometer passage went to 1e23 m); the rest of the inflation is
+        # domain, and the track is lost); the rest of the inflation is
         # reported on top of the bank's covariance until a fit passes
         bank_birge = np.minimum(birge, BANK_INFLATION_MAX)
         self.state.excess[runs] = (birge / bank_birge)[:, 0]

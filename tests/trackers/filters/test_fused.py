@@ -7,11 +7,11 @@ ways over whole passages and must agree to rounding at each quantity's own scale
 
 import numpy as np
 import pytest
-from reference import kalman_reference
+from reference import kalman_reference, linear_gaussian
 from scaled import assert_cov_close, assert_loglik_close, close
 
 from shipsense import load_scenario, parallel, simulate
-from shipsense.models.field_model import FieldModel, LinearModel, model_from_scenario
+from shipsense.models.field_model import FieldModel, model_from_scenario
 from shipsense.models.measurement import kernel_of
 from shipsense.physics.array import SensorArray
 from shipsense.physics.magnetic import earth_field_direction
@@ -122,12 +122,7 @@ def test_compiled_steps_equal_the_numpy_steps_with_scalar_rotated_sensors_and_ma
 @pytest.mark.parametrize("name", FILTER_NAMES)
 def test_compiled_steps_reproduce_the_kalman_filter_and_so_do_the_numpy_steps(name):
     rng = np.random.default_rng(1)
-    A = np.eye(4)
-    A[0, 2] = A[1, 3] = 0.5
-    Q = 0.05 * np.eye(4)
-    C = rng.standard_normal((3, 4))
-    R = np.array([0.5, 1.0, 2.0])
-    model = LinearModel(A, Q, C, R)
+    (A, Q, C, R), model = linear_gaussian(rng)
     y = rng.standard_normal((2, 25, 3)) * 3.0
     x0, P0 = np.array([1.0, -1.0, 0.0, 0.0]), np.diag([4.0, 4.0, 1.0, 1.0])
     options = {"huber_ukf": {"gamma": 1e12}, "puekf": {"n_pu": 4}}.get(name, {})
