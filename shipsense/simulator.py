@@ -7,8 +7,15 @@ batched call, and adds noise, outliers and dropouts.  Electrode envelopes can
 come from the raw shaft-rate chain and accelerometer bearings from the
 eigenvector chain instead of the shortcut models.
 
+Manoeuvres (the scenario's ``[manoeuvres]`` table, :mod:`shipsense.physics.manoeuvre`): the nominal
+passage makes the scheduled turns and speed changes, random passages draw theirs from
+``[manoeuvres.random]``; the motion is integrated exactly, the electric dipole stays along the keel and the
+body-fixed share of the magnetic moment turns with the hull.  Without the table the passages are straight,
+as they always were.
+
 Reproducibility: each random ingredient (prior, noise, outliers, dropouts,
-chains) has its own stream spawned from ``seed``, and every draw has the runs
+chains, manoeuvres) has its own stream spawned from ``seed`` (the manoeuvres' last, so that adding them
+moved no earlier draw), and every draw has the runs
 axis first, so run ``i`` of a batch does not depend on how many runs the batch
 has (except the heavy-tailed seismic option, which is reproducible but not
 prefix-stable).
@@ -17,14 +24,17 @@ prefix-stable).
 from __future__ import annotations
 
 import csv
+import json
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from shipsense.config import Scenario, load_scenario
+from shipsense.config.manoeuvres import nominal_manoeuvres
 from shipsense.physics.array import SensorArray
 from shipsense.physics.envelope import envelope_chain, magnitude_envelope_chain, raw_channels
+from shipsense.physics.manoeuvre import LABELS, SPEED_CHANGE, TURN, Manoeuvres, manoeuvring_motion, turned_moment
 from shipsense.physics.motion import cv_positions
 from shipsense.physics.noise import dropout_mask
 from shipsense.physics.seismic import eigen_bearing, simulate_vibration, wrap_axial
@@ -32,7 +42,7 @@ from shipsense.physics.seismic import eigen_bearing, simulate_vibration, wrap_ax
 STATE_LABELS = ("x", "y", "vx", "vy", "z", "mx", "my", "mz", "p")
 """Columns of :attr:`Simulation.truth`: position, velocity, source height, magnetic moment, electric moment."""
 
-_STREAMS = ("prior", "prior_dir", "noise", "outlier", "dropout", "envelope", "seismic", "seismic_tail")
+_STREAMS = ("prior", "prior_dir", "noise", "outlier", "dropout", "envelope", "seismic", "seismic_tail", "manoeuvre")
 
 
 @dataclass(frozen=True)
@@ -53,6 +63,15 @@ class Simulation:
         Noisy measurements; NaN where ``mask`` is False.
     mask : ndarray of bool, shape (runs, steps, m)
         True where a component was recorded.
+    heading : ndarray, shape (runs, steps)
+        True course angle ``atan2(v_y, v_x)`` (from east, counter-clockwise), in (-pi, pi], rad.
+    speed : ndarray, shape (runs, steps)
+        True speed, m/s.
+    manoeuvre : ndarray of int8, shape (runs, steps)
+        What the ship is doing at each sample: index into
+        :data:`~shipsense.physics.manoeuvre.LABELS` (straight, turn, speed change).
+    manoeuvres : Manoeuvres
+        Every run's manoeuvre schedule (no manoeuvre: an empty one).
     """
 
     scenario: Scenario
@@ -62,6 +81,10 @@ class Simulation:
     clean: np.ndarray
     measurements: np.ndarray
     mask: np.ndarray
+    heading: np.ndarray
+    speed: np.ndarray
+    manoeuvre: np.ndarray
+    manoeuvres: Manoeuvres
 
     @property
     def channels(self):
@@ -78,12 +101,21 @@ class Simulation:
         return self.truth[..., [0, 1, 4]]
 
     def save_npz(self, path):
-        """Write arrays and channel labels to a NumPy ``.npz`` file."""
+        """Write arrays and channel labels to a NumPy ``.npz`` file.
+
+        Besides the measurements and the truth: ``heading``, ``speed`` and ``manoeuvre`` (per sample, with
+        ``manoeuvre_labels``), and the manoeuvre schedule as JSON (``manoeuvre_schedule``: one list of
+        records per run, :meth:`~shipsense.physics.manoeuvre.Manoeuvres.to_records`, with
+        ``body_fixed_share``).
+        """
+        schedule = {"body_fixed_share": self.manoeuvres.body_fixed_share, "runs": self.manoeuvres.to_records()}
         np.savez_compressed(
             path, times=self.times, truth=self.truth, clean=self.clean, measurements=self.measurements,
             mask=self.mask, state_labels=np.array(STATE_LABELS),
             sensor_ids=np.array([c[0] for c in self.channels]), channel_names=np.array([c[1] for c in self.channels]),
             sensor_positions=self.array.positions, scenario_toml_name=np.array(self.scenario.name),
+            heading=self.heading, speed=self.speed, manoeuvre=self.manoeuvre, manoeuvre_labels=np.array(LABELS),
+            manoeuvre_schedule=np.array(json.dumps(schedule)),
         )
 
     def save_csv(self, path):
@@ -158,6 +190,54 @@ def sample_passages(scenario, runs: int, seed: int = 0, random: bool = True) -> 
     return _passages(sc, runs, random, streams)
 
 
+def _random_manoeuvres(sc: Scenario, x0, streams) -> Manoeuvres:
+    """One manoeuvre or none per random passage, drawn from ``[manoeuvres.random]`` (runs axis first, so
+    prefix-stable): a turn of uniform rate and total turn to port or starboard, or a speed change of
+    log-uniform factor at a uniform acceleration, starting uniformly in the window."""
+    cfg = sc.manoeuvres
+    runs = x0.shape[0]
+    if cfg is None or cfg.random is None:
+        return Manoeuvres.none(runs, 0.0 if cfg is None else cfg.body_fixed_share)
+    rnd = cfg.random
+    u = streams["manoeuvre"].random((runs, 6))
+    window = rnd.start if rnd.start is not None else (0.0, sc.period * (sc.steps - 1))
+    start = window[0] + (window[1] - window[0]) * u[:, 5]
+    turn = u[:, 1] < rnd.turn_share
+    rate = np.deg2rad(rnd.turn_rate_deg_s[0] + (rnd.turn_rate_deg_s[1] - rnd.turn_rate_deg_s[0]) * u[:, 2])
+    total = np.deg2rad(rnd.turn_deg[0] + (rnd.turn_deg[1] - rnd.turn_deg[0]) * u[:, 3])
+    side = np.where(u[:, 4] < 0.5, 1.0, -1.0)
+    f_lo, f_hi = rnd.speed_factor
+    factor = np.exp(np.log(f_lo) + np.log(f_hi / f_lo) * u[:, 3])
+    acc = rnd.acceleration[0] + (rnd.acceleration[1] - rnd.acceleration[0]) * u[:, 2]
+    speed = np.hypot(x0[:, 2], x0[:, 3])
+    change = speed * (factor - 1.0)
+    duration = np.where(turn, total / rate, np.abs(change) / acc)
+    kind = np.where(u[:, 0] < rnd.probability, np.where(turn, TURN, SPEED_CHANGE), 0)
+    return Manoeuvres.from_slots(kind[:, None], start[:, None], duration[:, None],
+                                 np.where(turn, side * rate, 0.0)[:, None],
+                                 np.where(turn, 0.0, np.sign(change) * acc)[:, None], cfg.body_fixed_share)
+
+
+def passage_manoeuvres(sc: Scenario, x0, random: bool, streams) -> Manoeuvres:
+    """The manoeuvre schedule of passages starting at ``x0`` (runs, 9): the nominal passage's scheduled
+    manoeuvres, or random passages' draws from ``[manoeuvres.random]``."""
+    if random:
+        return _random_manoeuvres(sc, x0, streams)
+    return nominal_manoeuvres(sc.manoeuvres, sc.passage.velocity, x0.shape[0])
+
+
+def manoeuvring_truth(x0, manoeuvres: Manoeuvres, times):
+    """True states (runs, K, 9) (columns :data:`STATE_LABELS`), course (unwrapped, rad) and labels (runs, K)
+    of passages starting at ``x0`` (runs, 9) with a schedule: exact motion, the moment's body-fixed share
+    turned with the hull (:mod:`shipsense.physics.manoeuvre`)."""
+    pos, vel, course, label = manoeuvring_motion(x0[:, 0:2], x0[:, 2:4], manoeuvres, times)
+    truth = np.repeat(x0[:, None, :], np.shape(times)[-1], axis=1)
+    truth[..., 0:2], truth[..., 2:4] = pos, vel
+    turn = course - np.arctan2(x0[:, None, 3], x0[:, None, 2])        # the hull's turn since t = 0
+    truth[..., 5:8] = turned_moment(x0[:, None, 5:8], turn, manoeuvres.body_fixed_share)
+    return truth, course, label
+
+
 def keel_dipole(velocity, p):
     """Horizontal electric dipole ``p v/|v|`` along the keel, (..., 3)."""
     speed = np.linalg.norm(velocity, axis=-1, keepdims=True)
@@ -207,9 +287,17 @@ def simulate(scenario, runs: int | None = None, seed: int | None = None, *, rand
     array = sc.array()
     times = sc.times
     x0 = _passages(sc, runs, random, streams)
+    manoeuvres = passage_manoeuvres(sc, x0, random, streams)
 
-    truth = np.repeat(x0[:, None, :], sc.steps, axis=1)
-    truth[..., 0:2] = cv_positions(x0[:, 0:2], x0[:, 2:4], times)
+    if manoeuvres.any:
+        truth, course, label = manoeuvring_truth(x0, manoeuvres, times)
+        heading = np.arctan2(np.sin(course), np.cos(course))
+    else:
+        truth = np.repeat(x0[:, None, :], sc.steps, axis=1)
+        truth[..., 0:2] = cv_positions(x0[:, 0:2], x0[:, 2:4], times)
+        heading = np.broadcast_to(np.arctan2(x0[:, None, 3], x0[:, None, 2]), (runs, sc.steps)).copy()
+        label = np.zeros((runs, sc.steps), dtype=np.int8)
+    speed = np.hypot(truth[..., 2], truth[..., 3])
     sources = truth[..., [0, 1, 4]]
     moments = truth[..., 5:8]
     dipoles = keel_dipole(truth[..., 2:4], truth[..., 8])
@@ -233,19 +321,19 @@ def simulate(scenario, runs: int | None = None, seed: int | None = None, *, rand
         meas[..., axial] = wrap_axial(meas[..., axial])
     if sc.envelope_chain.mode == "raw" and any(t == "electrode" and k in ("envelope", "magnitude")
                                                for t, k in zip(array.types, array.kinds)):
-        cols, env = _envelope_chain(sc, array, x0, streams)
+        cols, env = _envelope_chain(sc, array, x0, manoeuvres, streams)
         meas[..., cols] = env
 
     mask = dropout_mask(streams["dropout"], shape, sc.noise.dropout)
     meas = np.where(mask, meas, np.nan)
-    return Simulation(sc, array, times, truth, clean, meas, mask)
+    return Simulation(sc, array, times, truth, clean, meas, mask, heading, speed, label, manoeuvres)
 
 
 RAW_CHUNK_BYTES = 4 * 2**20
 """Raw shaft-rate samples the envelope chain simulates at once (runs beyond it go in chunks)."""
 
 
-def _envelope_chain(sc: Scenario, array: SensorArray, x0, streams):
+def _envelope_chain(sc: Scenario, array: SensorArray, x0, manoeuvres: Manoeuvres, streams):
     """Envelopes of the envelope and magnitude electrodes from simulated raw shaft-rate channels.
 
     Every such sensor records its three channels raw; an envelope sensor reports each channel's envelope, a
@@ -269,9 +357,13 @@ def _envelope_chain(sc: Scenario, array: SensorArray, x0, streams):
     envelopes = []
     for lo in range(0, x0.shape[0], rows):
         x = x0[lo:lo + rows]
-        src = np.concatenate([cv_positions(x[:, 0:2], x[:, 2:4], raw_t), np.broadcast_to(
-            x[:, None, 4:5], (x.shape[0], raw_t.size, 1))], axis=-1)
-        dip = keel_dipole(x[:, None, 2:4], x[:, None, 8])
+        if manoeuvres.any:    # the raw samples' own positions and keel directions
+            pos, vel, _, _ = manoeuvring_motion(x[:, 0:2], x[:, 2:4], manoeuvres.take(slice(lo, lo + rows)), raw_t)
+            dip = keel_dipole(vel, x[:, None, 8])
+        else:
+            pos = cv_positions(x[:, 0:2], x[:, 2:4], raw_t)
+            dip = keel_dipole(x[:, None, 2:4], x[:, None, 8])
+        src = np.concatenate([pos, np.broadcast_to(x[:, None, 4:5], (x.shape[0], raw_t.size, 1))], axis=-1)
         E = array.electric_field(src, dip)[..., chained, :]          # (runs, n_raw, S_chain, 3)
         raw = raw_channels(E.reshape(E.shape[:2] + (-1,)), raw_t, ch.shaft_hz, noise_std=ch.raw_noise_std,
                            rng=streams["envelope"]).reshape(E.shape)

@@ -69,6 +69,9 @@ UNITS = {
     ("TrackerOptions", "consistency_window"): "samples", ("TrackerOptions", "consistency_level"): "- (test level)",
     ("TrackerOptions", "rescan"): "-",
     ("TrackerConfig", "filter"): "-", ("TrackerConfig", "n_pu"): "-",
+    ("ManoeuvreConfig", "body_fixed_share"): "- (fraction)", ("SpeedChangeConfig", "factor"): "- (ratio)",
+    ("RandomManoeuvreConfig", "probability"): "- (probability)",
+    ("RandomManoeuvreConfig", "turn_share"): "- (fraction)",
 }
 
 SUFFIXES = {"_deg": "degrees", "_hz": "Hz", "_s": "s", "_m": "m"}
@@ -77,7 +80,9 @@ TOML_TABLE = {"Scenario": "top level", "SensorConfig": "[[sensors]]", "MediumCon
               "NoiseConfig": "[noise]", "EnvelopeChainConfig": "[envelope_chain]", "SeismicConfig": "[seismic]",
               "TrackerOptions": "[tracker] (the project's tracker)",
               "TrackerConfig": "[tracker] (the source studies' filter and bank)",
-              "ProcessNoiseConfig": "[tracker.process_noise]", "BankConfig": "[tracker.bank]"}
+              "ProcessNoiseConfig": "[tracker.process_noise]", "BankConfig": "[tracker.bank]",
+              "ManoeuvreConfig": "[manoeuvres]", "TurnConfig": "[[manoeuvres.turns]]",
+              "SpeedChangeConfig": "[[manoeuvres.speed_changes]]", "RandomManoeuvreConfig": "[manoeuvres.random]"}
 
 
 def _strip_annotated(tp):

@@ -15,6 +15,7 @@ Units are SI throughout (m, s, T, V/m, A·m², A·m, S/m, rad) except where a fi
 
 from shipsense.config.fields import ScenarioError, format_error
 from shipsense.config.load import load_scenario, shipped_scenarios
+from shipsense.config.manoeuvres import ManoeuvreConfig, RandomManoeuvreConfig, SpeedChangeConfig, TurnConfig
 from shipsense.config.scenario import (
     MIN_SENSOR_SPACING,
     MIN_SOURCE_DISTANCE,
@@ -33,6 +34,7 @@ from shipsense.config.scenario import (
 from shipsense.config.tracker import FILTERS, BankConfig, ProcessNoiseConfig, TrackerConfig, TrackerOptions
 
 __all__ = ["FILTERS", "MIN_SENSOR_SPACING", "MIN_SOURCE_DISTANCE", "BankConfig", "EarthConfig", "EnvelopeChainConfig",
-           "MediumConfig", "NoiseConfig", "PassageConfig", "PriorConfig", "ProcessNoiseConfig", "Scenario",
-           "ScenarioError", "SeismicConfig", "SensorConfig", "TrackerConfig", "TrackerOptions", "format_error",
-           "load_scenario", "shipped_scenarios", "to_toml", "validate_scenario"]
+           "ManoeuvreConfig", "MediumConfig", "NoiseConfig", "PassageConfig", "PriorConfig", "ProcessNoiseConfig",
+           "RandomManoeuvreConfig", "Scenario", "ScenarioError", "SeismicConfig", "SensorConfig", "SpeedChangeConfig",
+           "TrackerConfig", "TrackerOptions", "TurnConfig", "format_error", "load_scenario", "shipped_scenarios",
+           "to_toml", "validate_scenario"]

@@ -32,6 +32,7 @@ from shipsense.config.fields import (
     format_error,
     within,
 )
+from shipsense.config.manoeuvres import ManoeuvreConfig, check_manoeuvres
 from shipsense.config.tracker import TrackerConfig
 from shipsense.physics.array import CHANNELS, KINDS, SensorArray
 from shipsense.physics.electric import Medium
@@ -209,6 +210,7 @@ class Scenario(ConfigModel):
     earth: EarthConfig = EarthConfig()
     passage: PassageConfig
     prior: PriorConfig | None = None
+    manoeuvres: ManoeuvreConfig | None = None
     noise: NoiseConfig = NoiseConfig()
     envelope_chain: EnvelopeChainConfig = EnvelopeChainConfig()
     seismic: SeismicConfig = SeismicConfig()
@@ -250,12 +252,12 @@ class Scenario(ConfigModel):
             raise ValueError("passage.p: electrode sensors need the source's dipole moment p (A·m)")
         if math.hypot(*self.passage.velocity) == 0 and "electrode" in types:
             raise ValueError("passage.velocity: the electric dipole lies along the keel, so the speed must be > 0")
-        # closest approach of the nominal passage to every sensor
+        # closest approach of the nominal passage to every sensor (a manoeuvring one: check_manoeuvres)
         start = np.array([*self.passage.start, zt])
         vel = np.array([*self.passage.velocity, 0.0])
         duration = self.period * (self.steps - 1)
         vv = vel @ vel
-        for s in self.sensors:
+        for s in self.sensors if self.manoeuvres is None or not self.manoeuvres.scheduled else ():
             rel = np.array(s.position) - start
             t = 0.0 if vv == 0 else float(np.clip(rel @ vel / vv, 0.0, duration))
             gap = np.linalg.norm(rel - t * vel)
@@ -271,6 +273,8 @@ class Scenario(ConfigModel):
                 raise ValueError("prior.moment: magnetometers need a moment magnitude range [min, max]")
             if "electrode" in types and self.prior.p is None:
                 raise ValueError("prior.p: electrode sensors need a dipole moment range [min, max]")
+        if self.manoeuvres is not None:
+            check_manoeuvres(self, MIN_SOURCE_DISTANCE)
         if self.tracker is not None:
             pn = self.tracker.process_noise
             n = self.n_params

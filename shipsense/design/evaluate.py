@@ -8,7 +8,8 @@ reported are the convergence rate, the mean TRMSE of the reported estimate
 its RMSE over the second half of the passage, the same over the samples
 where the method reports a track (the tracker: `tracking` or `restarted`;
 the bank always does) with their share, against the posterior CRLB on those
-samples (the ratio), and the ambiguity verdict of the array.
+samples (the ratio; for manoeuvring passages each one's PCRLB conditional on its true manoeuvres,
+:mod:`~shipsense.design.manoeuvre_bound`), and the ambiguity verdict of the array.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from shipsense.design.fisher import pcrlb
+from shipsense.design.manoeuvre_bound import simulation_bound
 from shipsense.design.observability import check_array
 from shipsense.models.field_model import model_from_scenario
 from shipsense.trackers.bank.bank import run_bank
@@ -81,7 +83,10 @@ def evaluate_layout(scenario, passages=50, seed=HELD_OUT_SEED, filter_name=None,
     err = position_error(est, truth)[:, half:]
     tracked = tracked[:, half:]
     P0i = model.cov_to_internal(P0)
-    bounds = pcrlb(model, model.to_internal(truth), np.linalg.inv(P0i))[half:]
+    if sim.manoeuvres.any:   # each passage's bound conditional on its true manoeuvres
+        bounds = simulation_bound(model, sim, np.linalg.inv(P0i))[:, half:]
+    else:
+        bounds = pcrlb(model, model.to_internal(truth), np.linalg.inv(P0i))[half:]
     trace = np.broadcast_to(position_crlb_trace(model.cov_to_si(bounds)), err.shape)
     rmse = float(np.sqrt(np.mean(err ** 2)))
     rmse_tracked = float(np.sqrt(np.mean(err[tracked] ** 2))) if tracked.any() else float("nan")

@@ -156,17 +156,36 @@ def measurement_information(model, states, per_run=True):
     return np.einsum("rkcn,rkcp->rknp" if per_run else "rkcn,rkcp->knp", Hw, Hw)
 
 
-def pcrlb_from_information(model, info, J0, Q=None):
+def pcrlb_from_information(model, info, J0, Q=None, F=None):
     """The (P)CRLB recursion of :func:`pcrlb` from measurement information ``info`` (R, K, n, n): bounds
-    (R, K, n, n)."""
+    (R, K, n, n).
+
+    ``F`` (R or 1, K-1, n, n), optional: the transition of every step instead of ``model.A``, the bound
+    conditional on a known sequence of motions (a manoeuvring passage's true turns and speed changes,
+    :mod:`shipsense.design.manoeuvre_bound`): :math:`J_{k+1} = (Q + F_k J_k^{-1} F_k^T)^{-1} + I_{k+1}`.
+    ``Q`` may then be per step too, (R or 1, K-1, n, n).
+    """
     A = model.A
     Q = model.Q if Q is None else np.asarray(Q, dtype=float)
     deterministic = not np.any(Q)
-    Ainv = np.linalg.inv(A)
     K = info.shape[1]
     out = np.empty(info.shape)
     J = J0 + info[:, 0]
     out[:, 0] = np.linalg.inv(J)
+    if F is not None:
+        F = np.asarray(F, dtype=float)
+        for k in range(1, K):
+            Fk = F[:, k - 1]
+            if deterministic:   # J_k = F^-T J_{k-1} F^-1 + I_k
+                G = np.linalg.solve(np.swapaxes(Fk, -1, -2), J)
+                J = np.swapaxes(np.linalg.solve(np.swapaxes(Fk, -1, -2), np.swapaxes(G, -1, -2)), -1, -2)
+                J = J + info[:, k]
+            else:
+                Qk = Q if Q.ndim == 2 else Q[:, k - 1]
+                J = np.linalg.inv(Qk + Fk @ out[:, k - 1] @ np.swapaxes(Fk, -1, -2)) + info[:, k]
+            out[:, k] = np.linalg.inv(J)
+        return out
+    Ainv = np.linalg.inv(A)
     for k in range(1, K):
         if deterministic:   # J_k = A^-T J_{k-1} A^-1 + I_k
             J = Ainv.T @ J @ Ainv + info[:, k]

@@ -16,6 +16,9 @@ Process noise: (a) ``Q = sigma_q I`` (the magnetic source study, sigma_q =
 step on each parameter (the default for new scenarios).  Reference:
 Bar-Shalom, Li & Kirubarajan, *Estimation with Applications to Tracking and
 Navigation*, §6.3.2.
+
+The truth of manoeuvring passages (coordinated turns, along-track speed changes) and the transitions of
+their steps: :mod:`shipsense.physics.manoeuvre`.
 """
 
 from __future__ import annotations
