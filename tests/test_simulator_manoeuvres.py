@@ -1,8 +1,8 @@
 """Manoeuvring passages in the simulator: straight scenarios unchanged to the bit, the truth of turns and speed
 changes, the moment's body-fixed share, random manoeuvres' reproducibility and the written schedule."""
 
-import hashlib
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,28 +12,24 @@ from shipsense.config import shipped_scenarios
 from shipsense.physics.manoeuvre import SPEED_CHANGE, STRAIGHT, TURN
 from shipsense.simulator import keel_dipole
 
-# sha256 (first 16 hex digits) of times, truth, clean, measurements and mask of simulate(name, runs=3, seed=5,
-# random=...), made by the simulator before manoeuvres existed (commit 6df8b14), on the straight scenarios
-FROZEN = {
-    "S0/nominal": "13556ceaf1748565", "S0/random": "a5802161c7e05d6c",
-    "S1-P1/nominal": "f6c2e6d2543bab9a", "S1-P1/random": "22f1dd5d9b534da9",
-    "S1-P2/nominal": "4fc10208f97aa9a7", "S1-P2/random": "c34294698d4bae1d",
-    "S2-field-trial/nominal": "e0e7fc20d601ce27", "S2-field-trial/random": "1f7479077488f7c7",
-    "S2/nominal": "7ac285539cfd12bf", "S2/random": "69a8d121c12b4408",
-    "demo/nominal": "77250ede3cfe3478", "demo/random": "3d31ed11daffc8fd",
-    # the chains (runs=2, seed=3, random): S2 with the seismic chain, demo (40 steps) with the raw envelopes
-    "S2/seismic-chain/random": "2a8bef58a2dba66e", "demo/raw-envelope/random": "3be000b8df727c2a",
-}
+# fingerprints (sums, sums of squares, NaN counts and five values of times, truth, clean, measurements and mask)
+# of simulate(name, runs=3, seed=5, random=...) made by the simulator before manoeuvres existed (commit 6df8b14),
+# on the straight scenarios, and of the seismic and raw envelope chains (runs=2, seed=3, random); compared to
+# 1e-9 so that another machine's last bits (BLAS, libm) do not fail it while any change of a draw or a formula does
+FROZEN = json.loads((Path(__file__).parent / "data" / "straight_simulations.json").read_text())
 
 
-def digest(sim):
-    h = hashlib.sha256()
+def fingerprint(sim):
+    out = []
     for a in (sim.times, sim.truth, sim.clean, sim.measurements, sim.mask):
-        h.update(np.ascontiguousarray(a).tobytes())
-    return h.hexdigest()[:16]
+        a = np.asarray(a, dtype=float).ravel()
+        fin = np.where(np.isfinite(a), a, 0.0)
+        idx = np.linspace(0, a.size - 1, 5).astype(int)
+        out += [float(np.sum(fin)), float(np.sum(fin * fin)), float(np.isnan(a).sum())] + [float(fin[i]) for i in idx]
+    return out
 
 
-def test_scenarios_without_manoeuvres_simulate_to_the_bit_as_before():
+def test_scenarios_without_manoeuvres_simulate_as_before():
     got = {}
     straight = [n for n in shipped_scenarios() if load_scenario(n).manoeuvres is None]
     assert set(straight) >= {"S0", "S1-P1", "S1-P2", "S2", "S2-field-trial", "demo"}
@@ -41,14 +37,16 @@ def test_scenarios_without_manoeuvres_simulate_to_the_bit_as_before():
         for random in (False, True):
             key = f"{name}/{'random' if random else 'nominal'}"
             if key in FROZEN:
-                got[key] = digest(simulate(name, runs=3, seed=5, random=random))
+                got[key] = fingerprint(simulate(name, runs=3, seed=5, random=random))
     sc = load_scenario("S2")
-    got["S2/seismic-chain/random"] = digest(simulate(sc.with_updates(
+    got["S2/seismic-chain/random"] = fingerprint(simulate(sc.with_updates(
         seismic={**sc.seismic.model_dump(), "mode": "chain"}), runs=2, seed=3, random=True))
     sc = load_scenario("demo")
-    got["demo/raw-envelope/random"] = digest(simulate(sc.with_updates(
+    got["demo/raw-envelope/random"] = fingerprint(simulate(sc.with_updates(
         envelope_chain={**sc.envelope_chain.model_dump(), "mode": "raw"}, steps=40), runs=2, seed=3, random=True))
-    assert got == FROZEN
+    assert set(got) == set(FROZEN)
+    for key in FROZEN:
+        np.testing.assert_allclose(got[key], FROZEN[key], rtol=1e-9, atol=1e-300, err_msg=key)
 
 
 def test_straight_truth_carries_heading_speed_and_no_manoeuvre():
