@@ -96,11 +96,10 @@ class PassageV1Core(PassagePrefetch):
         # (the next blocks of this many environments are left in one piece of work, their run-ins in one batch)
         PassagePrefetch.__init__(self, max(1, min(self.E, self.tracker.independent_batch // PASSAGE_BLOCK)))
         self._rows = np.arange(E)
-        # the observer's noise (internal units) and the one-step transition
+        # the observer's noise and the one-step transition, in the model's internal units (the estimates are
+        # brought there by the model: FieldModel.to_internal, cov_to_internal)
         self._Rinv = np.ascontiguousarray(1.0 / self.tracker.filter_model.R, dtype=float)
         self._A = self.model.A
-        self._xs = self.model.x_scale
-        self._xs2 = np.outer(self._xs, self._xs)
         self._first = np.asarray(self.first_channel, dtype=np.int64)
 
     # -- episodes ---------------------------------------------------------------
@@ -190,9 +189,8 @@ class PassageV1Core(PassagePrefetch):
         envs = envs[~blind]   # (the prior's mean is the array centroid: a sensor may sit there)
         if envs.size == 0:
             return
-        x = (self.last.estimate[envs] / self._xs) @ self._A.T
-        P = self.last.cov[envs] / self._xs2
-        P = self._A @ P @ self._A.T
+        x = self.model.to_internal(self.last.estimate[envs]) @ self._A.T
+        P = self._A @ self.model.cov_to_internal(self.last.cov[envs]) @ self._A.T
         self.gains[envs] = information_gains_at(self.model, x, self._Rinv, P, self._first, self.subsets)
 
     def _blind(self, envs):
