@@ -354,7 +354,7 @@ def test_the_grid_fit_equals_a_least_squares_solve_per_candidate(monkeypatch):
     solve of the masked normal equations; passages in chunks, alone, and candidates on one thread give the
     same numbers."""
     from shipsense.models.field_model import model_from_scenario
-    from shipsense.trackers.init import grid_basis as initialiser
+    from shipsense.trackers.init import grid as initialiser
     from shipsense.trackers.init.grid import grid_fit
     from shipsense.trackers.init.grid_basis import _window_major
 
