@@ -136,6 +136,7 @@ its whole ``overrides`` dict.
   2026-11-28: its module, registration and tests removed (it could not run
   on v1's core as arguments); the docs' Results keep its figures.
 """
+
 from __future__ import annotations
 
 import gymnasium as gym
