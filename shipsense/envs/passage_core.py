@@ -18,7 +18,7 @@ from shipsense.trackers import Tracker
 from shipsense.trackers.tracker.results import INITIALISING, NO_DATA
 
 RECORDED = ("estimate", "cov", "status", "selected")
-"""What the environment keeps of its observer's output (:attr:`PassageV1Core.last`)."""
+"""What the environment keeps of its observer's output (``PassageV1Core.last``, a Sample of these fields)."""
 
 
 def _copy_outputs(sample, rows, into):
