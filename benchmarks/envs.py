@@ -112,7 +112,7 @@ def queued_rate(venv, actions, cycles=REPEATS):
     vector steps each, more than 16 episodes of every sub-environment) after one untimed cycle.
 
     Its observers' run-ins are done ahead, for every passage queued (a block of ``PASSAGE_BLOCK`` per
-    sub-environment), in one batch (:meth:`~shipsense.envs.passage_v1.PassageV1Core.run_ins`): a run of a
+    sub-environment), in one batch (:meth:`~shipsense.envs.passage_core.PassageV1Core.run_ins`): a run of a
     few episodes from a reset pays for the run-ins of all the queued passages and uses two of them, and reads
     a rate far below a training run's.  After a cycle the sub-environments' queues are at different points of
     their blocks, and the timed cycles pay for the run-ins they use, as a training run does.  Cycles differ in

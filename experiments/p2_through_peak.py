@@ -33,7 +33,7 @@ def main(argv=None):
     for label, peak in (("window only", None), (f"through the peak ({args.through_peak})", args.through_peak)):
         t0 = time.perf_counter()
         est, pos_cov, t_init = track_global(unit, model, y, sc, **wide.init_options(name, sc), through_peak=peak)
-        m = wide._metrics(est, pos_cov, truth, bounds, (time.perf_counter() - t0) / args.runs, ends)
+        m = wide.method_row(est, pos_cov, truth, bounds, (time.perf_counter() - t0) / args.runs, ends)
         shown = ", ".join(f"{k} {v:.3g}" for k, v in m.items() if v is not None)
         print(f"{label}: initialiser {t_init / args.runs:.3f} s per passage; {shown}")
 

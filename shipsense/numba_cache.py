@@ -5,73 +5,124 @@ contents), not of the files whose functions it inlines or whose constants it fre
 after an edit of only ``shipsense/models/measurement.py``, or an upgrade that changed it, the filter steps
 in ``fused.py`` that inline its measurement function would load stale machine code.  Each module with
 compiled kernels ends with :func:`key_on_sources`, which replaces its kernels' stamp by a hash of the module
-and of every package file it takes code or constants from (:data:`DEPENDS`, transitively), so that a change
-in any of them rebuilds it.  The stamp is a private attribute of numba's cache
+and of every package file it takes code or constants from (:func:`sources`: its module-level imports,
+transitively, read from the sources at import), so that a change in any of them rebuilds it: moving a module or
+adding an import needs no table.  The stamp is a private attribute of numba's cache
 (``Dispatcher._cache._cache_file._source_stamp``, numba 0.5x-0.6x); a numba without it keeps its own
 behaviour.
 """
 
 from __future__ import annotations
 
+import ast
 import hashlib
+import re
 from pathlib import Path
-
-DEPENDS = {
-    "design/information_gain.py": ("models/measurement.py", "trackers/linalg.py"),
-    "envs/features.py": (),
-    "envs/passage_v1.py": ("arguments.py", "design/information_gain.py", "envs/core_env.py", "envs/features.py",
-                           "envs/prefetch.py", "simulator.py", "trackers/tracker/results.py"),
-    "models/measurement.py": ("parallel.py", "physics/hed_kernel.py", "physics/kernels.py"),
-    "physics/hed_kernel.py": (),
-    "physics/kernels.py": ("physics/magnetic.py",),
-    "trackers/bank/selection.py": (),
-    "trackers/filters/kernels.py": ("models/measurement.py", "trackers/filters/core.py", "trackers/linalg.py"),
-    "trackers/fit/lm.py": ("models/measurement.py", "parallel.py", "trackers/linalg.py"),
-    "trackers/init/detection.py": (),
-    "trackers/init/distinct.py": (),
-    "trackers/init/grid.py": ("models/measurement.py", "models/transitions.py", "trackers/fit/least_squares.py",
-                              "trackers/init/distinct.py", "trackers/linalg.py"),
-    "trackers/linalg.py": (),
-    "trackers/tracker/consistency.py": (),
-    "trackers/tracker/restarts.py": ("models/transitions.py", "trackers/fit/least_squares.py",
-                                     "trackers/init/detection.py", "trackers/init/distinct.py",
-                                     "trackers/init/global_init.py", "trackers/init/window_fits.py"),
-    "trackers/tracker/step.py": ("models/measurement.py", "parallel.py", "trackers/bank/selection.py",
-                                 "trackers/filters/fused.py", "trackers/filters/kernels.py",
-                                 "trackers/init/detection.py", "trackers/tracker/consistency.py"),
-}
-"""Each file with compiled kernels (relative to the package) and the package modules it imports at module
-level (tests/test_numba_cache.py checks this against the sources)."""
 
 PACKAGE = Path(__file__).parent
 
+_IMPORT = re.compile(rb"^from[ \t]+\w+(?:\.\w+)*[ \t]+import[ \t]+(?:\([^)]*\)|[^\n]*)", re.M)
+"""A module-level ``from X import ...`` statement: at the start of a line (a statement inside a function, a class
+or an ``if`` is indented), its names on the line or in parentheses."""
 
-def sources(name, depends=DEPENDS):
-    """``name`` and every file its compiled code may take from: its imports, and theirs if they are kernel
-    files too (sorted)."""
+_SCANNED: dict = {}
+"""(path, mtime_ns, size) -> (the file's bytes, the package files it imports): each file is read and scanned
+once per process while it is unchanged."""
+
+
+def _scan(root, name):
+    """The bytes of ``root/name`` and the package files (relative to ``root``) it imports at module level."""
+    path = Path(root) / name
+    st = path.stat()
+    key = (str(path), st.st_mtime_ns, st.st_size)
+    hit = _SCANNED.get(key)
+    if hit is None:
+        data = path.read_bytes()
+        try:    # the import statements alone (parsing every file whole at import would cost a noticeable time)
+            nodes = [ast.parse(m.group(0)).body[0] for m in _IMPORT.finditer(data)]
+        except SyntaxError:    # (a statement the pattern cut short, e.g. continued by a backslash: the whole file)
+            nodes = [n for n in ast.parse(data).body if isinstance(n, ast.ImportFrom)]
+        found = set()
+        for node in nodes:
+            if node.level == 0 and node.module:
+                found.update(module_files(node.module, [a.name for a in node.names], root))
+        hit = _SCANNED[key] = (data, tuple(sorted(found)))
+    return hit
+
+
+def module_files(module, names, root=PACKAGE):
+    """The package files (relative to ``root``, the package's folder, named as the package) a statement ``from
+    module import names`` takes code from: the module's file, or for a package the files of the submodules it
+    names and, if it names anything else, the package's ``__init__.py``.  Empty for a module outside the
+    package."""
+    root = Path(root)
+    parts = module.split(".")
+    if parts[0] != root.name:
+        return []
+    base = root.joinpath(*parts[1:])
+    if base.with_suffix(".py").is_file():
+        return [base.with_suffix(".py").relative_to(root).as_posix()]
+    if not (base / "__init__.py").is_file():
+        return []
+    out, rest = [], False
+    for n in names:
+        for sub in (base / f"{n}.py", base / n / "__init__.py"):
+            if sub.is_file():
+                out.append(sub.relative_to(root).as_posix())
+                break
+        else:
+            rest = True
+    if rest:
+        out.append((base / "__init__.py").relative_to(root).as_posix())
+    return out
+
+
+def imports_of(name, root=PACKAGE):
+    """The package files that file ``name`` (relative to ``root``) imports at module level (sorted): read from
+    its source, its ``from shipsense... import ...`` statements at the start of a line (:func:`module_files`).
+    A file is read once per process while it is unchanged."""
+    return _scan(root, name)[1]
+
+
+def sources(name, root=PACKAGE):
+    """``name`` and every package file its compiled code may take code or constants from: its module-level
+    imports, theirs, and so on (sorted)."""
     seen, todo = set(), [name]
     while todo:
         f = todo.pop()
         if f not in seen:
             seen.add(f)
-            todo.extend(depends.get(f, ()))
+            todo.extend(imports_of(f, root))
     return sorted(seen)
 
 
-def sources_digest(name, root=PACKAGE, depends=DEPENDS):
+def sources_digest(name, root=PACKAGE):
     """SHA-256 of the names and contents of :func:`sources` of ``name``."""
     h = hashlib.sha256()
-    for f in sources(name, depends):
-        h.update(f.encode() + b"\0" + (Path(root) / f).read_bytes() + b"\0")
+    for f in sources(name, root):
+        h.update(f.encode() + b"\0" + _scan(root, f)[0] + b"\0")
     return h.digest()
 
 
-def key_on_sources(namespace, root=PACKAGE, depends=DEPENDS):
+def kernel_files(root=PACKAGE):
+    """The package files that key their compiled kernels (:func:`key_on_sources` on their last line), sorted."""
+    root = Path(root)
+    return sorted(p.relative_to(root).as_posix() for p in root.rglob("*.py")
+                  if p.read_bytes().rstrip().rpartition(b"\n")[2].startswith(b"numba_cache.key_on_sources(globals())"))
+
+
+def depends(root=PACKAGE):
+    """Each kernel file (:func:`kernel_files`) and the package files it imports at module level
+    (:func:`imports_of`): the graph :func:`sources` follows, derived from the sources."""
+    return {name: imports_of(name, root) for name in kernel_files(root)}
+
+
+def key_on_sources(namespace, root=PACKAGE):
     """Stamp the cached kernels defined in a module (its ``globals()``, and the values of its dicts: kernels
     a factory made) with :func:`sources_digest`; returns how many.  Call it at the end of the module, after
     its kernels are defined (numba reads the stamp when it first loads or saves a kernel, at its first call)."""
     name = Path(namespace["__file__"]).resolve().relative_to(Path(root).resolve()).as_posix()
-    digest = sources_digest(name, root, depends)
+    digest = sources_digest(name, root)
     count = 0
     found = []
     for obj in list(namespace.values()):   # the module's kernels, also those it keeps in a dict (kernel factories)

@@ -1,10 +1,12 @@
-"""What the Passage environment computes from its observer's output, compiled for their per-environment
-kernels (inlined): the track's observation features and its position error and NEES against the truth."""
+"""The Passage environment's compiled per-environment kernels: the sensors an action reads, what it computes
+from its observer's output (the observation's features, the position error and NEES against the truth) and the
+episode's sums (:class:`~shipsense.envs.passage_core.PassageV1Core` calls them on all its environments at once)."""
 
 from __future__ import annotations
 
 import math
 
+import numpy as np
 from numba import njit
 
 from shipsense import numba_cache
@@ -34,6 +36,80 @@ def error_and_nees(d0, d1, a, b, c):
     """Position error ``|d|`` and NEES ``d^T C^-1 d`` of an error ``d = (d0, d1)`` with covariance ``C = [[a,
     b], [b, c]]`` (its inverse in closed form; not finite where ``C`` is singular)."""
     return math.hypot(d0, d1), (c * (d0 * d0) - 2 * b * d0 * d1 + a * (d1 * d1)) / (a * c - b * b)
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def write_observations(est, cov, status, k, since, gains, centre, position_scale, steps, obs):
+    """:meth:`~shipsense.envs.passage_core.PassageV1Core.observe` into ``obs`` (E, 9 + 2 S) float32: the table's
+    entries in float64 (NaN -> 0, +-inf -> +-1), clipped to [-1, 1]."""
+    S = since.shape[1]
+    row = np.empty(obs.shape[1])
+    for e in range(est.shape[0]):
+        track_features(est[e], cov[e], centre, position_scale, row)
+        row[6] = cov[e, 0, 1] / math.sqrt(at_least(cov[e, 0, 0] * cov[e, 1, 1], 1e-300))
+        row[7] = status[e] / 4.0
+        row[8] = k[e] / steps
+        for s in range(S):
+            row[9 + s] = since[e, s] / steps
+            g = at_least(gains[e, 1 + s], 0.0)             # the single-sensor actions
+            row[9 + S + s] = g / (1.0 + g)
+        for i in range(row.size):
+            v = row[i]
+            v = 0.0 if v != v else v
+            obs[e, i] = min(max(v, -1.0), 1.0)
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def read_sensors(actions, who, subsets, sensor_of, y_all, k, since, last_read, y, reads):
+    """The reads of :meth:`~shipsense.envs.passage_core.PassageV1Core.step`: every environment's reads
+    (``reads``, float) under its action (a row of ``subsets``); for environments ``who``, the next sample
+    (``k``), its channels of the sensors read (``y``, the others NaN), the read mask (``last_read``) and the
+    steps since each sensor was read (``since``: 0 read, else one more).  Returns -1, or the first environment
+    whose action is not a row of ``subsets`` (then nothing is written)."""
+    S = subsets.shape[1]
+    for e in range(actions.size):
+        if actions[e] < 0 or actions[e] >= subsets.shape[0]:
+            return e                                    # (nothing written)
+    for e in range(actions.size):
+        count = 0
+        for s in range(S):
+            count += subsets[actions[e], s]
+        reads[e] = count
+    for i in range(who.size):
+        e = who[i]
+        row = subsets[actions[e]]
+        k[e] += 1
+        for j in range(y.shape[1]):
+            y[i, j] = y_all[e, k[e], j] if row[sensor_of[j]] else np.nan
+        for s in range(S):
+            last_read[e, s] = row[s]
+            since[e, s] = 0.0 if row[s] else since[e, s] + 1.0
+    return -1
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def accumulate_steps(who, rewards, reads, returns, total_reads):
+    """The episode's sums of environments ``who``: their rewards and reads."""
+    for i in range(who.size):
+        e = who[i]
+        returns[e] += rewards[e]
+        total_reads[e] += reads[e]
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def measure_errors(envs, k, est, cov, truth, limit, est_hist, errors, inside, error, nees):
+    """The measurement step of :class:`~shipsense.envs.passage_core.PassageV1Core` on environments ``envs``: the
+    position error (into ``error``) and NEES (``nees``; inf where not finite) at each one's current sample,
+    stored in the histories."""
+    for r in range(envs.size):
+        e = envs[r]
+        ke = k[e]
+        error[r], q = error_and_nees(est[e, 0] - truth[e, ke, 0], est[e, 1] - truth[e, ke, 1], cov[e, 0, 0],
+                                     cov[e, 0, 1], cov[e, 1, 1])
+        nees[r] = q if math.isfinite(q) else np.inf
+        est_hist[e, ke, 0], est_hist[e, ke, 1] = est[e, 0], est[e, 1]
+        errors[e, ke] = error[r]
+        inside[e, ke] = nees[r] <= limit
 
 
 numba_cache.key_on_sources(globals())   # the caches follow the files these kernels are compiled from

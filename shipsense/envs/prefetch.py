@@ -2,7 +2,7 @@
 run-ins done ahead on the process's background thread while the agent steps (:class:`PassagePrefetch`).
 
 A batched core of several environments whose episodes are passages (Passage-v1's,
-:class:`~shipsense.envs.passage_v1.PassageV1Core`) draws them in blocks of :data:`PASSAGE_BLOCK` per
+:class:`~shipsense.envs.passage_core.PassageV1Core`) draws them in blocks of :data:`PASSAGE_BLOCK` per
 environment and seed, and gives each one the observer's run-in (which does not depend on the agent) before
 its episode starts.  Knowing the seeds the coming resets will draw -- the environment's generator, copied,
 says them (:func:`~shipsense.envs.core_env.seed_ahead`), or an evaluation announces them

@@ -26,6 +26,9 @@ from shipsense.tasks import canonical_hash
 
 AMBIGUITY_CHUNK = -1
 """Chunk number of a cell's ambiguity check (one per cell, when the metric is asked for)."""
+DESCRIPTIVE = ("description",)
+"""Scenario fields left out of a cell's key: prose, which does not change what a result is (editing a
+scenario's description keeps its cells' finished tasks)."""
 
 
 @dataclass(frozen=True)
@@ -33,7 +36,7 @@ class Cell:
     """One layout under one site condition."""
 
     index: int
-    key: str
+    key: str         # the hash of what the cell's results are: layout, scenario (less DESCRIPTIVE), method, metrics
     layout: str
     condition: dict
     scenario: dict   # a validated scenario, JSON-able (``Scenario.model_dump(mode="json")``)
@@ -179,7 +182,8 @@ def build_cells(spec: SweepSpec, base_dir: Path) -> list[Cell]:
             except ScenarioError as err:
                 raise SweepError(str(err)) from None
             scenario = sc.model_dump(mode="json")
-            key = canonical_hash({"layout": layout.name, "scenario": scenario, "method": spec.method,
+            what = {k: v for k, v in scenario.items() if k not in DESCRIPTIVE}   # (prose is not what a result is)
+            key = canonical_hash({"layout": layout.name, "scenario": what, "method": spec.method,
                                   "metrics": sorted(spec.metrics), "ambiguity_passages": spec.ambiguity_passages})[:16]
             draws = canonical_hash({"condition": cond})[:16]
             cells.append(Cell(len(cells), key, layout.name, dict(cond), scenario, draws))

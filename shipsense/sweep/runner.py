@@ -48,9 +48,10 @@ class SweepRun:
     workers: int
 
 
-FORMAT = 2
-"""Version of the folder layout and of the seed derivation (2: common random numbers per condition); part of
-the sweep hash, so that a folder written by another scheme is never resumed."""
+FORMAT = 3
+"""Version of the folder layout and of the seed derivation (2: common random numbers per condition; 3: a cell's
+key leaves out the scenario's description, :data:`~shipsense.sweep.cells.DESCRIPTIVE`, so its tasks' file names
+changed); part of the sweep hash, so that a folder written by another scheme is never resumed."""
 
 
 def sweep_hash(spec: SweepSpec) -> str:

@@ -544,7 +544,7 @@ def test_the_run_ins_in_one_batch_observe_what_one_at_a_time_did(monkeypatch):
     environments (``Tracker.set_passage_states``): observations, rewards and errors equal, to the bit, those of
     each passage's run-in alone, its window fitted at the sample it completes (the loop before, replayed
     here), over reset cycles of a vector env."""
-    from shipsense.envs import passage_v1
+    from shipsense.envs import passage_core, passage_v1
 
     def one_at_a_time(self, entries):                                # the run-in before: one passage, its
         for entry in entries:                                       # window fitted at the sample it completes
@@ -553,7 +553,7 @@ def test_the_run_ins_in_one_batch_observe_what_one_at_a_time_did(monkeypatch):
             while self._blind_status(last.status)[0] and k < self.K - 2:
                 k += 1
                 last = trk.update(self.times[k], y[:, k])
-            record = {name: np.copy(getattr(last, name)[0]) for name in passage_v1._RECORDED}
+            record = {name: np.copy(getattr(last, name)[0]) for name in passage_core.RECORDED}
             entry[2] = (k, record, trk.passage_states([0])[0])
 
     def run():
@@ -752,7 +752,7 @@ def test_a_forked_child_does_not_wait_for_a_cache_lock_another_thread_held():
     import os
     import threading
 
-    from shipsense.trackers.init import grid as initialiser
+    from shipsense.trackers.init import grid_basis as initialiser
 
     held, release = threading.Event(), threading.Event()
 

@@ -89,6 +89,23 @@ def test_cells_and_seeds_are_stable_and_distinct(tmp_path):
     assert derive_seed(3, cells[2].draws, 1) == tasks[5].seed
 
 
+def test_a_cell_key_is_what_its_results_are_not_the_scenario_prose(tmp_path):
+    """Editing the base scenario's description keeps every cell's key (and so its finished tasks); editing a
+    value that changes the results (the prior's start ranges) changes them all."""
+    spec, base = load_sweep(_sweep(tmp_path))
+    keys = [c.key for c in build_cells(spec, base)]
+    text = (tmp_path / "base.toml").read_text()
+    assert 'description = """' in text
+    (tmp_path / "base.toml").write_text(text.replace('description = """', 'description = """Reworded. ', 1))
+    reworded = build_cells(spec, base)
+    assert [c.key for c in reworded] == keys
+    assert reworded[0].scenario["description"].startswith("Reworded. ")      # (the cell still carries it)
+    assert "range = [60.0, 120.0]" in text
+    (tmp_path / "base.toml").write_text(text.replace("range = [60.0, 120.0]", "range = [70.0, 120.0]", 1))
+    farther = [c.key for c in build_cells(spec, base)]
+    assert not set(farther) & set(keys)
+
+
 @pytest.mark.parametrize("change, message", [
     ({"layouts": [{"name": "x", "file": "nope.toml"}]}, r"layouts\['x'\]\.file|nope\.toml: no such file"),
     ({"conditions": {"noise_scale": []}}, r"conditions\.noise_scale: an empty list"),

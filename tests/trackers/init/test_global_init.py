@@ -355,7 +355,8 @@ def test_the_grid_fit_equals_a_least_squares_solve_per_candidate(monkeypatch):
     same numbers."""
     from shipsense.models.field_model import model_from_scenario
     from shipsense.trackers.init import grid as initialiser
-    from shipsense.trackers.init.grid import _window_major, grid_fit
+    from shipsense.trackers.init.grid import grid_fit
+    from shipsense.trackers.init.grid_basis import _window_major
 
     model = model_from_scenario("S2")
     ax = model.axial
@@ -399,7 +400,7 @@ def test_grid_terms_keep_their_gram_matrices_inverses():
     """grid_terms' Gram matrices cannot be made writeable and carry their ridge inverses: grid_fit with them
     gives what it gives with a copy (whose inverses it computes per call), bit for bit, on windows with every
     sample present and with some missing."""
-    from shipsense.trackers.init import grid as initialiser
+    from shipsense.trackers.init import grid_basis as initialiser
     from shipsense.trackers.init.grid import candidate_grid, grid_fit, grid_terms, ridge_inverses
 
     model = model_from_scenario(load_scenario("S2"))
@@ -445,8 +446,8 @@ def test_the_grid_terms_serve_shorter_windows_from_a_longer_one_exactly(monkeypa
     """grid_terms keeps each grid's terms for the longest window and serves shorter ones as prefixes: the same
     numbers as computing them (bit for bit, also filled a few candidates at a time, and Gram matrices continued
     from a shorter window's), read-only; a longer window extends the cache."""
-    from shipsense.trackers.init import grid as initialiser
-    from shipsense.trackers.init.grid import _window_major, grid_terms
+    from shipsense.trackers.init import grid_basis as initialiser
+    from shipsense.trackers.init.grid_basis import _window_major, grid_terms
 
     model = model_from_scenario("S2")          # magnetometers and a bearing: offset and basis both nonzero
     grid = candidate_grid(model, [50.0, 150.0], np.arange(0.0, 360.0, 90.0), np.arange(0.0, 360.0, 120.0), [4.0])
@@ -474,7 +475,7 @@ def test_the_candidate_grid_is_kept_and_its_terms_found_by_identity_only_when_fr
     another model, other arguments or another source depth); grid_terms of that grid is served without
     hashing, while a writable grid changed in place gets terms of its new values (it is hashed every
     call)."""
-    from shipsense.trackers.init import grid as initialiser
+    from shipsense.trackers.init import grid_basis as initialiser
     from shipsense.trackers.init.grid import grid_terms
 
     model = model_from_scenario("S2")
@@ -583,7 +584,7 @@ def test_the_grid_caches_serve_threads_at_once():
     import sys
     import threading
 
-    from shipsense.trackers.init import grid as initialiser
+    from shipsense.trackers.init import grid_basis as initialiser
     from shipsense.trackers.init.grid import grid_terms
 
     model = model_from_scenario("S2")
@@ -622,7 +623,7 @@ def test_one_thread_at_a_time_fills_the_grid_caches(monkeypatch):
     bookkeeping is not interleaved: interleaved, dict iterations raised 'changed size during iteration')."""
     import threading
 
-    from shipsense.trackers.init import grid as initialiser
+    from shipsense.trackers.init import grid_basis as initialiser
     from shipsense.trackers.init.grid import grid_terms
 
     model = model_from_scenario("S2")
