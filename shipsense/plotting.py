@@ -156,7 +156,11 @@ def plot_track(summary, times, path, truth=None, title=None, ellipses=8):
                            color=colour, alpha=0.3, lw=0, label=STATUSES[code])
     values = np.concatenate(curves)
     if np.any(np.isfinite(values) & (values > 0)):
+        from matplotlib.ticker import FormatStrFormatter, NullFormatter
+
         b.set_yscale("log")
+        b.yaxis.set_major_formatter(FormatStrFormatter("%g"))   # plain numbers: no mathtext to lay out
+        b.yaxis.set_minor_formatter(NullFormatter())
     else:
         b.text(0.5, 0.5, "no sample tracked: no uncertainty or error to show", transform=b.transAxes,
                ha="center", va="center", fontsize=9, color="0.3")

@@ -138,7 +138,6 @@ def cmd_track(args) -> int:
     from shipsense.atomic import staged_directory
     from shipsense.cli.track import describe, track_to_files
     from shipsense.config import load_scenario
-    from shipsense.simulator import simulate
     from shipsense.trackers.filters import FILTER_NAMES
 
     sc = load_scenario(args.scenario)
@@ -156,6 +155,8 @@ def cmd_track(args) -> int:
         if getattr(args, flag) is not None:
             raise BadInput(f"--{flag.replace('_', '-')} applies to recordings (--data)")
     within_budget(args, budget.tracking(sc, sc.steps, what=f"a simulated passage of {sc.name} ({sc.steps} steps)"))
+    from shipsense.simulator import simulate
+
     sim = simulate(sc, runs=1, seed=args.seed, random=args.random)
     times, y, truth = sim.times, sim.measurements[0], sim.truth[0]
     used_seed = sc.seed if args.seed is None else args.seed
