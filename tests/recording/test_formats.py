@@ -167,3 +167,15 @@ def test_a_magnitude_a_little_below_zero_is_noise_and_further_is_refused():
     assert (high == 1.0).all()
     sim = simulate("S1-P2", runs=20, seed=1)   # the simulator's own envelopes dip below zero by noise only
     assert np.nanmin(sim.measurements) < 0 and (np.nan_to_num(sim.measurements, nan=0.0) >= low).all()
+
+
+def test_the_recordings_guide_states_the_limits_the_reader_applies():
+    from pathlib import Path
+
+    from shipsense.recording.limits import FIELD_LIMIT, NEGATIVE_SIGMAS
+
+    page = (Path(__file__).resolve().parents[2] / "docs" / "guide" / "recordings.md").read_text()
+    assert f"| magnetometer | \\|value\\| <= {FIELD_LIMIT['magnetometer']:g} T |" in page
+    assert f"| electrode | \\|value\\| <= {FIELD_LIMIT['electrode']:g} V/m |" in page
+    assert FIELD_LIMIT["accelerometer"] == pytest.approx(2 * np.pi) and "<= 2 pi rad" in page
+    assert f">= -{NEGATIVE_SIGMAS:g} noise std" in page
