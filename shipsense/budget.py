@@ -29,6 +29,7 @@ SIMULATE_S_PER_VALUE = 2e-8           # per run x step x channel: kernels, noise
 TRACK_S_PER_ROW = 1.5e-4              # the project's tracker on one passage (benchmarks/track_rows.py)
 TRACK_BYTES_PER_ROW = 3_000.0         # estimates, covariances, status and the recording's own arrays
 RECORDING_BYTES_PER_LINE = 20.0       # a CSV line "time,sensor,channel,value" is at least this long
+RECORDING_BYTES_PER_VALUE = 8.0       # a NetCDF/HDF5 or miniSEED value: float64, at most this long uncompressed
 STUDY_S_PER_RUN = {"S0": 0.15, "S1": 0.3, "S2": 0.5}
 STUDY_BYTES_PER_RUN = {"S0": 3e6, "S1": 1e6, "S2": 2e7}
 WIDE_S_PER_PASSAGE = 0.3              # three families, one process (shipsense reproduce wide)
@@ -118,11 +119,13 @@ def tracking(scenario, rows: int, what: str | None = None) -> Work:
 
 
 def recording(path, scenario) -> Work:
-    """Reading and tracking a recorded CSV, from its size alone (before it is parsed)."""
+    """Reading and tracking a recording, from its size and format alone (before it is parsed)."""
     from pathlib import Path
 
+    from shipsense.recording.formats import format_of
+
     size = Path(path).stat().st_size
-    lines = size / RECORDING_BYTES_PER_LINE
+    lines = size / (RECORDING_BYTES_PER_LINE if format_of(path) == "csv" else RECORDING_BYTES_PER_VALUE)
     rows = lines / max(1, scenario.array().n_channels)    # every channel of a sample is one line
     return tracking(scenario, int(rows), what=f"the recording {path} ({size / 1e6:.3g} MB)")
 

@@ -100,21 +100,30 @@ def _ellipse(ax, mean, cov, color, nsig=2.0):
 def plot_track(summary, times, path, truth=None, title=None, ellipses=8):
     """A tracked passage (:class:`~shipsense.cli.track.TrackSummary`) to a PNG: the array, the truth (if known)
     and the estimated track with 2-sigma ellipses, coloured by status; and over time the position error
-    against the reported 2-sigma (or the 2-sigma alone)."""
+    against the reported 2-sigma (or the 2-sigma alone).  A passage the tracker never tracked (one sample, no
+    field above the noise) draws the array and says so; nothing is drawn on a log scale that has no positive
+    value."""
     from shipsense.trackers.tracker.results import INITIALISING, STATUSES
 
     pl = summary.plot
     k, est, cov, status = pl["k"], pl["estimate"], pl["cov"][:, :2, :2], pl["status"]
     t = np.asarray(times)[k]
-    tracked = status > INITIALISING
-    fig, ax = plt.subplots(1, 2, figsize=(14, 6.5), layout="constrained", width_ratios=[1.3, 1])
+    tracked = (status > INITIALISING) & np.isfinite(est[:, :2]).all(axis=1)
+    # fixed margins, not a layout engine: the constrained layout measured every text twice per figure
+    fig, ax = plt.subplots(1, 2, figsize=(14, 6.5), width_ratios=[1.3, 1])
+    fig.subplots_adjust(left=0.06, right=0.98, bottom=0.09, top=0.93, wspace=0.18)
     a = ax[0]
     if truth is not None:
         a.plot(truth[:, 0], truth[:, 1], "-", color="tab:red", lw=2, label="truth")
-    a.plot(est[tracked, 0], est[tracked, 1], "-", color="tab:blue", lw=1.6, label="estimate (tracking)")
+    if tracked.any():
+        a.plot(est[tracked, 0], est[tracked, 1], "-", color="tab:blue", lw=1.6, label="estimate (tracking)")
+    else:
+        a.text(0.5, 0.96, f"no estimate: the tracker did not start tracking in {summary.samples} sample"
+               f"{'s' if summary.samples != 1 else ''}", transform=a.transAxes,
+               ha="center", va="top", fontsize=9, color="0.3")
     colours = {2: "tab:blue", 3: "tab:green", 4: "tab:orange"}
     for code, colour in colours.items():
-        at = status == code
+        at = (status == code) & tracked
         if at.any() and code != 2:
             a.plot(est[at, 0], est[at, 1], "o", ms=4, color=colour, label=STATUSES[code])
     shown = np.flatnonzero(tracked)
@@ -131,23 +140,37 @@ def plot_track(summary, times, path, truth=None, title=None, ellipses=8):
     a.set_xlabel("x east [m]")
     a.set_ylabel("y north [m]")
     a.grid(alpha=0.3)
-    a.legend(fontsize=8, loc="best")
+    a.legend(fontsize=8, loc="lower left")
     a.set_title(title or "tracked passage (2-sigma ellipses)")
     b = ax[1]
     two_sigma = 2 * np.sqrt(np.maximum(np.linalg.eigvalsh(cov)[:, -1], 0.0))
+    curves = [two_sigma[tracked]]
     b.plot(t[tracked], two_sigma[tracked], "-", color="tab:blue", label="reported 2-sigma (major axis)")
     if truth is not None:
         err = np.hypot(*(est[:, :2] - truth[k, :2]).T)
         b.plot(t[tracked], err[tracked], "-", color="tab:red", lw=1, label="position error")
+        curves.append(err[tracked])
     for code, colour in ((1, "0.8"), (4, "tab:orange")):
         if np.any(status == code):
             b.fill_between(t, 0, 1, where=status == code, step="mid", transform=b.get_xaxis_transform(),
                            color=colour, alpha=0.3, lw=0, label=STATUSES[code])
-    b.set_yscale("log")
+    values = np.concatenate(curves)
+    if np.any(np.isfinite(values) & (values > 0)):
+        from matplotlib.ticker import FormatStrFormatter, NullFormatter
+
+        b.set_yscale("log")
+        b.yaxis.set_major_formatter(FormatStrFormatter("%g"))   # plain numbers: no mathtext to lay out
+        b.yaxis.set_minor_formatter(NullFormatter())
+    else:
+        b.text(0.5, 0.5, "no sample tracked: no uncertainty or error to show", transform=b.transAxes,
+               ha="center", va="center", fontsize=9, color="0.3")
+    if t.size == 1:
+        b.set_xlim(t[0] - 1.0, t[0] + 1.0)
     b.set_xlabel("time [s]")
     b.set_ylabel("m")
     b.grid(alpha=0.3, which="both")
-    b.legend(fontsize=8)
+    if b.get_legend_handles_labels()[0]:
+        b.legend(fontsize=8, loc="upper right")
     b.set_title("error against the reported uncertainty")
     fig.savefig(path, dpi=110)
     plt.close(fig)

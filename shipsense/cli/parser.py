@@ -56,13 +56,23 @@ def build_parser() -> argparse.ArgumentParser:
                    help="Monte Carlo runs (default: the scenario's)")
     m.add_argument("--seed", type=SEED, default=None, help="random seed (default: the scenario's)")
     m.add_argument("--random", action="store_true", help="draw passages from the scenario's [prior]")
-    m.add_argument("--out", default=None, help="write measurements to FILE.npz or a tidy FILE.csv")
+    m.add_argument("--out", default=None,
+                   help="write measurements to FILE.npz, or as a recording: a tidy FILE.csv, FILE.nc (NetCDF/HDF5) or "
+                        "FILE.mseed (miniSEED, one run)")
     m.add_argument("--plot", default=None, help="write a picture of the array, passages and traces to FILE.png")
     m.set_defaults(func=cmd_simulate)
 
     t = sub.add_parser("track", parents=[limits], help="track a simulated passage, or a recorded one (--data)")
     t.add_argument("scenario", help="a shipped scenario name or a TOML file (the array, medium and tracker)")
-    t.add_argument("--data", default=None, help="recorded long-format CSV: time,sensor,channel,value (SI units)")
+    t.add_argument("--data", nargs="+", default=None, metavar="FILE",
+                   help="recordings to track (CSV time,sensor,channel,value; NetCDF/HDF5; miniSEED), folders of "
+                        "them or glob patterns; several: one folder each in --out and a summary.csv")
+    t.add_argument("--mapping", default=None, metavar="FILE.toml",
+                   help="renames of the recordings' sensor and channel names, and the NetCDF variable's names")
+    t.add_argument("--passage-gap", type=float, default=None, metavar="SECONDS",
+                   help="split a recording into passages at gaps longer than this (default: 10 times the "
+                        "tracker's gap limit)")
+    t.add_argument("--no-plot", action="store_true", help="write the tables only, no track.png")
     t.add_argument("--method", choices=["tracker", "bank"], default="tracker",
                    help="tracker: the project's tracker (default); bank: the source studies' bank")
     t.add_argument("--filter", default=None,

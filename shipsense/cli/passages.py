@@ -28,8 +28,19 @@ def cmd_simulate(args) -> int:
     from shipsense.simulator import simulate
 
     sc = load_scenario(args.scenario)
-    if args.out is not None and Path(args.out).suffix not in (".npz", ".csv"):
-        raise BadInput(f"--out must end in .npz or .csv, got {args.out!r}")
+    if args.out is not None:
+        from shipsense.recording.formats import SUFFIXES
+
+        suffixes = (".npz", *(s for v in SUFFIXES.values() for s in v))
+        if Path(args.out).suffix.lower() not in suffixes:
+            raise BadInput(f"--out must end in {', '.join(suffixes)}, got {args.out!r}")
+        if Path(args.out).suffix.lower() != ".npz":
+            from shipsense.recording.formats import check_writable
+
+            check_writable(args.out)
+        if Path(args.out).suffix.lower() in SUFFIXES["miniseed"] and (args.runs or sc.runs) != 1:
+            raise BadInput(f"--out {args.out}: a miniSEED file holds one recording; add --runs 1 (or write .csv "
+                           "or .nc for several runs)")
     if args.plot is not None and Path(args.plot).suffix != ".png":
         raise BadInput(f"--plot must end in .png, got {args.plot!r}")
     if args.random and sc.prior is None:
@@ -46,7 +57,12 @@ def cmd_simulate(args) -> int:
             (atomic_path(args.plot) if args.plot else nullcontext()) as plot_tmp:
         if args.out:
             bar.set_description(f"write {args.out}")
-            sim.save(out_tmp)
+            if Path(args.out).suffix.lower() == ".npz":
+                sim.save_npz(out_tmp)
+            else:
+                from shipsense.recording import write_recording
+
+                write_recording(sim, out_tmp)
         bar.update(1)
         if args.plot:
             from shipsense.plotting import plot_simulation
@@ -122,31 +138,29 @@ def cmd_track(args) -> int:
     from shipsense.atomic import staged_directory
     from shipsense.cli.track import describe, track_to_files
     from shipsense.config import load_scenario
-    from shipsense.plotting import plot_track
-    from shipsense.recording import RecordingError, read_recording
-    from shipsense.simulator import simulate
     from shipsense.trackers.filters import FILTER_NAMES
 
     sc = load_scenario(args.scenario)
     if args.filter is not None and args.filter not in FILTER_NAMES:
         raise BadInput(f"--filter must be one of {', '.join(FILTER_NAMES)}, got {args.filter!r}")
+    if args.passage_gap is not None and not (args.passage_gap > 0 and np.isfinite(args.passage_gap)):
+        raise BadInput(f"--passage-gap must be a positive number of seconds, got {args.passage_gap!r}")
     out = Path(args.out)
     writable("--out", out, directory=True)
-    truth = None
     if args.data:
-        within_budget(args, budget.recording(args.data, sc))
-        try:
-            times, y = read_recording(args.data, sc)
-        except RecordingError as err:
-            raise BadInput(str(err)) from None
-        missing = np.isnan(y).mean()
-        source = f"recording {args.data} ({y.shape[0]} samples, {100 * missing:.1f} % of values missing)"
-    else:
-        within_budget(args, budget.tracking(sc, sc.steps, what=f"a simulated passage of {sc.name} ({sc.steps} steps)"))
-        sim = simulate(sc, runs=1, seed=args.seed, random=args.random)
-        times, y, truth = sim.times, sim.measurements[0], sim.truth[0]
-        used_seed = sc.seed if args.seed is None else args.seed
-        source = f"simulated {'random' if args.random else 'nominal'} passage of {sc.name} (seed {used_seed})"
+        from shipsense.cli.recordings import track_recordings
+
+        return track_recordings(args, sc)
+    for flag in ("mapping", "passage_gap"):
+        if getattr(args, flag) is not None:
+            raise BadInput(f"--{flag.replace('_', '-')} applies to recordings (--data)")
+    within_budget(args, budget.tracking(sc, sc.steps, what=f"a simulated passage of {sc.name} ({sc.steps} steps)"))
+    from shipsense.simulator import simulate
+
+    sim = simulate(sc, runs=1, seed=args.seed, random=args.random)
+    times, y, truth = sim.times, sim.measurements[0], sim.truth[0]
+    used_seed = sc.seed if args.seed is None else args.seed
+    source = f"simulated {'random' if args.random else 'nominal'} passage of {sc.name} (seed {used_seed})"
     first_use("track", args.filter)
     with staged_directory(out) as stage:   # the tables and the plot, or nothing
         try:
@@ -154,9 +168,13 @@ def cmd_track(args) -> int:
                                      progress=not QUIET["on"])
         except ValueError as err:
             raise BadInput(str(err)) from None
-        plot_track(summary, times, stage / "track.png", truth=truth,
-                   title=f"{sc.name}: {args.method} (2-sigma ellipses)")
+        if not args.no_plot:
+            from shipsense.plotting import plot_track
+
+            plot_track(summary, times, stage / "track.png", truth=truth,
+                       title=f"{sc.name}: {args.method} (2-sigma ellipses)")
     for line in describe(summary, source):
         print(line)
-    print(f"wrote {out / 'estimates.csv'}, {out / 'selection_log.csv'} and {out / 'track.png'}")
+    print(f"wrote {out / 'estimates.csv'}, {out / 'selection_log.csv'}"
+          + ("" if args.no_plot else f" and {out / 'track.png'}"))
     return EXIT_OK

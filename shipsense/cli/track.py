@@ -71,6 +71,12 @@ class TrackSummary:
     mean_error: float | None = None
     gaps: list = field(default_factory=list)
     plot: dict = field(default_factory=dict)
+    peak_snr: float | None = None
+
+    @property
+    def tracked(self) -> bool:
+        """Whether any sample reached a tracking status (else the estimate is the tracker's initial state)."""
+        return bool(np.any(self.plot["status"] > INITIALISING))
 
     @property
     def restarts(self):
@@ -138,7 +144,16 @@ def track_to_files(scenario, times, measurements, out, *, truth=None, method="tr
     if truth is not None:
         final_error = float(np.hypot(*(s.estimate[0, :2] - np.asarray(truth)[-1, :2])))
     return TrackSummary(tracker, K, s.estimate[0], s.cov[0, :2, :2], STATUSES[s.status[0]], bool(s.ambiguous[0]),
-                        final_error, err_sum / err_n if err_n else None, list(tracker.gaps), plot)
+                        final_error, err_sum / err_n if err_n else None, list(tracker.gaps), plot,
+                        peak_snr(scenario, scenario.array(), y))
+
+
+def peak_snr(scenario, array, y):
+    """The largest field value of ``y`` (K, m) over its channel's noise standard deviation (bearings left out),
+    or None without a field value."""
+    field_cols = ~np.asarray(array.axial, dtype=bool)
+    v = np.abs(y[:, field_cols]) / np.asarray(scenario.channel_std, dtype=float)[field_cols]
+    return float(np.nanmax(v)) if np.isfinite(v).any() else None
 
 
 def _track_blocks(tracker, t, y, truth, steps, parts, header, labels, keys, keep, thin, stats):
@@ -179,8 +194,12 @@ def describe(summary: TrackSummary, source: str) -> list[str]:
              f"{summary.restarts} restarts"]
     counts = np.bincount(summary.plot["status"], minlength=len(STATUSES))
     if counts[NO_DATA] == len(summary.plot["status"]):
-        lines.append("  no sample of the passage had a field value: nothing to track")
-    if summary.final_error is not None:
+        lines[1:] = ["  no sample of the passage had a field value: nothing to track"]
+    elif not summary.tracked:
+        snr = "" if summary.peak_snr is None else f"; the largest field value is {summary.peak_snr:.3g} noise std"
+        lines[1:] = [f"  no estimate: the tracker did not start tracking in {summary.samples} sample"
+                     f"{'s' if summary.samples != 1 else ''}{snr}"]
+    if summary.final_error is not None and summary.tracked:
         lines.append(f"  position error: final {summary.final_error:.2f} m"
                      + (f", mean {summary.mean_error:.2f} m once tracking" if summary.mean_error is not None else ""))
     lines += [f"  gap: {g}" for g in summary.gaps]
