@@ -149,6 +149,20 @@ def check(scenario, passages: int) -> Work:
                 values * CHECK_S_PER_VALUE, "--passages (or the scenario's steps)")
 
 
+SUBSET_S_PER_WORK = 2e-7              # the search over subsets, per subset value (benchmarks/design_certificate.py)
+
+
+def subset_search(k: int, candidates: int, work: int | None, guard_seconds: float) -> float:
+    """Seconds of ``shipsense design``'s search over subsets (:func:`shipsense.design.placement.place`): at most
+    its work limit at the measured rate, and at most its time guard; 0 when it does not run."""
+    from shipsense.design.placement import EXACT_MAX_K
+    from shipsense.design.subsets import MAX_WORK
+
+    if k > EXACT_MAX_K or work == 0:
+        return 0.0
+    return float(min((MAX_WORK if work is None else work) * SUBSET_S_PER_WORK, guard_seconds))
+
+
 def design(scenario, candidates: int, passages: int, search_seconds: float = 0.0) -> Work:
     """``shipsense design``: per-candidate Fisher information over ``passages`` prior passages (the relaxation,
     rounding and check cost less at these sizes; benchmarks/design.py), plus ``search_seconds`` (the branch

@@ -17,6 +17,7 @@ import hashlib
 from pathlib import Path
 
 DEPENDS = {
+    "design/subsets.py": (),
     "design/information_gain.py": ("models/measurement.py", "trackers/linalg.py"),
     "envs/features.py": (),
     "envs/passage_v1.py": ("arguments.py", "design/information_gain.py", "envs/core_env.py", "envs/features.py",

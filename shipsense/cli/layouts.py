@@ -132,13 +132,14 @@ def cmd_design(args) -> int:
     sc = load_scenario(args.scenario)
     cands, costs = (None, None) if not args.candidates else _read_candidates(args.candidates, sc.sensors[0].position[2])
     n_cands = len(cands) if cands is not None else len(default_candidates(sc))
-    search = args.bb_seconds if args.k <= 3 and np.isfinite(args.bb_seconds) else 0.0   # the branch and bound
-    within_budget(args, budget.design(sc, n_cands, args.passages if sc.prior is not None else 1, search))
+    within_budget(args, budget.design(sc, n_cands, args.passages if sc.prior is not None else 1,
+                                      budget.subset_search(args.k, n_cands, args.bb_work, args.bb_seconds)))
     first_use("design", notice=first_use_notice)
     try:
         result = design_array(sc, args.k, criterion=args.criterion, candidates=cands, costs=costs, budget=args.budget,
                               passages=args.passages, seed=args.seed, solver=args.solver, cuts=not args.no_cuts,
-                              prior_floor=args.prior_floor, bb_seconds=args.bb_seconds, progress=not QUIET["on"])
+                              prior_floor=args.prior_floor, bb_work=args.bb_work, bb_seconds=args.bb_seconds,
+                              progress=not QUIET["on"])
     except ValueError as err:
         raise BadInput(str(err)) from None
     paths = write_design(result, out)
