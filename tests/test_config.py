@@ -199,10 +199,10 @@ def test_the_conductivity_ratio_must_keep_the_image_series_bounded(tmp_path):
     is refused by the ratio range, at either end; the ends of the range themselves load."""
     from shipsense.physics.electric import CONDUCTIVITY_RATIO
 
-    bad(tmp_path, BASE.replace("sigma_seabed = 0.04", "sigma_seabed = 1e-308"), "medium: sigma_seabed", "ratio")
+    bad(tmp_path, BASE.replace("sigma_seabed = 0.04", "sigma_seabed = 1e-308"), "medium.sigma_seabed", "ratio")
     bad(tmp_path, BASE.replace("sigma_seabed = 0.04", "sigma_seabed = 100.0").replace("sigma_water = 4.0",
                                                                                      "sigma_water = 0.01"),
-        "medium: sigma_seabed", "ratio")
+        "medium.sigma_seabed", "ratio")
     lo, hi = CONDUCTIVITY_RATIO
     for ratio in (lo, hi):
         sc = load_text(tmp_path, BASE.replace("sigma_seabed = 0.04", f"sigma_seabed = {ratio * 0.1!r}")

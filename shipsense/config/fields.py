@@ -4,6 +4,7 @@ pydantic annotation whose message names the field's problem in the project's wor
 from __future__ import annotations
 
 import math
+import re
 from typing import Annotated
 
 from pydantic import (
@@ -110,6 +111,9 @@ def format_error(err: ValidationError, source: str) -> str:
             loc += f"[{part}]" if isinstance(part, int) else (f".{part}" if loc else str(part))
         msg = e["msg"]
         msg = msg[len("Value error, "):] if msg.startswith("Value error, ") else msg
+        field = re.match(r"([A-Za-z_]\w*): ", msg)
+        if field and loc:   # a table's own check names its field: one path, "medium.sigma_seabed: ..."
+            loc, msg = f"{loc}.{field[1]}", msg[field.end():]
         kind = e["type"]
         if kind == "missing":
             msg = "required field is missing"
