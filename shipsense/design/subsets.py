@@ -16,7 +16,7 @@ pair values).  The search enumerates the k-subsets in lexicographic order of the
 single-sensor value, the best first (so that a good design is found early), and drops every branch whose bound
 does not exceed the best design found: with nothing left, that design is optimal.  A node's children are
 first screened with the bound that adds the largest remaining gains, then with the bound through the pair
-table (:func:`_top_sum_min_gain`); only the survivors' values are computed (a Cholesky factorisation per passage).
+table; only the survivors' values are computed (a Cholesky factorisation per passage).
 
 The work is counted (the subset values computed and the children screened through the pair table) and the
 search stops on it (``max_work``), not on the clock, so that what it proves does not depend on the machine's
