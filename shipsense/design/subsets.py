@@ -388,6 +388,9 @@ def subset_search(problem, incumbent=None, max_work=MAX_WORK, time_guard=None, t
 
     t0 = time.perf_counter()
     N, k = problem.N, problem.k
+    if N * (N - 1) // 2 > max_work:   # the pair table alone is beyond the work limit (and its memory with it)
+        return {"chosen": None, "value": -np.inf, "upper_bound": np.inf, "complete": False, "work": 0,
+                "stopped_by": "work", "seconds": time.perf_counter() - t0, "method": METHODS["pair"]}
     J = np.ascontiguousarray(np.swapaxes(problem.J, 0, 1), dtype=float)       # (N, S, n, n)
     single, pair = pair_values(J, float(problem.eps))
     order = np.argsort(-single, kind="stable")                              # the best single sensor first

@@ -49,6 +49,8 @@ def test_stopped_on_its_work_it_still_proves_a_true_bound_and_the_same_one_every
         assert not r["complete"] and r["stopped_by"] == "work"
         assert r["upper_bound"] >= values.max() - 1e-12
     assert runs[0]["upper_bound"] == runs[1]["upper_bound"] and runs[0]["work"] == runs[1]["work"]
+    none = subset_search(problem, max_work=24 * 23 // 2 - 1)                 # not even the pair table
+    assert none["work"] == 0 and none["upper_bound"] == np.inf and none["chosen"] is None
     guarded = subset_search(problem, time_guard=0.0)
     assert guarded["stopped_by"] == "time guard" and guarded["upper_bound"] >= values.max() - 1e-12
 
