@@ -287,7 +287,7 @@ def triple_values(J, eps, pa, pb, start, lo, hi, out):
 def search_quads(a, J, eps, pair, triple, start_of, best, best_set, costs, budget, cuts, max_work, tol):
     """Every 4-subset {a, b, c, d} (a < b < c < d) for a fixed first candidate a, with the triple bounds
     ``f(abcd) <= f(abc) + min(gain(d | ab), gain(d | ac), gain(d | bc))``, the gains read from the triple table
-    (``triple[start_of[x, y] + z - y - 1]`` = f({x, y, z})).  Same returns as :func:`search_branch`."""
+    (``triple[start_of[x, y] + z - y - 1]`` = f({x, y, z})).  Same returns as ``search_branch``."""
     N, S, n = J.shape[0], J.shape[1], J.shape[2]
     work = 0
     pruned = -np.inf
