@@ -26,9 +26,9 @@ TIME_LIMIT_MINUTES = 180.0
 
 # measured rates (reference machine), on the fast side
 SIMULATE_S_PER_VALUE = 2e-8           # per run x step x channel: kernels, noise, envelope chain
-TRACK_S_PER_ROW = 1.5e-4              # the project's tracker, per sample x channel (a recording's row; track_rows.py)
-TRACK_BYTES_PER_ROW = 3_000.0         # estimates, covariances, status and the recording's own arrays, per row
-TRACK_BYTES_PER_CHANNEL = 2.5e6       # the initialiser's grid, per channel (track of 100 and 200 vector
+TRACK_S_PER_VALUE = 1.5e-4            # the project's tracker, per sample x channel (a recording's row; track_rows.py)
+TRACK_BYTES_PER_SAMPLE = 3_000.0      # estimates, covariances, status and the recording's own arrays, per sample
+TRACK_BYTES_PER_CHANNEL = 2.8e6       # the initialiser's grid, per channel (track of 100 and 200 vector
 #                                       magnetometers, 300 steps: 2.9 MB a channel above one magnetometer's run)
 RECORDING_BYTES_PER_LINE = 20.0       # a CSV line "time,sensor,channel,value" is at least this long
 STUDY_S_PER_RUN = {"S0": 0.15, "S1": 0.3, "S2": 0.5}
@@ -118,9 +118,9 @@ def tracking(scenario, rows: int, what: str | None = None) -> Work:
     of each sample grows with the array's channels (every channel is a row of a recording), and the
     initialiser's grid holds every channel's predicted field."""
     channels = scenario.array().n_channels
-    values = float(rows) * channels
     return Work(what or f"tracking {rows} samples of {scenario.name} ({channels} channels)",
-                values * TRACK_BYTES_PER_ROW + channels * TRACK_BYTES_PER_CHANNEL, values * TRACK_S_PER_ROW,
+                float(rows) * TRACK_BYTES_PER_SAMPLE + channels * TRACK_BYTES_PER_CHANNEL,
+                float(rows) * channels * TRACK_S_PER_VALUE,
                 "samples (the scenario's steps, or a shorter recording) or sensors")
 
 
