@@ -4,7 +4,7 @@ Run:  python experiments/design_reports.py [--k 3] [--passages 8] [--out results
 
 Each scenario is designed exactly as `shipsense design SCENARIO --k K` does
 (default 11 x 11 candidate grid around the array, 8 prior passages, solver
-auto, ambiguity cuts, branch and bound for k <= 3 with 20 s) and its files
+auto, ambiguity cuts, the search over subsets for k <= 4 stopped on its work) and its files
 are written to OUT/SCENARIO/; the table (markdown) gives the criterion, the
 certified bound, the design's value, the guaranteed efficiency, the solver,
 the time, the verdict and the baselines' efficiency relative to the design.
@@ -35,7 +35,7 @@ def main(argv=None):
         bb = r.branch_and_bound
         rows.append(f"| {name} | {res.criterion} | {r.upper_bound:.2f} | {r.value:.2f} | "
                     f"{r.guaranteed_efficiency:.3f} | "
-                    f"{r.solver}{' + B&B ' + ('complete' if bb['complete'] else 'stopped') if bb else ''} | "
+                    f"{r.solver}{' + search ' + ('complete' if bb['complete'] else 'stopped') if bb else ''} | "
                     f"{res.timings['total']:.1f} | {r.verdict.verdict if r.verdict else '-'} | "
                     + " / ".join(f"{b[key]['efficiency_vs_design']:.3f}"
                                  for key in ("best_of_1000_random", "line", "triangle")) + " |")

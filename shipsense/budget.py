@@ -26,8 +26,10 @@ TIME_LIMIT_MINUTES = 180.0
 
 # measured rates (reference machine), on the fast side
 SIMULATE_S_PER_VALUE = 2e-8           # per run x step x channel: kernels, noise, envelope chain
-TRACK_S_PER_ROW = 1.5e-4              # the project's tracker on one passage (benchmarks/track_rows.py)
-TRACK_BYTES_PER_ROW = 3_000.0         # estimates, covariances, status and the recording's own arrays
+TRACK_S_PER_VALUE = 1.5e-4            # the project's tracker, per sample x channel (a recording's row; track_rows.py)
+TRACK_BYTES_PER_SAMPLE = 3_000.0      # estimates, covariances, status and the recording's own arrays, per sample
+TRACK_BYTES_PER_CHANNEL = 2.8e6       # the initialiser's grid, per channel (track of 100 and 200 vector
+#                                       magnetometers, 300 steps: 2.9 MB a channel above one magnetometer's run)
 RECORDING_BYTES_PER_LINE = 20.0       # a CSV line "time,sensor,channel,value" is at least this long
 RECORDING_BYTES_PER_VALUE = 8.0       # a NetCDF/HDF5 or miniSEED value: float64, at most this long uncompressed
 STUDY_S_PER_RUN = {"S0": 0.15, "S1": 0.3, "S2": 0.5}
@@ -113,9 +115,14 @@ def simulation(scenario, runs: int) -> Work:
 
 
 def tracking(scenario, rows: int, what: str | None = None) -> Work:
-    """Tracking one passage of ``rows`` samples (a simulated passage, or a recording's distinct times)."""
-    return Work(what or f"tracking {rows} samples of {scenario.name}", rows * TRACK_BYTES_PER_ROW,
-                rows * TRACK_S_PER_ROW, "samples (the scenario's steps, or a shorter recording)")
+    """Tracking one passage of ``rows`` samples (a simulated passage, or a recording's distinct times): the work
+    of each sample grows with the array's channels (every channel is a row of a recording), and the
+    initialiser's grid holds every channel's predicted field."""
+    channels = scenario.array().n_channels
+    return Work(what or f"tracking {rows} samples of {scenario.name} ({channels} channels)",
+                float(rows) * TRACK_BYTES_PER_SAMPLE + channels * TRACK_BYTES_PER_CHANNEL,
+                float(rows) * channels * TRACK_S_PER_VALUE,
+                "samples (the scenario's steps, or a shorter recording) or sensors")
 
 
 def recording(path, scenario) -> Work:
@@ -126,8 +133,8 @@ def recording(path, scenario) -> Work:
 
     size = Path(path).stat().st_size
     lines = size / (RECORDING_BYTES_PER_LINE if format_of(path) == "csv" else RECORDING_BYTES_PER_VALUE)
-    rows = lines / max(1, scenario.array().n_channels)    # every channel of a sample is one line
-    return tracking(scenario, int(rows), what=f"the recording {path} ({size / 1e6:.3g} MB)")
+    samples = lines / max(1, scenario.array().n_channels)    # every channel of a sample is one line
+    return tracking(scenario, int(samples), what=f"the recording {path} ({size / 1e6:.3g} MB)")
 
 
 def study(key: str, runs: int | None) -> Work:
@@ -152,10 +159,27 @@ def check(scenario, passages: int) -> Work:
                 values * CHECK_S_PER_VALUE, "--passages (or the scenario's steps)")
 
 
+SUBSET_S_PER_WORK = 2e-7              # the search over subsets, per subset value (benchmarks/design_certificate.py)
+
+
+def subset_search(k: int, candidates: int, work: int | None, guard_seconds: float) -> float:
+    """Seconds of ``shipsense design``'s search over subsets (:func:`shipsense.design.placement.place`), on the
+    fast side: the tables it certainly computes (the pair values; for k = 4 also every triple's), at most its
+    work limit and its time guard; 0 when it does not run."""
+    from shipsense.design.placement import EXACT_MAX_K
+
+    if k > EXACT_MAX_K or work == 0:
+        return 0.0
+    n = float(candidates)
+    tables = n * (n - 1) / 2 + (n * (n - 1) * (n - 2) / 6 if k == 4 else 0.0)
+    return float(min(tables if work is None else min(tables, work), guard_seconds / SUBSET_S_PER_WORK)
+                 * SUBSET_S_PER_WORK)
+
+
 def design(scenario, candidates: int, passages: int, search_seconds: float = 0.0) -> Work:
     """``shipsense design``: per-candidate Fisher information over ``passages`` prior passages (the relaxation,
-    rounding and check cost less at these sizes; benchmarks/design.py), plus ``search_seconds`` (the branch
-    and bound's time limit, when it runs)."""
+    rounding and check cost less at these sizes; benchmarks/design.py), plus ``search_seconds`` (the search over
+    subsets, :func:`subset_search`)."""
     array = scenario.array()
     channels = int(np.sum(array.channel_sensor == 0))   # the template sensor's channels
     d = 8                                               # parameters of a passage, at most

@@ -285,7 +285,8 @@ def test_import_shipsense_is_light_and_its_names_arrive_on_use():
     (["check", "S1-P2", "--passages", "10000", "--max-minutes", "10"], "--max-minutes"),
     (["track", "S2", "--max-minutes", "1e-6"], "--max-minutes"),
     (["design", "S1-P2", "--k", "3", "--passages", "10000", "--max-minutes", "1"], "--max-minutes"),
-    (["design", "S1-P2", "--k", "3", "--passages", "2", "--max-minutes", "0.1"], "--max-minutes"),  # B&B 20 s
+    (["design", "S1-P2", "--k", "3", "--bb-work", "-1"], "--bb-work"),
+    (["design", "S1-P2", "--k", "3", "--bb-seconds", "0"], "--bb-seconds"),
     (["check", "S1-P2", "S1-P2", "S1-P2", "--passages", "2000", "--max-minutes", "4"], "--max-minutes"),
     (["check", "S2", "--junit", f"{__file__}/x.xml"], "--junit"),      # a file as the folder
     (["simulate", "S2", "--runs", "2", "--out", f"{__file__}/x.npz"], "--out"),

@@ -179,3 +179,32 @@ def test_with_updates_validates():
     assert sc.with_updates(runs=3).runs == 3
     with pytest.raises(ScenarioError, match="steps"):
         sc.with_updates(steps=1)
+
+
+def test_values_beyond_the_physical_ranges_are_refused(tmp_path):
+    """Values that passed as finite but overflow later (a speed of 1e308 m/s, a bank level of 1e308, a noise
+    variance of 1e-320 whose inverse is infinite) are refused, naming the field and the range with its unit."""
+    prior = "\n[prior]\nspeed = [4.0, 1e308]\nmoment = [1e6, 1e7]\np = [50.0, 200.0]\n"
+    bad(tmp_path, BASE + prior, "prior.speed", "100 m/s")
+    bank = "\n[tracker.bank]\nlevels = [1e308]\nbearings_deg = [0.0]\n"
+    bad(tmp_path, BASE + bank, "tracker.bank.levels[0]", "1e+12")
+    bad(tmp_path, BASE.replace("noise_std = 1e-9", "noise_var = 1e-320"), "sensors[0].noise_var", "at least 1e-30")
+    bad(tmp_path, BASE.replace("noise_std = 1e-9", "noise_std = 1e-200"), "sensors[0].noise_std", "at least 1e-15")
+    at_floor = load_text(tmp_path, BASE.replace("noise_std = 1e-9", "noise_var = 1e-30"))
+    assert at_floor.sensors[0].channel_std == pytest.approx((1e-15,) * 3)
+
+
+def test_the_conductivity_ratio_must_keep_the_image_series_bounded(tmp_path):
+    """A seabed of 1e-308 S/m (the image series' reflection coefficient rounds to 1: no bounded stopping shell)
+    is refused by the ratio range, at either end; the ends of the range themselves load."""
+    from shipsense.physics.electric import CONDUCTIVITY_RATIO
+
+    bad(tmp_path, BASE.replace("sigma_seabed = 0.04", "sigma_seabed = 1e-308"), "medium.sigma_seabed", "ratio")
+    bad(tmp_path, BASE.replace("sigma_seabed = 0.04", "sigma_seabed = 100.0").replace("sigma_water = 4.0",
+                                                                                     "sigma_water = 0.01"),
+        "medium.sigma_seabed", "ratio")
+    lo, hi = CONDUCTIVITY_RATIO
+    for ratio in (lo, hi):
+        sc = load_text(tmp_path, BASE.replace("sigma_seabed = 0.04", f"sigma_seabed = {ratio * 0.1!r}")
+                       .replace("sigma_water = 4.0", "sigma_water = 0.1"))
+        assert abs(sc.medium.physics().eta) < 1.0

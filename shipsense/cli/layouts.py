@@ -69,7 +69,9 @@ def _print_verdict(result):
     if result.verdict == "error":
         return
     sc, verdict = result.scenario, result.detail
-    print(f"{sc.name}: {verdict.verdict.upper()}  ({len(sc.sensors)} sensors, {verdict.passages} passage(s) "
+    # labelled by the file (or shipped name) as given, as the JSON and the JUnit report are: two files may hold
+    # scenarios of one name
+    print(f"{result.layout}: {verdict.verdict.upper()}  ({len(sc.sensors)} sensors, {verdict.passages} passage(s) "
           f"{'from the prior' if sc.prior is not None else '(the nominal one)'}; {result.seconds:.1f} s)")
     print(f"  Fisher information: rank {verdict.fim_rank} of {len(verdict.labels)}, "
           f"condition number {verdict.fim_condition:.3g} (internal units)")
@@ -81,46 +83,10 @@ def _print_verdict(result):
               f"{np.degrees(np.arctan2(b[3], b[2])):.0f} deg; chi-square {p.chi2:.3g}, {p.distance_m:.0f} m apart")
 
 
-def _read_candidates(path, z_default):
-    """Candidates (N, 3) and optional costs (N,) from a CSV (x,y[,z][,cost]) or a TOML [candidates] table."""
-    import csv
-    import tomllib
-
-    from shipsense.design.placement import grid_candidates
-
-    path = Path(path)
-    if not path.is_file():
-        raise BadInput(f"--candidates: no such file {path}")
-    if path.suffix == ".csv":
-        with open(path, newline="") as fh:
-            rows = list(csv.DictReader(fh))
-        if not rows or not {"x", "y"} <= set(rows[0]):
-            raise BadInput(f"{path}: a candidate CSV needs a header with x,y (and optionally z)")
-        try:
-            pts = np.array([[float(r["x"]), float(r["y"]), float(r.get("z") or z_default)] for r in rows])
-            costs = np.array([float(r["cost"]) for r in rows]) if "cost" in rows[0] else None
-        except ValueError as err:
-            raise BadInput(f"{path}: {err}") from None
-    elif path.suffix == ".toml":
-        try:
-            c = tomllib.loads(path.read_text()).get("candidates")
-        except tomllib.TOMLDecodeError as err:
-            raise BadInput(f"{path}: not valid TOML ({err})") from None
-        if not isinstance(c, dict) or "polygon" not in c or "spacing" not in c:
-            raise BadInput(f"{path}: needs a [candidates] table with polygon = [[x, y], ...] and spacing")
-        pts = grid_candidates(c["polygon"], float(c["spacing"]), float(c.get("z", z_default)),
-                              c.get("exclusions", []), float(c.get("min_spacing", 0.0)))
-        costs = None
-    else:
-        raise BadInput(f"--candidates must be a .csv or .toml file, got {path.name!r}")
-    if not np.isfinite(pts).all() or len(pts) == 0:
-        raise BadInput(f"{path}: candidates must be finite and at least one")
-    return pts, costs
-
-
 def cmd_design(args) -> int:
     from shipsense import budget
     from shipsense.config import load_scenario
+    from shipsense.design.candidates import load_candidates
     from shipsense.design.designer import default_candidates, design_array, summary_lines, write_design
     from shipsense.design.observability import first_use_notice
 
@@ -130,15 +96,16 @@ def cmd_design(args) -> int:
                         f"not a file: got {args.out}")
     writable("--out", out, directory=True)
     sc = load_scenario(args.scenario)
-    cands, costs = (None, None) if not args.candidates else _read_candidates(args.candidates, sc.sensors[0].position[2])
+    cands, costs = (None, None) if not args.candidates else load_candidates(args.candidates, sc)
     n_cands = len(cands) if cands is not None else len(default_candidates(sc))
-    search = args.bb_seconds if args.k <= 3 and np.isfinite(args.bb_seconds) else 0.0   # the branch and bound
-    within_budget(args, budget.design(sc, n_cands, args.passages if sc.prior is not None else 1, search))
+    within_budget(args, budget.design(sc, n_cands, args.passages if sc.prior is not None else 1,
+                                      budget.subset_search(args.k, n_cands, args.bb_work, args.bb_seconds)))
     first_use("design", notice=first_use_notice)
     try:
         result = design_array(sc, args.k, criterion=args.criterion, candidates=cands, costs=costs, budget=args.budget,
                               passages=args.passages, seed=args.seed, solver=args.solver, cuts=not args.no_cuts,
-                              prior_floor=args.prior_floor, bb_seconds=args.bb_seconds, progress=not QUIET["on"])
+                              prior_floor=args.prior_floor, bb_work=args.bb_work, bb_seconds=args.bb_seconds,
+                              progress=not QUIET["on"])
     except ValueError as err:
         raise BadInput(str(err)) from None
     paths = write_design(result, out)

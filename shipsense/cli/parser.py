@@ -115,8 +115,13 @@ def build_parser() -> argparse.ArgumentParser:
                    help="relaxation solver: auto (CLARABEL up to 800 candidates, else first-order), clarabel "
                         "(interior point; falls back to first-order if it fails) or first-order (projected "
                         "gradient, Frank-Wolfe with cuts or a budget); default auto")
-    g.add_argument("--bb-seconds", type=float, default=20.0,
-                   help="time limit of the branch and bound that tightens the bound for k <= 3 (default 20; 0: off)")
+    g.add_argument("--bb-work", type=whole_flag(0, 10**12), default=None,
+                   help="work limit of the search over subsets that tightens the bound for few sensors (D: the exact "
+                        "search for k <= 4, subset values computed, default 20,000,000; A, E: the branch and bound "
+                        "for k <= 3, node bounds, default 2,000; 0: off)")
+    g.add_argument("--bb-seconds", type=float, default=120.0,
+                   help="time guard of that search: it stops on its work, this only keeps a slow machine from "
+                        "waiting without end, and the report says when it fired (default 120; inf: none)")
     g.add_argument("--prior-floor", type=float, default=None,
                    help="floor on the scaled prior information (a regulariser; default: none, the scenario's "
                         "prior covariance as it is)")

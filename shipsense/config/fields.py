@@ -4,6 +4,7 @@ pydantic annotation whose message names the field's problem in the project's wor
 from __future__ import annotations
 
 import math
+import re
 from typing import Annotated
 
 from pydantic import (
@@ -56,12 +57,30 @@ def within(limit, unit):
     return AfterValidator(check)
 
 
+def at_least(limit, unit):
+    """A validator: every component at least ``limit`` (the small end of a physical range, stated in the
+    message: a value below it overflows the computations that divide by it)."""
+    def check(v):
+        values = v if isinstance(v, (tuple, list)) else (v,)
+        if any(x < limit for x in values):
+            raise ValueError(f"outside the physical range: at least {limit:g} {unit}, got {v!r}")
+        return v
+    return AfterValidator(check)
+
+
 Coord2 = Annotated[Vec2, within(1e6, "m")]
 Coord3 = Annotated[Vec3, within(1e6, "m")]
 Speed2 = Annotated[Vec2, within(100.0, "m/s")]
+Speed = Annotated[Positive, within(100.0, "m/s")]
+Distance = Annotated[Positive, within(1e6, "m")]
 Moment3 = Annotated[Vec3, within(1e12, "A·m²")]
-Std = Annotated[Positive, within(1e3, "(SI)")]
-Var = Annotated[Positive, within(1e6, "(SI²)")]
+Moment = Annotated[Positive, within(1e12, "A·m²")]
+ElectricMoment = Annotated[Positive, within(1e9, "A·m")]
+MIN_NOISE_STD = 1e-15
+"""Smallest noise standard deviation (SI: T, V/m, rad) a sensor may have: a femtotesla, far below any seabed
+sensor's floor; below it the whitened residuals and the Fisher information overflow."""
+Std = Annotated[Positive, within(1e3, "(SI)"), at_least(MIN_NOISE_STD, "(SI)")]
+Var = Annotated[Positive, within(1e6, "(SI²)"), at_least(MIN_NOISE_STD ** 2, "(SI²)")]
 Conductivity = Annotated[Positive, within(100.0, "S/m")]
 Range = Annotated[tuple[Finite, Finite], AfterValidator(check_range)]
 PositiveRange = Annotated[tuple[Positive, Positive], AfterValidator(check_range)]
@@ -92,6 +111,9 @@ def format_error(err: ValidationError, source: str) -> str:
             loc += f"[{part}]" if isinstance(part, int) else (f".{part}" if loc else str(part))
         msg = e["msg"]
         msg = msg[len("Value error, "):] if msg.startswith("Value error, ") else msg
+        field = re.match(r"([A-Za-z_]\w*): ", msg)
+        if field and loc:   # a table's own check names its field: one path, "medium.sigma_seabed: ..."
+            loc, msg = f"{loc}.{field[1]}", msg[field.end():]
         kind = e["type"]
         if kind == "missing":
             msg = "required field is missing"

@@ -35,7 +35,7 @@ from shipsense.config.fields import (
 from shipsense.config.manoeuvres import ManoeuvreConfig, check_manoeuvres
 from shipsense.config.tracker import TrackerConfig
 from shipsense.physics.array import CHANNELS, KINDS, SensorArray
-from shipsense.physics.electric import Medium
+from shipsense.physics.electric import CONDUCTIVITY_RATIO, Medium
 from shipsense.physics.magnetic import earth_field_direction
 
 MIN_SENSOR_SPACING = 0.01
@@ -107,6 +107,16 @@ class MediumConfig(ConfigModel):
     sigma_seabed: Conductivity = 0.04
     water_depth: Annotated[Positive, within(11_000.0, "m")] = 15.0
 
+    @model_validator(mode="after")
+    def _check(self):
+        lo, hi = CONDUCTIVITY_RATIO
+        ratio = self.sigma_seabed / self.sigma_water
+        if not lo <= ratio <= hi:
+            raise ValueError(f"sigma_seabed: the seabed-to-water conductivity ratio must be within [{lo:g}, {hi:g}] "
+                             f"(the image series' range: shipsense.physics.electric.CONDUCTIVITY_RATIO), got "
+                             f"{self.sigma_seabed:g} / {self.sigma_water:g} = {ratio:.3g}")
+        return self
+
     def physics(self) -> Medium:
         return Medium(self.sigma_water, self.sigma_seabed, self.water_depth)
 
@@ -138,14 +148,15 @@ class PriorConfig(ConfigModel):
     magnitude (and ``p``) is log-uniform, the moment direction uniform.
     """
 
-    range: PositiveRange = (150.0, 400.0)
-    bearing_deg: Range = (0.0, 360.0)
-    course_offset_deg: Range = (-20.0, 20.0)
-    cpa: Range | None = Field(None, description="If given, the course is set so that the closest approach to "
-                              "the centroid is uniform in this range (m), instead of course_offset_deg.")
-    speed: PositiveRange = (3.0, 10.0)
-    moment: PositiveRange | None = None
-    p: PositiveRange | None = None
+    range: Annotated[PositiveRange, within(1e6, "m")] = (150.0, 400.0)
+    bearing_deg: Annotated[Range, within(720.0, "deg")] = (0.0, 360.0)
+    course_offset_deg: Annotated[Range, within(180.0, "deg")] = (-20.0, 20.0)
+    cpa: Annotated[Range, within(1e6, "m")] | None = Field(
+        None, description="If given, the course is set so that the closest approach to the centroid is uniform "
+        "in this range (m), instead of course_offset_deg.")
+    speed: Annotated[PositiveRange, within(100.0, "m/s")] = (3.0, 10.0)
+    moment: Annotated[PositiveRange, within(1e12, "A·m²")] | None = None
+    p: Annotated[PositiveRange, within(1e9, "A·m")] | None = None
 
 
 class NoiseConfig(ConfigModel):

@@ -31,10 +31,10 @@ class ProcessNoiseConfig(ConfigModel):
     """
 
     model: Literal["identity", "dwna", "diagonal"] = "dwna"
-    sigma_q: Positive = 0.1
-    q_diag: list[Annotated[Finite, Field(ge=0)]] | None = None
-    sigma_a: tuple[Positive, Positive] = (1.0, 1.0)
-    param_var: list[Annotated[Finite, Field(ge=0)]] | None = None
+    sigma_q: Annotated[Positive, within(1e24, "(state units)²")] = 0.1
+    q_diag: list[Annotated[Finite, Field(ge=0), within(1e24, "(state units)²")]] | None = None
+    sigma_a: Annotated[tuple[Positive, Positive], within(100.0, "m/s²")] = (1.0, 1.0)
+    param_var: list[Annotated[Finite, Field(ge=0), within(1e24, "(parameter units)²")]] | None = None
 
 
 class BankConfig(ConfigModel):
@@ -48,22 +48,25 @@ class BankConfig(ConfigModel):
     deviations below.
     """
 
-    levels: list[Positive] = Field(min_length=1, description="Moment magnitudes (A·m²) or p levels (A·m).")
-    bearings_deg: list[Finite] = Field(min_length=1)
+    levels: list[Annotated[Positive, within(1e12, "A·m² or A·m")]] = Field(
+        min_length=1, description="Moment magnitudes (A·m²) or p levels (A·m).")
+    bearings_deg: list[Annotated[Finite, within(720.0, "deg")]] = Field(min_length=1)
     bearing_convention: Literal["east", "north"] = Field(
         "east", description="east: bearings counter-clockwise from +x, seed = (r cos phi, r sin phi); north: "
         "clockwise from north (+y), seed = (r sin phi, r cos phi) (the magnetic source study's S0 bank).")
-    initial_velocity: Vec2 = (6.0, 6.0)
+    initial_velocity: Annotated[Vec2, within(100.0, "m/s")] = (6.0, 6.0)
     initial_course: Literal["fixed", "towards_array"] = Field(
         "fixed", description="fixed: every hypothesis gets initial_velocity; towards_array: the speed "
         "|initial_velocity| on the course from the seed towards the array centroid (a passing ship).")
-    position_std: Positive = 30.0
-    velocity_std: Positive = 2.0
-    moment_std: Positive = 1e8
-    z_std: Positive = 1.0
-    p_std: Positive = 50.0
-    p_initial: Positive = Field(100.0, description="Initial p (A·m) when the levels are magnetic (fused model).")
-    range_correction: Positive = Field(2.0, description="Image correction c of the electric range formula.")
+    position_std: Annotated[Positive, within(1e6, "m")] = 30.0
+    velocity_std: Annotated[Positive, within(100.0, "m/s")] = 2.0
+    moment_std: Annotated[Positive, within(1e12, "A·m²")] = 1e8
+    z_std: Annotated[Positive, within(1e4, "m")] = 1.0
+    p_std: Annotated[Positive, within(1e9, "A·m")] = 50.0
+    p_initial: Annotated[Positive, within(1e9, "A·m")] = Field(
+        100.0, description="Initial p (A·m) when the levels are magnetic (fused model).")
+    range_correction: Annotated[Positive, within(1e3, "")] = Field(
+        2.0, description="Image correction c of the electric range formula.")
     prune_nats: Positive | None = Field(None, description="Drop hypotheses this far below the best (None: keep all).")
     ambiguity_nats: Positive = Field(3.0, description="Near-tie threshold on the normalised log-likelihood.")
     ambiguity_distance: Positive = Field(20.0, description="Near-ties farther apart than this (m) are ambiguous.")

@@ -21,6 +21,9 @@ import numpy as np
 from shipsense.design import placement as pl
 
 RANDOM_LAYOUTS = 1000
+BB_GUARD_SECONDS = 120.0
+"""Default time guard of the search over subsets (``--bb-seconds``): the search stops on its work; this only
+keeps a much slower machine from waiting without end, and the report says when it fired."""
 
 
 @dataclass
@@ -139,7 +142,7 @@ def _efficiency(criterion, value, reference, d):
 
 def design_array(scenario, k, *, criterion="D", candidates=None, costs=None, budget=None, passages=8, seed=0,
                  solver="auto", cuts=True, prior_floor=None, stride=2, random_layouts=RANDOM_LAYOUTS,
-                 bb_seconds=20.0, check=True, progress=False):
+                 bb_work=None, bb_seconds=BB_GUARD_SECONDS, check=True, progress=False):
     """Design an array of ``k`` copies of the scenario's first sensor.
 
     Parameters
@@ -167,9 +170,15 @@ def design_array(scenario, k, *, criterion="D", candidates=None, costs=None, bud
     check : bool
         Run the ambiguity check on the design (with ``cuts=False``; the cuts
         need it).  Off only to time the rest (benchmarks): the verdict is then None.
+    bb_work : int, optional
+        Work limit of the search over subsets that tightens the bound for few
+        sensors (:func:`~shipsense.design.placement.place`: the exact search of
+        the D criterion for k <= 4, subset values computed; the branch and bound
+        of A and E for k <= 3, node bounds); None: each search's default, 0: no
+        search.  The search stops on its work, so that what it proves does not
+        depend on the machine's load.
     bb_seconds : float
-        Time limit of the branch and bound that tightens the bound for k <= 3
-        (0: none).
+        A time guard on that search (inf: none); the report says when it fired.
     progress : bool
         A progress bar on a terminal.
 
@@ -189,8 +198,11 @@ def design_array(scenario, k, *, criterion="D", candidates=None, costs=None, bud
         raise ValueError(f"--criterion must be one of {', '.join(pl.CRITERIA)}, got {criterion!r}")
     if solver not in pl.SOLVERS:
         raise ValueError(f"--solver must be one of {', '.join(pl.SOLVERS)}, got {solver!r}")
-    if not (np.isfinite(bb_seconds) and bb_seconds >= 0):
-        raise ValueError(f"--bb-seconds must be a number >= 0, got {bb_seconds!r}")
+    if not (bb_seconds == bb_seconds and bb_seconds > 0):
+        raise ValueError(f"--bb-seconds must be a number > 0 (inf: no guard), got {bb_seconds!r}")
+    if bb_work is not None and not (isinstance(bb_work, (int, np.integer)) and bb_work >= 0):
+        raise ValueError(f"--bb-work must be a whole number >= 0, got {bb_work!r}")
+    guard = None if bb_seconds == np.inf else float(bb_seconds)
     if prior_floor is not None and not (np.isfinite(prior_floor) and prior_floor > 0):
         raise ValueError(f"--prior-floor must be a positive number, got {prior_floor!r}")
     cands = default_candidates(scenario) if candidates is None else np.asarray(candidates, dtype=float)
@@ -221,11 +233,11 @@ def design_array(scenario, k, *, criterion="D", candidates=None, costs=None, bud
         bar.set_description("design: relaxation, rounding" + ("" if not cuts else " and ambiguity cuts"))
         if cuts:
             result = pl.place_with_cuts(problem, model, thetas, scenario.steps, criterion, solver=solver,
-                                        bb_seconds=bb_seconds)
+                                        bb_work=bb_work, bb_seconds=guard)
             timings["relaxation_and_rounding"] = result.seconds
             timings["ambiguity_check"] = result.check_seconds
         else:
-            result = pl.place(problem, criterion, solver, bb_seconds=bb_seconds)
+            result = pl.place(problem, criterion, solver, bb_work=bb_work, bb_seconds=guard)
             timings["relaxation_and_rounding"] = result.seconds
             t0 = time.perf_counter()
             if check:
@@ -315,9 +327,10 @@ def summary_lines(result):
                  f"{r.upper_bound:.4g}; gap {r.certified_gap:.3g} (no {k}-sensor design does better by more)")
     if r.branch_and_bound is not None:
         b = r.branch_and_bound
-        lines.append(f"  branch and bound: {b['nodes']} nodes in {b['seconds']:.1f} s, "
+        stop = {"work": "stopped at its work limit", "time guard": "stopped by the time guard (--bb-seconds)"}
+        lines.append(f"  search over subsets ({b['method']}): work {b['work']:,} in {b['seconds']:.1f} s, "
                      + ("complete: the design is optimal" if b["complete"] else
-                        f"stopped at the time limit, proved bound {b['upper_bound']:.4g}"))
+                        f"{stop[b['stopped_by']]}, proved bound {b['upper_bound']:.4g}"))
     if eff is not None:
         lines.append(f"  guaranteed efficiency {eff:.3f} against the best {k}-sensor design")
     lines.append(f"  ambiguity cuts added: {len(r.cuts)}; verdict: "

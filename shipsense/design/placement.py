@@ -19,7 +19,8 @@ gradient on the capped simplex, Frank–Wolfe with a linear-programming
 oracle when there are cuts or costs; the first-order ones stop on their
 duality gap, and a CLARABEL failure falls back to them.  Rounding: top-k
 and greedy, then an exchange search (:func:`swap_refine`); for few sensors
-a time-limited :func:`branch_and_bound` tightens the bound.
+an exact search over the subsets (D: :mod:`shipsense.design.subsets`; A, E:
+:func:`branch_and_bound`), stopped on its work, tightens the bound.
 
 Certificate.  After every solve the objective and its (super)gradient ``g``
 are recomputed in numpy from the returned weights; for a concave ``f``,
@@ -532,6 +533,13 @@ def round_design(problem, w, criterion="D", cuts=None):
 
 
 # -- branch and bound (few sensors) --------------------------------------------------------
+BB_NODES = 2000
+"""Default work limit of :func:`branch_and_bound`: node bounds computed."""
+EXACT_MAX_K = 4
+"""Largest k for which :func:`place` runs the exact search of the D criterion
+(:func:`shipsense.design.subsets.subset_search`); other criteria get :func:`branch_and_bound` up to k = 3."""
+
+
 def _node_bound(problem, criterion, lo, hi, w0, iterations=150, tol=1e-4):
     """Upper bound on the relaxation with ``lo <= w <= hi`` (some weights fixed at 0 or 1): projected gradient,
     then the Frank–Wolfe bound (valid whether or not the iteration converged).  Returns (bound, w)."""
@@ -573,25 +581,30 @@ def _node_bound(problem, criterion, lo, hi, w0, iterations=150, tol=1e-4):
     return f + best - float(g @ w), w
 
 
-def branch_and_bound(problem, criterion="D", incumbent=None, time_limit=20.0, w0=None):
+def branch_and_bound(problem, criterion="D", incumbent=None, max_nodes=BB_NODES, time_guard=None, w0=None):
     """Best-first branch and bound on the relaxation (no cuts, no costs): the optimal k-subset, or what it proved.
 
     Each node fixes some candidates in (w = 1) or out (w = 0); its bound is
-    the certified relaxation bound with those fixings (:func:`_node_bound`).
-    Nodes whose bound does not beat the incumbent are pruned; the candidate
-    of largest relaxed weight is branched on.  Stopped at ``time_limit``
-    seconds, the bound it proved is the largest bound of the open nodes (or
-    the incumbent's value if none is left: then the incumbent is optimal).
+    the certified relaxation bound with those fixings (:func:`_node_bound`, a
+    fixed number of iterations).  Nodes whose bound does not beat the incumbent
+    are pruned; the candidate of largest relaxed weight is branched on.
+    Stopped after ``max_nodes`` node bounds (the work, so that what it proves
+    does not depend on the machine's load), or by the ``time_guard`` (seconds;
+    the result says so), the bound it proved is the largest bound of the open
+    nodes (or the incumbent's value if none is left: then the incumbent is
+    optimal).
 
     Returns
     -------
     dict
-        ``chosen`` (k,), ``value``, ``upper_bound`` (proved), ``nodes``,
-        ``complete`` (the tree was exhausted), ``seconds``.
+        ``chosen`` (k,), ``value``, ``upper_bound`` (proved), ``work`` (node bounds computed),
+        ``complete`` (the tree was exhausted), ``stopped_by`` (None, "work" or "time guard"),
+        ``seconds`` and ``method``.
     """
     import heapq
 
     t0 = time.perf_counter()
+    stopped_by = None
     N, k = problem.N, problem.k
     if incumbent is None:
         incumbent = greedy(problem, criterion)
@@ -603,7 +616,13 @@ def branch_and_bound(problem, criterion="D", incumbent=None, time_limit=20.0, w0
     heap = [(-bound, 0, lo, hi, w)]
     counter, nodes = 1, 1
     tol = 1e-9
-    while heap and time.perf_counter() - t0 < time_limit:
+    while heap:
+        if nodes >= max_nodes:
+            stopped_by = "work"
+            break
+        if time_guard is not None and time.perf_counter() - t0 > time_guard:
+            stopped_by = "time guard"
+            break
         neg, _, lo, hi, w = heapq.heappop(heap)
         if -neg <= best + tol:
             heap = []                            # best-first: every other open node is worse
@@ -632,8 +651,9 @@ def branch_and_bound(problem, criterion="D", incumbent=None, time_limit=20.0, w0
                 counter += 1
     complete = not heap
     proved = best if complete else max(best, max(-h[0] for h in heap))
-    return {"chosen": best_set, "value": best, "upper_bound": float(proved), "nodes": nodes,
-            "complete": bool(complete), "seconds": time.perf_counter() - t0}
+    return {"chosen": best_set, "value": best, "upper_bound": float(proved), "work": nodes,
+            "complete": bool(complete), "stopped_by": None if complete else stopped_by,
+            "seconds": time.perf_counter() - t0, "method": "branch and bound on the relaxation"}
 
 
 # -- the whole method ----------------------------------------------------------------------
@@ -751,19 +771,27 @@ def pair_discrepancy(model, theta, theta_alt, steps):
     return np.bincount(model.array.channel_sensor, weights=per_channel, minlength=S)
 
 
-def place(problem, criterion="D", method="auto", cuts=None, first_order_above=800, bb_max_k=3, bb_seconds=0.0):
+def place(problem, criterion="D", method="auto", cuts=None, first_order_above=800, bb_max_k=EXACT_MAX_K,
+          bb_work=0, bb_seconds=None):
     """Solve the relaxation, certify it, round and refine; returns a :class:`Placement`.
 
     ``method``: ``auto``, ``clarabel`` (also spelled ``convex``) or
     ``first-order``; see :func:`solve_relaxation`.  A solver failure falls
     back to the first-order method (the Placement's ``message`` says so).
 
-    For few sensors (``k <= bb_max_k``, no cuts, no costs), where the
-    relaxation is loose, ``bb_seconds > 0`` runs a time-limited
-    :func:`branch_and_bound` that tightens the bound (and may improve the
-    design); what it proved is in ``branch_and_bound``.  Off by default here;
-    ``shipsense design`` gives it 20 s.
+    For few sensors (``k <= bb_max_k``), where the relaxation is loose, a search
+    over the subsets tightens the bound (and may improve the design): for the D
+    criterion the exact enumeration pruned by submodular bounds
+    (:func:`shipsense.design.subsets.subset_search`, which keeps cuts and costs
+    at its leaves), for A and E (k <= 3, no cuts, no costs)
+    :func:`branch_and_bound` on the relaxation.  It stops on its work limit
+    ``bb_work`` (0, the default here: no search; None: each search's default,
+    as ``shipsense design`` runs it), with
+    ``bb_seconds`` only as a guard (None: none) that the result names when it
+    fires; what it proved is in ``branch_and_bound``.
     """
+    from shipsense.design.subsets import MAX_WORK, subset_search
+
     t0 = time.perf_counter()
     solver = "clarabel" if method == "convex" else method
     if solver not in SOLVERS:
@@ -772,9 +800,15 @@ def place(problem, criterion="D", method="auto", cuts=None, first_order_above=80
     upper, relax = certified_bound(problem, w, criterion, cuts)
     chosen, value = round_design(problem, w, criterion, cuts)
     bb = None
-    if problem.k <= bb_max_k and not cuts and problem.costs is None and bb_seconds > 0:
-        bb = branch_and_bound(problem, criterion, incumbent=chosen, time_limit=bb_seconds, w0=w)
-        if bb["value"] > value:
+    if bb_work != 0 and problem.k <= bb_max_k:
+        if criterion == "D":
+            bb = subset_search(problem, incumbent=chosen if feasible(chosen[None], cuts, problem)[0] else None,
+                               max_work=MAX_WORK if bb_work is None else bb_work, time_guard=bb_seconds, cuts=cuts)
+        elif problem.k <= 3 and not cuts and problem.costs is None:
+            bb = branch_and_bound(problem, criterion, incumbent=chosen, w0=w, time_guard=bb_seconds,
+                                  max_nodes=BB_NODES if bb_work is None else bb_work)
+    if bb is not None:
+        if bb["chosen"] is not None and bb["value"] > value:
             chosen, value = bb["chosen"], bb["value"]
         upper = min(upper, bb["upper_bound"])
         bb = {k: v for k, v in bb.items() if k != "chosen"}
@@ -785,7 +819,7 @@ def place(problem, criterion="D", method="auto", cuts=None, first_order_above=80
 
 
 def place_with_cuts(problem, candidate_model, thetas, steps, criterion="D", tau=DEFAULT_CHI2, max_rounds=6,
-                    check_passages=4, starts=8, seed=0, progress=False, solver="auto", bb_seconds=0.0):
+                    check_passages=4, starts=8, seed=0, progress=False, solver="auto", bb_work=0, bb_seconds=None):
     """Place sensors, then add ambiguity cuts until the rounded design passes the ambiguity check.
 
     The check is :func:`~shipsense.design.observability.check_array` on the
@@ -800,7 +834,7 @@ def place_with_cuts(problem, candidate_model, thetas, steps, criterion="D", tau=
     solve_seconds = check_seconds = 0.0
     messages = []
     for _ in range(max_rounds):
-        result = place(problem, criterion, solver, cuts, bb_seconds=bb_seconds)
+        result = place(problem, criterion, solver, cuts, bb_work=bb_work, bb_seconds=bb_seconds)
         solve_seconds += result.seconds
         if result.message and result.message not in messages:
             messages.append(result.message)

@@ -60,8 +60,24 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Medium", "FastHED", "fast_hed", "hed_field", "hed_potential", "envelope_reading",
-           "magnitude_reading", "magnitude_jacobian"]
+__all__ = ["CONDUCTIVITY_RATIO", "MAX_SHELLS", "Medium", "FastHED", "fast_hed", "hed_field", "hed_potential",
+           "envelope_reading", "magnitude_reading", "magnitude_jacobian"]
+
+
+CONDUCTIVITY_RATIO = (1e-3, 1e3)
+r"""The seabed-to-water conductivity ratios :math:`\sigma_2/\sigma_1` a :class:`Medium` may have.
+
+The image series converges like :math:`|\eta|^n` with :math:`|\eta| = |1 - r|/(1 + r)` for the ratio
+:math:`r`, so the shells it needs grow like :math:`1/|\ln|\eta|| \approx 1/(2r)` as :math:`r \to 0` (and
+:math:`r/2` as :math:`r \to \infty`); at :math:`|\eta| = 1` (an insulating or a perfectly conducting seabed)
+the tail falls only like :math:`1/n^2` and no tolerance is reached in a bounded number of shells.  Within
+this range :math:`|\eta| \le 0.998` and the stopping rule ends within :data:`MAX_SHELLS` shells at every
+tolerance the package uses; the range spans resistive rock under sea water (:math:`r \approx 10^{-3}`) to
+conductive sediment.
+"""
+MAX_SHELLS = 200_000
+"""Most image shells a series sums before it gives up with an error (never reached within
+:data:`CONDUCTIVITY_RATIO` at the package's tolerances)."""
 
 
 @dataclass(frozen=True)
@@ -87,6 +103,10 @@ class Medium:
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise ValueError(f"Medium.{name} must be a finite number > 0, got {value!r}")
+        lo, hi = CONDUCTIVITY_RATIO
+        if not lo <= self.sigma_seabed / self.sigma_water <= hi:
+            raise ValueError(f"Medium.sigma_seabed / sigma_water must be within [{lo:g}, {hi:g}] (CONDUCTIVITY_RATIO), "
+                             f"got {self.sigma_seabed!r} / {self.sigma_water!r}")
 
     @property
     def eta(self) -> float:
@@ -194,7 +214,7 @@ def _series(rx, ry, zs, zt, px, py, medium, rtol, max_shells, potential):
     )
 
 
-def hed_potential(sensors, sources, moments, medium: Medium, *, rtol=1e-10, max_shells=200_000):
+def hed_potential(sensors, sources, moments, medium: Medium, *, rtol=1e-10, max_shells=MAX_SHELLS):
     """Electric potential (V) of a horizontal dipole in the layered sea (image series).
 
     Same arguments as :func:`hed_field`; used to check the field against
@@ -283,15 +303,18 @@ def magnitude_jacobian(E, dE):
 
 def _last_shell(eta, D, rho, target):
     """The first shell ``n >= 2`` after which the series' tail is at most ``target`` at every offset ``rho`` (an
-    array of the points' ``target`` shape); 999,999 if none.  The tail: :func:`_integral_tail` twice (two images
+    array of the points' ``target`` shape).  Bounded: within :data:`CONDUCTIVITY_RATIO` the tail bound falls
+    like ``|eta|^n`` and reaches any positive target within :data:`MAX_SHELLS` shells; beyond them a
+    ``RuntimeError`` (not a loop that does not end).  The tail: :func:`_integral_tail` twice (two images
     per shell per family, each term -- and rho^2 K2, rho K3 -- at most 1/R^3).  Bound and target are functions
     of the offset alone, so each distinct offset is tested once."""
     r_abs, first = np.unique(np.abs(rho), return_index=True)
     t = np.broadcast_to(target, np.shape(rho)).reshape(-1)[first]
-    for n in range(2, 1_000_000):
+    for n in range(2, MAX_SHELLS + 1):
         if np.all(2.0 * _integral_tail(abs(eta), n, D, r_abs, 3) <= t):
             return n
-    return 999_999
+    raise RuntimeError(f"HED image series: no stopping shell within {MAX_SHELLS} (eta={eta:.6f}: outside "
+                       "CONDUCTIVITY_RATIO)")
 
 
 def _shell_sums(eta, D, last, rho2, w, out):

@@ -107,17 +107,24 @@ def _chunk(task):
             "nees_coverage": coverage(q, second, axis=1).tolist(), "seconds": [seconds] * task.passages}
 
 
-def crlb_position_trace(sc, model, truth):
-    """Trace (R, K) of the position block of each passage's constant-velocity CRLB, m², with the prior
-    information of the tracker's bank (its initial standard deviations)."""
+def crlb_position(sc, model, truth):
+    """The position block (R, K, 2, 2) of each passage's constant-velocity CRLB, m², with the prior information
+    of the tracker's bank (its initial standard deviations)."""
     from shipsense.design.fisher import pcrlb
-    from shipsense.trackers.metrics import position_crlb_trace
     from shipsense.trackers.tracker.settings import resolve_settings
 
     bank = resolve_settings(sc).bank
     J0 = np.diag(model.to_internal(bank.state_std(model.labels)) ** -2.0)
     b = pcrlb(model, model.to_internal(truth), J0, per_run=True, Q=np.zeros_like(model.Q))
-    return position_crlb_trace(model.cov_to_si(b))
+    return np.ascontiguousarray(model.cov_to_si(b)[..., :2, :2])
+
+
+def crlb_position_trace(sc, model, truth):
+    """Trace (R, K) of the position block of each passage's constant-velocity CRLB (:func:`crlb_position`),
+    m²."""
+    from shipsense.trackers.metrics import position_crlb_trace
+
+    return position_crlb_trace(crlb_position(sc, model, truth))
 
 
 def track_passages(method, sc, times, y):

@@ -1,5 +1,5 @@
-"""Tracking metrics: position error, RMSE, convergence, NEES and 95 % ellipse coverage, and the position
-bound the errors are compared with.
+"""Tracking metrics: position error, RMSE, convergence (and the rule that judges it over the passages whose data
+allow it), NEES and 95 % ellipse coverage, and the position bound the errors are compared with.
 
 Conventions: estimates and truth are (runs, steps, >= 2) with (x, y) first, in metres;
 "error" is the horizontal position error.
@@ -14,6 +14,22 @@ CONVERGENCE_THRESHOLD_M = 10.0
 CHI2_2DOF_95 = 5.991464547107979
 """The 95 % quantile of chi-square with 2 degrees of freedom, ``-2 ln 0.05``: a position whose NEES is at most
 this lies inside the reported 95 % ellipse."""
+CRLB_SD_LIMIT_M = CONVERGENCE_THRESHOLD_M / np.sqrt(CHI2_2DOF_95)
+r"""The position CRLB's standard deviation (m) up to which a passage's data allow convergence
+(:func:`convergence_allowed`): 10 / sqrt(2 ln 20) = 4.08 m.
+
+An efficient estimate's horizontal error is Gaussian with the bound's covariance; with an equal standard
+deviation :math:`s` on each axis its length is Rayleigh distributed, so
+
+.. math::  P(|e| \le r) = 1 - \exp\!\Big(-\frac{r^2}{2 s^2}\Big) = 0.95
+           \iff s = \frac{r}{\sqrt{2 \ln 20}} = \frac{r}{\sqrt{\chi^2_{2, 0.95}}},
+
+with :math:`r` = :data:`CONVERGENCE_THRESHOLD_M` (10 m) and :math:`2 \ln 20 = -2 \ln 0.05` =
+:data:`CHI2_2DOF_95`.  A bound of unequal axes is judged by its larger one (:func:`crlb_sd`): its covariance
+lies below :math:`s^2 I` for that :math:`s`, so the probability of the disc is at least the equal-axes one
+(Anderson's theorem: T. W. Anderson, "The integral of a symmetric unimodal function over a symmetric convex
+set", Proc. AMS 6, 1955).  At a larger bound even an efficient estimate misses the threshold in more than
+5 % of the passages: a miss there is the data's, not the tracker's."""
 
 
 def position_error(means, truth):
@@ -91,9 +107,54 @@ def converged_until(means, truth, ends, threshold=CONVERGENCE_THRESHOLD_M, hold=
     k = np.arange(truth.shape[1])[None, :]
     valid = k <= np.asarray(ends)[:, None]
     err = np.where(valid, position_error(means, truth), np.nan)
-    n_hold = np.maximum(1, (hold * (np.asarray(ends) + 1)).astype(int))
-    tail = valid & (k > (ends - n_hold)[:, None])
+    tail = valid & (k >= judged_sample(ends, hold)[:, None])
     return np.all(np.where(tail, err < threshold, True), axis=1), err, valid
+
+
+def judged_sample(ends, hold=0.1):
+    """The first sample (R,) of the last ``hold`` of each passage's samples ``0 .. ends`` (R,): where
+    :func:`converged_until` starts judging."""
+    ends = np.asarray(ends)
+    return ends - np.maximum(1, (hold * (ends + 1)).astype(int)) + 1
+
+
+def crlb_sd(bounds):
+    """The position bound's standard deviation along its larger axis (m): the square root of the largest
+    eigenvalue of the (x, y) block of ``bounds`` (..., >= 2, >= 2; SI, m²: a CRLB's position block or its
+    whole state); shape (...)."""
+    b = np.asarray(bounds, dtype=float)
+    a, c, off = b[..., 0, 0], b[..., 1, 1], 0.5 * (b[..., 0, 1] + b[..., 1, 0])
+    return np.sqrt(0.5 * (a + c) + np.hypot(0.5 * (a - c), off))
+
+
+def convergence_allowed(bounds, limit=CRLB_SD_LIMIT_M):
+    """Whether each passage's data allow convergence: the position CRLB ``bounds`` (..., >= 2, >= 2, SI) at its
+    judged sample (:func:`judged_sample`) has a standard deviation (:func:`crlb_sd`) of at most ``limit``
+    (:data:`CRLB_SD_LIMIT_M`: an efficient estimate is then within the 10 m threshold in at least 95 % of
+    cases).  The rule the convergence of a tracker is judged by (:func:`convergence_rates`); shape (...)."""
+    return crlb_sd(bounds) <= limit
+
+
+def convergence_rates(converged, allowed):
+    """The convergence rate restricted to the passages whose data allow it, beside the unrestricted one.
+
+    Parameters
+    ----------
+    converged : array of bool, shape (R,)
+        Each passage converged (:func:`converged_until`).
+    allowed : array of bool, shape (R,)
+        Its data allow convergence (:func:`convergence_allowed`).
+
+    Returns
+    -------
+    dict
+        ``convergence`` (the share of all passages), ``convergence_bounded`` (the share of the allowed ones;
+        NaN if none is) and ``bounded`` (how many are allowed).
+    """
+    converged, allowed = np.asarray(converged, dtype=bool), np.asarray(allowed, dtype=bool)
+    return {"convergence": float(converged.mean()),
+            "convergence_bounded": float(converged[allowed].mean()) if allowed.any() else float("nan"),
+            "bounded": int(allowed.sum())}
 
 
 def nees(means, covs, truth, components=(0, 1)):

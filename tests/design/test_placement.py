@@ -144,11 +144,24 @@ def test_frank_wolfe_with_costs_is_certified(small):
 
 def test_branch_and_bound_proves_the_optimum_or_a_true_bound(small):
     *_, problem = small
-    sets, values = pl.enumerate_designs(problem, "D")
-    bb = pl.branch_and_bound(problem, "D", time_limit=30.0)
+    sets, values = pl.enumerate_designs(problem, "A")
+    bb = pl.branch_and_bound(problem, "A", max_nodes=10_000)
     assert bb["complete"] and bb["value"] == pytest.approx(values.max(), abs=1e-9)
     assert bb["upper_bound"] == pytest.approx(values.max(), abs=1e-9)
-    early = pl.branch_and_bound(problem, "D", incumbent=sets[np.argmin(values)], time_limit=0.0)
+    early = pl.branch_and_bound(problem, "A", incumbent=sets[np.argmin(values)], max_nodes=1)
+    assert not early["complete"] and early["stopped_by"] == "work"
     assert early["upper_bound"] >= values.max() - 1e-9                     # stopped at once: still a true bound
-    res = pl.place(problem, "D", bb_seconds=30.0)                           # k = 3: place runs it
+    guarded = pl.branch_and_bound(problem, "A", incumbent=sets[np.argmin(values)], time_guard=0.0)
+    assert guarded["stopped_by"] == "time guard" and guarded["upper_bound"] >= values.max() - 1e-9
+    res = pl.place(problem, "A", bb_work=None)                              # k = 3: place runs it
     assert res.branch_and_bound["complete"] and res.guaranteed_efficiency == pytest.approx(1.0, abs=1e-9)
+
+
+def test_the_search_stops_on_its_work_and_the_same_work_proves_the_same_bound(small):
+    """The search's result depends on the work limit, not on the clock: two runs with the same limit prove the
+    same bound, and a larger limit never proves less."""
+    *_, problem = small
+    runs = [pl.branch_and_bound(problem, "A", max_nodes=3) for _ in range(2)]
+    assert runs[0]["upper_bound"] == runs[1]["upper_bound"] and runs[0]["work"] == runs[1]["work"] == 3
+    more = pl.branch_and_bound(problem, "A", max_nodes=6)
+    assert more["upper_bound"] <= runs[0]["upper_bound"] + 1e-12

@@ -289,3 +289,21 @@ def test_the_fast_paths_table_is_the_plain_series_bit_for_bit(monkeypatch, sigma
     assert kernel._table.shape[0] > 8192     # (more points than a chunk: the build is split)
     np.testing.assert_array_equal(kernels["1"]._table, want)
     np.testing.assert_array_equal(kernels["2"]._table, want)
+
+
+def test_a_conductivity_ratio_outside_the_series_range_is_refused_and_the_stopping_shell_is_bounded():
+    """At |eta| = 1 (sigma_seabed = 1e-308 rounds eta to 1) the tail falls like 1/n^2 and no tolerance is reached in
+    a bounded number of shells: the Medium refuses the ratio; at the range's ends the stopping shell is found
+    within MAX_SHELLS."""
+    from shipsense.physics.electric import CONDUCTIVITY_RATIO, MAX_SHELLS, _last_shell
+
+    with pytest.raises(ValueError, match="CONDUCTIVITY_RATIO"):
+        Medium(4.0, 1e-308, 15.0)
+    with pytest.raises(ValueError, match="CONDUCTIVITY_RATIO"):
+        Medium(1e-6, 100.0, 15.0)
+    rho = np.array([0.0, 30.0, 2000.0])
+    for ratio in CONDUCTIVITY_RATIO:
+        eta = Medium(1.0, ratio, 15.0).eta
+        assert 2 <= _last_shell(eta, 15.0, rho, 1e-13 / (rho**2 + 900.0) ** 1.5) <= MAX_SHELLS
+    with pytest.raises(RuntimeError, match="CONDUCTIVITY_RATIO"):
+        _last_shell(1.0, 15.0, rho, 1e-13 / (rho**2 + 900.0) ** 1.5)

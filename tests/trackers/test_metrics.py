@@ -147,3 +147,43 @@ def test_position_crlb_trace_is_the_si_trace_of_the_position_block():
     np.testing.assert_allclose(model.cov_to_si(Bi), S @ Bi @ S, rtol=1e-14)
     np.testing.assert_allclose(model.cov_to_internal(model.cov_to_si(Bi)), Bi, rtol=1e-14)
     assert position_crlb_trace(B).shape == (3, 5)
+
+
+def test_the_crlb_limit_is_where_an_efficient_estimate_is_within_10_m_in_95_percent_of_cases():
+    """4.08 m = 10 / sqrt(2 ln 20): an equal-axes Gaussian error of that sd lies within 10 m with probability
+    0.95 (Rayleigh, and by sampling); of any shape whose larger axis has that sd, with at least 0.95."""
+    from shipsense.trackers.metrics import CONVERGENCE_THRESHOLD_M, CRLB_SD_LIMIT_M, convergence_allowed, crlb_sd
+
+    s = CRLB_SD_LIMIT_M
+    assert s == pytest.approx(10.0 / np.sqrt(2 * np.log(20.0)), rel=1e-12) and 4.08 < s < 4.09
+    assert 1 - np.exp(-CONVERGENCE_THRESHOLD_M**2 / (2 * s**2)) == pytest.approx(0.95, abs=1e-12)
+    rng = np.random.default_rng(0)
+    for ratio, angle in ((1.0, 0.0), (0.3, 0.7), (0.0, 2.0)):                # the smaller axis' share, rotation
+        R = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
+        C = R @ np.diag([s**2, ratio * s**2]) @ R.T
+        assert crlb_sd(C) == pytest.approx(np.sqrt(np.linalg.eigvalsh(C).max()), rel=1e-12)
+        assert convergence_allowed(C * (1 - 1e-9)) and not convergence_allowed(C * (1 + 1e-6))
+        e = rng.multivariate_normal([0.0, 0.0], C, size=200_000)
+        inside = np.mean(np.hypot(e[:, 0], e[:, 1]) <= CONVERGENCE_THRESHOLD_M)
+        assert inside >= 0.95 - 0.002 and (ratio < 1 or inside == pytest.approx(0.95, abs=0.002))
+    full = np.zeros((3, 5, 5))
+    full[:, :2, :2] = np.diag([4.0, 1.0])
+    assert crlb_sd(full) == pytest.approx([2.0] * 3)                       # a whole state's bound: its (x, y) block
+
+
+def test_convergence_is_judged_over_the_passages_whose_data_allow_it_beside_the_unrestricted_rate():
+    from shipsense.trackers.metrics import converged_until, convergence_rates, judged_sample
+
+    conv = np.array([True, False, True, False])
+    allowed = np.array([True, True, True, False])
+    r = convergence_rates(conv, allowed)
+    assert r == {"convergence": 0.5, "convergence_bounded": pytest.approx(2 / 3), "bounded": 3}
+    assert np.isnan(convergence_rates(conv, np.zeros(4, bool))["convergence_bounded"])
+    truth = np.zeros((2, 50, 4))
+    ends = np.array([49, 19])
+    first = judged_sample(ends)
+    assert list(first) == [45, 18]                                         # the last 10 % (at least one sample)
+    means = truth.copy()
+    means[0, first[0] - 1, 0] = 50.0                                       # just before the judged samples
+    means[1, first[1], 0] = 50.0                                           # the first judged sample
+    assert list(converged_until(means, truth, ends)[0]) == [True, False]
