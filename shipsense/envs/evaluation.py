@@ -4,8 +4,8 @@ A policy is a baseline the environment offers (its unwrapped class lists them in
 with ``baseline(name)``: a callable ``obs -> action`` that may read the environment's internal state), a planning
 baseline of a Passage environment (:mod:`shipsense.envs.planning`: ``greedy-threshold``, ``rollout``, the offline
 ``hindsight``) or a stable-baselines3 model file ``PATH.zip`` (PPO, or MaskablePPO, predicting with the
-environment's ``action_masks`` when it has them). Episode ``i`` is reset with ``seed + i``, so every policy meets
-the same episodes. Returned: the mean return and its standard error, and each task metric the environment reports
+environment's ``action_masks`` when it has them).  Episode ``i`` is reset with ``seed + i``, so every policy meets
+the same episodes.  Returned: the mean return and its standard error, and each task metric the environment reports
 at the end of an episode (``info["episode_metrics"]``) averaged the same way, and the policy's compute per
 decision.
 """
