@@ -18,12 +18,14 @@ observer and its reward: a later Passage version with the same spaces takes them
     One step of policy improvement over greedy by Monte Carlo rollouts (Bertsekas' rollout algorithm).  At
     every decision, for each action :math:`a` and each of :math:`F` futures :math:`f`,
 
-    .. math::  Q(a) = \frac{1}{F} \sum_f \sum_{j=1}^{H} r_j(a, f),
+    .. math::  Q(a) = \frac{1}{F} \sum_f \Big[\sum_{j=1}^{H} r_j(a, f) + (T - H)\, r^e_H(a, f)\Big],
 
     the return of :math:`H` steps that read :math:`a` first and then follow greedy, with the environment's
-    own reward :math:`r = -\ln(1 + e / e_s) - c\,\text{reads}` (:math:`e` the observer's error against the
-    future's truth).  A future is drawn **from the observer's belief**, never from the environment's passage:
-    the ship's state :math:`x_0 \sim \mathcal N(\hat x, P)` from the observer's selected estimate and its
+    own reward :math:`r = r^e - c\,\text{reads}`, :math:`r^e = -\ln(1 + e / e_s)` (:math:`e` the observer's
+    error against the future's truth), and the last step's error term held for the :math:`T - H` steps left
+    in the passage after the horizon (:data:`TAILS`: a read goes on paying off after it).  A future is drawn
+    **from the observer's belief**, never from the environment's passage: the ship's state
+    :math:`x_0 \sim \mathcal N(\hat x, P)` from the observer's selected estimate and its
     covariance, carried by the observer's motion model (``x_{j+1} = A x_j``), its samples
     :math:`y_j = h(x_j) + v_j` with the scenario's noise (its outliers and dropouts too).  Every action meets
     the same futures (common random numbers: the differences of :math:`Q` are not buried in the futures'
@@ -64,10 +66,15 @@ PLANNERS = ("greedy-threshold", "rollout", "hindsight")
 """The planning baselines' names (``shipsense evaluate --policy``)."""
 THRESHOLDS = (0.0, 0.005, 0.01, 0.02, 0.03, 0.05, 0.075, 0.1, 0.15, 0.2, 0.3, 0.5)
 """The thresholds (nats) :func:`fit_threshold` tries by default."""
-FIT_SEED = 1_000_000
-"""First seed of :func:`fit_threshold`'s training episodes (``shipsense evaluate`` holds out 2,000,000 on)."""
+FIT_SEED = 3_000_000
+"""First seed of :func:`fit_threshold`'s training episodes (away from ``shipsense evaluate``'s held-out seeds,
+2,000,000 and up, and from ``shipsense train``'s held-out evaluations, 1,000,000 and up)."""
 FIT_EPISODES = 30
 """Training episodes of :func:`fit_threshold`."""
+TAILS = ("hold", "none")
+"""What a rollout counts after its horizon: ``hold``, the last simulated step's error term for every step left
+in the passage (reads go on paying off after the horizon; without it, a short horizon sees a read's energy
+but little of its gain); ``none``, nothing."""
 
 
 def offers(env):
@@ -79,12 +86,13 @@ def planner(env, name, seed=None, **options):
     """The planning baseline ``name`` (one of :data:`PLANNERS`) for the single environment ``env``:
     ``policy(obs) -> action``.  ``seed`` seeds a policy's own generator (rollout's futures); ``options``:
     ``threshold`` (greedy-threshold: nats, default fitted), ``fit_episodes``, ``fit_seed`` (its fit);
-    ``horizon``, ``samples`` (rollout); ``beam`` (hindsight).  A bad name or option raises one ``ValueError``."""
+    ``horizon``, ``samples``, ``tail`` (rollout, :data:`TAILS`); ``beam`` (hindsight).  A bad name or option
+    raises one ``ValueError``."""
     if not offers(env):
         raise ValueError(f"policy {name!r} needs a Passage environment")
     core = env.unwrapped.core
-    allowed = {"greedy-threshold": ("threshold", "fit_episodes", "fit_seed"), "rollout": ("horizon", "samples"),
-               "hindsight": ("beam",)}
+    allowed = {"greedy-threshold": ("threshold", "fit_episodes", "fit_seed"),
+               "rollout": ("horizon", "samples", "tail"), "hindsight": ("beam",)}
     if name not in allowed:
         raise ValueError(f"unknown planner {name!r}; offered: {', '.join(PLANNERS)}")
     unknown = sorted(set(options) - set(allowed[name]))
@@ -210,10 +218,13 @@ class Rollout:
     """``rollout`` (the module docstring) on a core's environments: ``policy(obs) -> action`` (environment 0's;
     a core of several environments decides for each in turn, ``actions()``)."""
 
-    def __init__(self, core, horizon=4, samples=16, seed=None):
+    def __init__(self, core, horizon=4, samples=16, seed=None, tail="hold"):
         self.core = core
         self.horizon = number("horizon", horizon, 1, 10_000, integer=True)
         self.samples = number("samples", samples, 1, 100_000, integer=True)
+        if tail not in TAILS:
+            raise ValueError(f"tail must be one of {', '.join(TAILS)}, got {tail!r}")
+        self.tail = tail
         self.rng = np.random.default_rng(seed)
         self.A = len(core.subsets)
         self.twin = None
@@ -227,7 +238,7 @@ class Rollout:
         return np.array([self.decide(e) for e in range(self.core.E)])
 
     def describe(self):
-        return {"horizon": self.horizon, "samples": self.samples, "candidates": self.A}
+        return {"horizon": self.horizon, "samples": self.samples, "tail": self.tail, "candidates": self.A}
 
     def decide(self, e):
         """Environment ``e``'s action: greedy's while its observer has no track, else the action of the largest
@@ -256,9 +267,12 @@ class Rollout:
         twin.returns[:] = 0.0
         actions = np.repeat(np.arange(A), F)
         for _ in range(steps):
-            twin.step(actions)
+            _, _, _, info = twin.step(actions)
             actions = twin.greedy_actions()
-        return twin.returns.reshape(A, F).mean(axis=1)
+        value = twin.returns.copy()
+        if self.tail == "hold":             # the last error term held to the passage's end
+            value += (core.K - 1 - k - steps) * info["error_term"]
+        return value.reshape(A, F).mean(axis=1)
 
 
 # -- hindsight ------------------------------------------------------------------------------------------------
