@@ -12,7 +12,13 @@ import numpy as np
 from shipsense.arguments import number
 from shipsense.config import load_scenario
 from shipsense.design.information_gain import information_gains_at
-from shipsense.envs.features import accumulate_steps, measure_errors, read_sensors, write_observations
+from shipsense.envs.features import (
+    accumulate_steps,
+    measure_errors,
+    predicted_beliefs,
+    read_sensors,
+    write_observations,
+)
 from shipsense.envs.prefetch import PASSAGE_BLOCK, PassagePrefetch
 from shipsense.simulator import simulate
 from shipsense.trackers import Tracker
@@ -83,7 +89,8 @@ class PassageV1Core(PassagePrefetch):
         # the observer's noise and the one-step transition, in the model's internal units (the estimates are
         # brought there by the model: FieldModel.to_internal, cov_to_internal)
         self._Rinv = np.ascontiguousarray(1.0 / tracker.filter_model.R, dtype=float)
-        self._A = self.model.A
+        self._A = np.ascontiguousarray(self.model.A, dtype=float)
+        self._scale = np.ascontiguousarray(self.model.x_scale, dtype=float)
         self._first = np.asarray(self.first_channel, dtype=np.int64)
         self._allocate(tracker)
 
@@ -218,8 +225,9 @@ class PassageV1Core(PassagePrefetch):
         envs = envs[~blind]   # (the prior's mean is the array centroid: a sensor may sit there)
         if envs.size == 0:
             return
-        x = self.model.to_internal(self.last.estimate[envs]) @ self._A.T
-        P = self._A @ self.model.cov_to_internal(self.last.cov[envs]) @ self._A.T
+        n = self.model.n
+        x, P = np.empty((envs.size, n)), np.empty((envs.size, n, n))
+        predicted_beliefs(envs, self.last.estimate, self.last.cov, self._scale, self._A, x, P)
         self.gains[envs] = information_gains_at(self.model, x, self._Rinv, P, self._first, self.subsets)
 
     def _blind(self, envs):
