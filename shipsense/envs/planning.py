@@ -218,7 +218,7 @@ class Rollout:
     """``rollout`` (the module docstring) on a core's environments: ``policy(obs) -> action`` (environment 0's;
     a core of several environments decides for each in turn, ``actions()``)."""
 
-    def __init__(self, core, horizon=4, samples=16, seed=None, tail="hold"):
+    def __init__(self, core, horizon=4, samples=32, seed=None, tail="hold"):
         self.core = core
         self.horizon = number("horizon", horizon, 1, 10_000, integer=True)
         self.samples = number("samples", samples, 1, 100_000, integer=True)
