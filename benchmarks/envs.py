@@ -3,8 +3,13 @@ tracker is its observer) and of ArrayDesign-v1 (single and native vector, 16 env
 episodes: every episode's site set-up, i.e. its Fisher matrices, is included) against ArrayDesign-v0 (a few
 steps: its terminal judge tracks 8 passages), with CartPole-v1 measured in the same run as the reference.
 
+The reference of issue 50's targets is **raw** CartPole: ``gym.make("CartPole-v1").unwrapped`` stepped with
+random actions (:func:`raw_cartpole_rate`), a few times faster than the wrapped environment (its checkers and
+time limit), which would make the ratios look better than they are.  The targets: a Passage step at least
+1/30 of raw CartPole's step rate, the 64-environment vector env's steps (frames) at least 0.12 of it.
+
 Run:  PYTHONPATH=. python benchmarks/envs.py [--steps 2000] [--num-envs 64] [--allocator tuned|default]
-      [--v1-id shipsense/Passage-v1] [--design-steps 400] [--design-envs 16] [--skip-passage]
+      [--v1-id shipsense/Passage-v1] [--design-steps 400] [--design-envs 16] [--skip-passage] [--skip-design]
 
 Passage-v1's actions read the first ``k``-sensor subset (its full budget).  Autoresets are included (with the
 run-in: the observer reads every sensor until its first track).  Every rate is over three timed runs
@@ -47,6 +52,21 @@ def sustained_rate(reset, run, frames):
     return REPEATS * frames / total
 
 
+def raw_cartpole_rate(steps):
+    """Steps per second of raw CartPole (``gym.make("CartPole-v1").unwrapped``: no wrappers), random actions (drawn
+    beforehand), reset when an episode ends (:func:`sustained_rate`)."""
+    env = gym.make("CartPole-v1").unwrapped
+    actions = np.random.default_rng(0).integers(0, 2, steps).tolist()
+
+    def run():
+        for a in actions:
+            _, _, term, trunc, _ = env.step(a)
+            if term or trunc:
+                env.reset()
+
+    return sustained_rate(lambda seed: env.reset(seed=seed), run, steps)
+
+
 def single_rate(env, steps, action):
     def run():
         for _ in range(steps):
@@ -75,14 +95,17 @@ def main(argv=None):
     ap.add_argument("--design-steps", type=int, default=400, help="ArrayDesign-v1 single-env steps per timed run")
     ap.add_argument("--design-envs", type=int, default=16, help="ArrayDesign-v1 vector envs")
     ap.add_argument("--skip-passage", action="store_true", help="measure only CartPole and ArrayDesign")
+    ap.add_argument("--skip-design", action="store_true", help="measure only CartPole and Passage")
     args = ap.parse_args(argv)
     tuned = args.allocator == "tuned" and shipsense.tune_allocator()
     print(f"allocator: {'tuned (shipsense.tune_allocator)' if tuned else 'default'}")
     n = args.num_envs
+    raw = raw_cartpole_rate(args.steps * 10)
     cart = single_rate(gym.make("CartPole-v1"), args.steps, 1)
     cart_vec = vector_rate(gym.make_vec("CartPole-v1", num_envs=n, vectorization_mode="vector_entry_point"),
                            args.steps // 10, np.ones(n, dtype=np.int64))
     print(f"{'environment':<44}{'steps/s':>12}")
+    print(f"{'CartPole-v1 raw (unwrapped, random actions)':<44}{raw:>12,.0f}")
     print(f"{'CartPole-v1 (single)':<44}{cart:>12,.0f}")
     print(f"{f'CartPole-v1 (native vector, {n} envs)':<44}{cart_vec:>12,.0f}")
     if not args.skip_passage:
@@ -90,6 +113,10 @@ def main(argv=None):
         print(f"{f'{args.v1_id} (single)':<44}{single:>12,.0f}")
         print(f"{f'{args.v1_id} (vector, {n} envs)':<44}{vec:>12,.0f}")
         print(f"Passage-v1 / CartPole-v1: single {single / cart:.4f}, vector {vec / cart_vec:.4f}")
+        print(f"Passage-v1 / raw CartPole-v1: single 1/{raw / single:.1f} (target 1/30 or better), vector "
+              f"{vec / raw:.3f}x (target 0.12x or more)")
+    if args.skip_design:
+        return
     d = design_rates(args.design_steps, args.design_envs)
     for name, rate in d.items():
         print(f"{name:<44}{rate:>12,.1f}")

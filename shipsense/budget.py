@@ -39,7 +39,8 @@ WIDE_BYTES_PER_CHUNK = 5e8            # one chunk of passages in one worker
 CHECK_S_PER_VALUE = 1.5e-4            # ambiguity search per passage x step x channel (benchmarks/check.py)
 PPO_S_PER_STEP = {"scheduling": 4e-3, "placement": 2e-3}   # PPO on Passage-v1 (16 envs) and on ArrayDesign-v1
 TRAIN_EVALUATION_S = {"scheduling": 120.0, "placement": 40.0}   # a held-out evaluation, per 200 episodes
-EVALUATE_S_PER_EPISODE = {"convex": 5.0}   # design_array per site (S1-P2, 81 candidates); the others far less
+EVALUATE_S_PER_EPISODE = {"convex": 5.0, "rollout": 5.0, "hindsight": 1.5}   # convex: design_array per site (S1-P2,
+# 81 candidates); rollout, hindsight: Passage-v1 planning baselines at their defaults; the others far less
 DESIGN_S_PER_VALUE = 5e-7             # Fisher build per candidate x passage x step x channel (benchmarks/design.py)
 
 

@@ -60,13 +60,16 @@ def cmd_evaluate(args) -> int:
 
     within_budget(args, budget.evaluation(args.env_id, args.policy, args.episodes))
     env_kwargs = json_kwargs("--env-kwargs", args.env_kwargs)
+    policy_kwargs = json_kwargs("--policy-kwargs", args.policy_kwargs)
     if "Passage" in args.env_id:               # (the tracker observes)
         first_use("evaluate")
     try:
         result = evaluate(args.env_id, args.policy, args.episodes, args.seed, env_kwargs,
-                          progress=not QUIET["on"])
+                          progress=not QUIET["on"], policy_kwargs=policy_kwargs)
     except ValueError as err:
-        raise BadInput(str(err)) from None
+        message = str(err)
+        raise BadInput("--policy-kwargs" + message[len("policy_kwargs"):] if message.startswith("policy_kwargs")
+                       else message) from None
     if args.json:
         print(json.dumps(result, indent=2))
     else:

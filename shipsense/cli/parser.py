@@ -162,8 +162,13 @@ def build_parser() -> argparse.ArgumentParser:
                         "episodes reset with seeds S, S+1, ...")
     ev.add_argument("env_id", metavar="ENV_ID", help="e.g. shipsense/ArrayDesign-v1")
     ev.add_argument("--policy", required=True, metavar="NAME|PATH.zip",
-                    help="a baseline the environment offers (random, round-robin, greedy, convex) or a "
+                    help="a baseline the environment offers (random, round-robin, greedy, convex; Passage "
+                         "environments also greedy-threshold, rollout and the offline reference hindsight) or a "
                          "stable-baselines3 model file")
+    ev.add_argument("--policy-kwargs", default=None, metavar="JSON",
+                    help="a planning baseline's options, a JSON object: greedy-threshold {\"threshold\": nats} "
+                         "(default: fitted on training seeds), rollout {\"horizon\": 4, \"samples\": 32}, "
+                         "hindsight {\"beam\": 256}")
     ev.add_argument("--episodes", type=whole_flag(1, 10**6), default=50, help="episodes (default: %(default)s)")
     ev.add_argument("--seed", type=whole_flag(0, 2**31 - 1), default=2_000_000,
                     help="seed of the first episode (default: %(default)s, away from training's seeds)")

@@ -112,4 +112,39 @@ def measure_errors(envs, k, est, cov, truth, limit, est_hist, errors, inside, er
         inside[e, ke] = nees[r] <= limit
 
 
+@njit(cache=True, error_model="numpy", nogil=True)
+def predicted_beliefs(envs, est, cov, x_scale, A, X, P):
+    """The observers' beliefs of environments ``envs`` predicted one step, in the model's internal units (the
+    linearisation point of the predicted gains of
+    :class:`~shipsense.envs.passage_core.PassageV1Core`): ``X[r] = A
+    (est[e] / s)`` (r, n) and ``P[r] = A (cov[e] / (s s^T)) A^T`` (r, n, n), ``s`` the model's ``x_scale``
+    (SI per internal unit) -- numpy's ``to_internal(est) @ A.T`` and ``A @ cov_to_internal(cov) @ A.T``
+    without their temporaries."""
+    n = x_scale.size
+    xi, Pi, tmp = np.empty(n), np.empty((n, n)), np.empty((n, n))
+    for r in range(envs.size):
+        e = envs[r]
+        for a in range(n):
+            xi[a] = est[e, a] / x_scale[a]
+            for b in range(n):
+                Pi[a, b] = cov[e, a, b] / (x_scale[a] * x_scale[b])
+        for a in range(n):
+            acc = 0.0
+            for b in range(n):
+                acc += xi[b] * A[a, b]
+            X[r, a] = acc
+        for a in range(n):
+            for b in range(n):
+                acc = 0.0
+                for c in range(n):
+                    acc += A[a, c] * Pi[c, b]
+                tmp[a, b] = acc
+        for a in range(n):
+            for b in range(n):
+                acc = 0.0
+                for c in range(n):
+                    acc += tmp[a, c] * A[b, c]
+                P[r, a, b] = acc
+
+
 numba_cache.key_on_sources(globals())   # the caches follow the files these kernels are compiled from

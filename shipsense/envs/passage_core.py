@@ -4,6 +4,7 @@ of them at once.  The single environment and the native vector one both run on :
 
 from __future__ import annotations
 
+import copy
 from itertools import combinations
 
 import numpy as np
@@ -11,7 +12,13 @@ import numpy as np
 from shipsense.arguments import number
 from shipsense.config import load_scenario
 from shipsense.design.information_gain import information_gains_at
-from shipsense.envs.features import accumulate_steps, measure_errors, read_sensors, write_observations
+from shipsense.envs.features import (
+    accumulate_steps,
+    measure_errors,
+    predicted_beliefs,
+    read_sensors,
+    write_observations,
+)
 from shipsense.envs.prefetch import PASSAGE_BLOCK, PassagePrefetch
 from shipsense.simulator import simulate
 from shipsense.trackers import Tracker
@@ -64,8 +71,8 @@ class PassageV1Core(PassagePrefetch):
         if sc.prior is None:
             raise ValueError(f"scenario {sc.name!r} has no [prior]: Passage-v1 draws passages from it")
         self.scenario = sc
-        self.tracker = Tracker(sc, passages=num_envs)
-        self.model = self.tracker.model
+        tracker = Tracker(sc, passages=num_envs)
+        self.model = tracker.model
         arr = self.model.array
         self.S = len(arr.ids)
         self.k_reads = number("k", k, 1, self.S, integer=True)
@@ -79,7 +86,19 @@ class PassageV1Core(PassagePrefetch):
         self.first_channel = np.flatnonzero(np.diff(np.concatenate([[-1], self.sensor_of])))
         self.obs_dim = 9 + 2 * self.S
         self.times = sc.times
-        E, K = self.E, self.K
+        # the observer's noise and the one-step transition, in the model's internal units (the estimates are
+        # brought there by the model: FieldModel.to_internal, cov_to_internal)
+        self._Rinv = np.ascontiguousarray(1.0 / tracker.filter_model.R, dtype=float)
+        self._A = np.ascontiguousarray(self.model.A, dtype=float)
+        self._scale = np.ascontiguousarray(self.model.x_scale, dtype=float)
+        self._first = np.asarray(self.first_channel, dtype=np.int64)
+        self._allocate(tracker)
+
+    def _allocate(self, tracker):
+        """The state of ``tracker.P`` environments observed by ``tracker`` (of this core's model)."""
+        self.tracker = tracker
+        self.E = E = tracker.P
+        K = self.K
         self.y = np.zeros((E, K, self.model.m))
         self.truth = np.zeros((E, K, self.model.n))
         self.est_hist = np.zeros((E, K, 2))
@@ -96,11 +115,28 @@ class PassageV1Core(PassagePrefetch):
         # (the next blocks of this many environments are left in one piece of work, their run-ins in one batch)
         PassagePrefetch.__init__(self, max(1, min(self.E, self.tracker.independent_batch // PASSAGE_BLOCK)))
         self._rows = np.arange(E)
-        # the observer's noise and the one-step transition, in the model's internal units (the estimates are
-        # brought there by the model: FieldModel.to_internal, cov_to_internal)
-        self._Rinv = np.ascontiguousarray(1.0 / self.tracker.filter_model.R, dtype=float)
-        self._A = self.model.A
-        self._first = np.asarray(self.first_channel, dtype=np.int64)
+
+    def twin(self, num_envs):
+        """A core of ``num_envs`` environments with this one's scenario, arguments, spaces and rewards, its observer
+        a sibling of this one's (:meth:`~shipsense.trackers.Tracker.sibling`: the same model, so passage states
+        move between the two), with no passage yet: for planners that simulate futures on it (their samples in
+        ``y``, their truths in ``truth``) or run episodes of their own (:meth:`reset_envs`)."""
+        twin = copy.copy(self)
+        twin._allocate(self.tracker.sibling(number("num_envs", num_envs, 1, 100_000, integer=True)))
+        return twin
+
+    def copy_envs(self, source, rows, envs):
+        """Environments ``envs`` of this core (a :meth:`twin`) set to environment ``rows`` of ``source``'s
+        state as its agent and observer know it (``rows`` may repeat): sample index, start, steps since each
+        read, last reads, episode sums, the observer's state and output and its predicted gains -- not the
+        passage (``y``, ``truth``), which the caller writes."""
+        rows, envs = np.asarray(rows, dtype=np.int64), np.asarray(envs, dtype=np.int64)
+        for name in ("k", "start", "since", "last_read", "returns", "reads", "gains"):
+            getattr(self, name)[envs] = getattr(source, name)[rows]
+        _copy_outputs(source.last.take(rows), envs, self.last)
+        distinct, which = np.unique(rows, return_inverse=True)
+        states = source.tracker.passage_states(distinct)
+        self.tracker.set_passage_states(envs, [states[i] for i in which.tolist()])
 
     # -- episodes ---------------------------------------------------------------
     looks_ahead = True
@@ -189,8 +225,9 @@ class PassageV1Core(PassagePrefetch):
         envs = envs[~blind]   # (the prior's mean is the array centroid: a sensor may sit there)
         if envs.size == 0:
             return
-        x = self.model.to_internal(self.last.estimate[envs]) @ self._A.T
-        P = self._A @ self.model.cov_to_internal(self.last.cov[envs]) @ self._A.T
+        n = self.model.n
+        x, P = np.empty((envs.size, n)), np.empty((envs.size, n, n))
+        predicted_beliefs(envs, self.last.estimate, self.last.cov, self._scale, self._A, x, P)
         self.gains[envs] = information_gains_at(self.model, x, self._Rinv, P, self._first, self.subsets)
 
     def _blind(self, envs):
