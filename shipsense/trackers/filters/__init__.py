@@ -41,35 +41,69 @@ class FilterUnit:
     name: str
     options: dict = field(default_factory=dict)
 
-    def predict(self, belief: Belief, model) -> Belief:
-        """Time update (shared; the SR-CDKF propagates its factor by triangularisation).
+    def on(self, model):
+        """This unit's steps on ``model``, their implementation chosen here, once: the compiled kernels
+        (:class:`CompiledSteps`) for a model with a compiled measurement kernel
+        (:func:`~shipsense.models.measurement.kernel_of`), the numpy steps of the filter modules otherwise
+        (:class:`NumpySteps`).  What the bank and :func:`~shipsense.trackers.filters.run.run_filter` step
+        with."""
+        spec = kernel_of(model)
+        return NumpySteps(self) if spec is None else CompiledSteps(self, spec)
 
-        Compiled (:mod:`~shipsense.trackers.filters.fused`) for models with a compiled kernel, numpy otherwise.
-        """
-        square_root = self.name == "srcdkf"
-        if kernel_of(model) is not None:
-            out = fused.predict(belief, model, square_root)
-            if out is not None:
-                return out
-        return predict(belief, model, square_root=square_root)
+    def predict(self, belief: Belief, model) -> Belief:
+        """Time update (shared; the SR-CDKF propagates its factor by triangularisation), by :meth:`on`'s
+        steps."""
+        return self.on(model).predict(belief, model)
 
     def step(self, belief: Belief, y, model, mask=None):
         """Time update then measurement update (:meth:`predict` then :meth:`update`); returns ``(belief,
         innovation)``."""
-        return self.update(self.predict(belief, model), y, model, mask)
+        return self.on(model).step(belief, y, model, mask)
 
     def update(self, belief: Belief, y, model, mask=None):
-        """Measurement update; returns ``(belief, innovation)``.
+        """Measurement update, by :meth:`on`'s steps; returns ``(belief, innovation)``."""
+        return self.on(model).update(belief, y, model, mask)
 
-        Compiled (:mod:`~shipsense.trackers.filters.fused`) for models with a compiled kernel; the numpy
-        update of the filter's module otherwise, and for a step in which an element failed numerically.
-        """
-        spec = kernel_of(model)
-        if spec is not None:
-            out = fused.update(self.name, belief, y, model, spec, mask, **self.options)
-            if out is not None:
-                return out
-        return UPDATES[self.name](belief, y, model, mask, **self.options)
+
+@dataclass(frozen=True)
+class NumpySteps:
+    """A unit's numpy steps: :func:`~shipsense.trackers.filters.core.predict` and the update of its module
+    (``ukf.update`` and so on), the generic implementation, for a model without a compiled kernel (a user's own
+    ``h``, the series HED path)."""
+
+    unit: FilterUnit
+
+    def predict(self, belief: Belief, model) -> Belief:
+        return predict(belief, model, square_root=self.unit.name == "srcdkf")
+
+    def update(self, belief: Belief, y, model, mask=None):
+        return UPDATES[self.unit.name](belief, y, model, mask, **self.unit.options)
+
+    def step(self, belief: Belief, y, model, mask=None):
+        return self.update(self.predict(belief, model), y, model, mask)
+
+
+@dataclass(frozen=True)
+class CompiledSteps:
+    """A unit's compiled steps on a model with a compiled measurement kernel ``spec``
+    (:mod:`~shipsense.trackers.filters.fused`).  A step in which an element fails numerically (a covariance
+    that is not positive definite, a result that is not finite) is taken again by the numpy steps, which flag
+    and repair such an element (the compiled kernels stop at it)."""
+
+    unit: FilterUnit
+    spec: tuple
+
+    def predict(self, belief: Belief, model) -> Belief:
+        square_root = self.unit.name == "srcdkf"
+        out = fused.predict(belief, model, square_root)
+        return out if out is not None else predict(belief, model, square_root=square_root)
+
+    def update(self, belief: Belief, y, model, mask=None):
+        out = fused.update(self.unit.name, belief, y, model, self.spec, mask, **self.unit.options)
+        return out if out is not None else UPDATES[self.unit.name](belief, y, model, mask, **self.unit.options)
+
+    def step(self, belief: Belief, y, model, mask=None):
+        return self.update(self.predict(belief, model), y, model, mask)
 
 
 def get_filter(name: str, **options) -> FilterUnit:
@@ -90,4 +124,5 @@ def _options_of(name):
     return tuple(inspect.signature(UPDATES[name]).parameters)[4:]
 
 
-__all__ = ["FILTER_NAMES", "Belief", "FilterUnit", "Innovation", "get_filter", "predict", "safe_cholesky", "tria"]
+__all__ = ["FILTER_NAMES", "Belief", "CompiledSteps", "FilterUnit", "Innovation", "NumpySteps", "get_filter", "predict",
+           "safe_cholesky", "tria"]

@@ -460,15 +460,15 @@ class Tracker:
         nothing of theirs written)."""
         o, h, s = self.settings, self.huber, self.state
         runs = np.asarray(runs, dtype=np.int64)
-        test = self._testing
-        consistency = (self._R_used, self.model.R,
+        # the kernel's bundles (step.PassageRows, Consistency, Selection) as plain tuples (step.py says why)
+        passages = (s.nis, s.trusted, out.status, TRACKING, INCONSISTENT)
+        consistency = (self._testing, self._R_used, self.model.R,
                        *((float(h.gamma), float(h.eps), float(h.scale)) if h is not None else (np.inf, 0.0, 1.0)),
                        quantile_table(o.consistency_level, self.model.m), s.cons, s.cons_n, s.cons_tests, s.cons_fails,
                        s.cons_now)
         selection = (self.model.x_scale, self.MIXTURE, float(o.report_nats), float(o.report_distance_m),
                      s.excess, out.estimate, out.cov, s.own, out.gap_nats, out.ambiguous, out.hypotheses, out.selected)
-        left = self._compiled(runs, yi, self.model.y_scale, self.bank, s.nis, test, consistency, selection,
-                              out.status, s.trusted, (TRACKING, INCONSISTENT), stepped)
+        left = self._compiled(runs, yi, self.model.y_scale, self.bank, passages, consistency, selection, stepped)
         if left.size < runs.size:
             self.bank.belief = Belief(*self.bank.belief)   # (as BankState.step leaves it)
         if left.size == 0:
