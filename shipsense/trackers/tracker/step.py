@@ -96,9 +96,10 @@ class StepModel(NamedTuple):
 
 
 class PassageRows(NamedTuple):
-    """The per-passage state the step reads and writes (:class:`~shipsense.trackers.tracker.passages.
-    PassageArrays`' fields, indexed by passage): the NIS window ``nis`` (P, N), whether the bank's fits are
-    ``trusted`` (P,), the sample's ``status`` (P,) (written) and its codes ``tracking`` and ``inconsistent``."""
+    """The per-passage state the step reads and writes, indexed by passage (fields of
+    :class:`~shipsense.trackers.tracker.passages.PassageArrays`): the NIS window ``nis`` (P, N), whether the
+    bank's fits are ``trusted`` (P,), the sample's ``status`` (P,) (written) and its codes ``tracking`` and
+    ``inconsistent``."""
 
     nis: np.ndarray
     trusted: np.ndarray
