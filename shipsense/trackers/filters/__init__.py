@@ -20,6 +20,7 @@ motion models are linear) and differs in its measurement update:
 
 from __future__ import annotations
 
+import weakref
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -47,8 +48,20 @@ class FilterUnit:
         (:func:`~shipsense.models.measurement.kernel_of`), the numpy steps of the filter modules otherwise
         (:class:`NumpySteps`).  What the bank and :func:`~shipsense.trackers.filters.run.run_filter` step
         with."""
+        last = self.__dict__.get("_last")   # the steps on the model of the last call, while that model lives
+        if last is not None and last[0]() is model:
+            return last[1]
         spec = kernel_of(model)
-        return NumpySteps(self) if spec is None else CompiledSteps(self, spec)
+        steps = NumpySteps(self) if spec is None else CompiledSteps(self, spec)
+        try:
+            object.__setattr__(self, "_last", (weakref.ref(model), steps))
+        except TypeError:                    # (a model that takes no weak reference: chosen again next time)
+            pass
+        return steps
+
+    def __getstate__(self):
+        """The unit's fields (copied and pickled without the steps :meth:`on` keeps)."""
+        return {"name": self.name, "options": self.options}
 
     def predict(self, belief: Belief, model) -> Belief:
         """Time update (shared; the SR-CDKF propagates its factor by triangularisation), by :meth:`on`'s
@@ -65,13 +78,15 @@ class FilterUnit:
         return self.on(model).update(belief, y, model, mask)
 
 
-@dataclass(frozen=True)
 class NumpySteps:
     """A unit's numpy steps: :func:`~shipsense.trackers.filters.core.predict` and the update of its module
     (``ukf.update`` and so on), the generic implementation, for a model without a compiled kernel (a user's own
     ``h``, the series HED path)."""
 
-    unit: FilterUnit
+    __slots__ = ("unit",)      # (a plain class: FilterUnit's steps are made on every call of theirs)
+
+    def __init__(self, unit):
+        self.unit = unit
 
     def predict(self, belief: Belief, model) -> Belief:
         return predict(belief, model, square_root=self.unit.name == "srcdkf")
@@ -83,15 +98,16 @@ class NumpySteps:
         return self.update(self.predict(belief, model), y, model, mask)
 
 
-@dataclass(frozen=True)
 class CompiledSteps:
     """A unit's compiled steps on a model with a compiled measurement kernel ``spec``
     (:mod:`~shipsense.trackers.filters.fused`).  A step in which an element fails numerically (a covariance
     that is not positive definite, a result that is not finite) is taken again by the numpy steps, which flag
     and repair such an element (the compiled kernels stop at it)."""
 
-    unit: FilterUnit
-    spec: tuple
+    __slots__ = ("unit", "spec")
+
+    def __init__(self, unit, spec):
+        self.unit, self.spec = unit, spec
 
     def predict(self, belief: Belief, model) -> Belief:
         square_root = self.unit.name == "srcdkf"
