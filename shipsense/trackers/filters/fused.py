@@ -20,10 +20,10 @@ whose step fails numerically here (an innovation or posterior covariance that is
 non-finite result) makes the whole step rerun on the numpy steps, which flag and repair such elements (the
 kernels stop at them).
 
-The kernels take their arrays in named bundles (:class:`~shipsense.trackers.filters.kernels.Prior`,
+The update kernels take their arrays in named bundles (:class:`~shipsense.trackers.filters.kernels.Prior`,
 :class:`~shipsense.trackers.filters.kernels.Readings`, :class:`~shipsense.trackers.filters.kernels.UpdateSpec`,
-:class:`~shipsense.trackers.filters.kernels.Posterior`), passed as plain tuples of their fields (numba's
-dispatcher types a plain tuple in its compiled fast path, a named one in Python).
+:class:`~shipsense.trackers.filters.kernels.Posterior`), through an entry that takes their fields flat
+(:mod:`~shipsense.trackers.filters.kernels` says why).
 
 The results equal the numpy steps' to rounding (tests/trackers/filters/test_fused.py), with one difference by
 design: the Huber update's reweighting stops for each element when its weights settle, where the numpy
@@ -52,8 +52,8 @@ from shipsense.trackers.filters.ukf import merwe_weights
 # -- threads --------------------------------------------------------------------------------------------------
 
 _PREDICT_ROWS = frozenset({0, 1, 2, 3, 4, 6, 7, 8, 9})    # the predict kernel's arguments with a row per element
-_UPDATE_ROWS = frozenset({0, 1, 3})    # the update kernel's bundles with a row per element (Prior, Readings,
-#                                        Posterior; not UpdateSpec)
+_UPDATE_ROWS = frozenset({0, 1, 2, 3, 4, 15, 16, 17, 18, 19, 20, 21, 22, 23})   # (its Prior's, Readings' and
+#                                                                                Posterior's fields)
 
 
 def _rows(a, lo, hi, nb):
@@ -213,10 +213,9 @@ def _run_update(consts, X, L, P, y, mask, model, spec):
     post = (np.empty((nb, n)), np.empty((nb, n, n)), np.zeros((nb, n, n)) if filt != SRCDKF else _NO_COV,
             np.empty((nb, m)), np.empty((nb, m, m)), np.empty(nb), np.empty(nb), np.empty(nb, dtype=np.int64),
             np.empty(nb, dtype=bool))           # (kernels.Posterior's fields)
-    # the kernel's bundles (kernels.Prior, Readings, UpdateSpec, Posterior) as plain tuples: numba's dispatch
-    # types a plain tuple in its compiled fast path, a named one in Python, field by field (slower a call)
-    if not _split(UPDATE_KERNELS[filt], _UPDATE_ROWS, nb, (X, L, P), (y, mask), (noise_variances(model), spec,
-                                                                                 *consts[1:]), post):
+    # the entry takes the fields of the kernel's bundles kernels.Prior, Readings, UpdateSpec and Posterior, flat
+    if not _split(UPDATE_KERNELS[filt], _UPDATE_ROWS, nb, X, L, P, y, mask, noise_variances(model), spec, *consts[1:],
+                  *post):
         return None
     mean_out, P_out, L_out = post[:3]
     return mean_out, P_out, L_out, post[3:8]

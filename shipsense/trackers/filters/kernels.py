@@ -10,8 +10,9 @@ implementation; the numpy updates of the filter modules are the generic path of 
 (:mod:`~shipsense.trackers.filters.fused` says which runs where).
 
 An update kernel takes its arrays in four bundles named by meaning -- :class:`Prior`, :class:`Readings`,
-:class:`UpdateSpec`, :class:`Posterior` -- each passed as a plain tuple of its fields and named inside the
-kernel (numba's dispatcher types a plain tuple in its compiled fast path, a named one in Python).
+:class:`UpdateSpec`, :class:`Posterior`.  Python calls its entry (:data:`UPDATE_KERNELS`) with the bundles'
+fields flat, which bundles them for the kernel: numba's dispatcher types a flat argument in its compiled fast
+path and a tuple's fields one by one, which at a batch of one costs a share of a filter step.
 """
 
 from __future__ import annotations
@@ -437,8 +438,7 @@ def _update_kernel_for(code):
 
     def kernel(prior, readings, spec, post):
         """One measurement update of every batch element: the bundles :class:`Prior`, :class:`Readings`,
-        :class:`UpdateSpec` and :class:`Posterior` (written), each given as a plain tuple of its fields (a
-        plain tuple is what numba's dispatch types fastest; named here).
+        :class:`UpdateSpec` and :class:`Posterior` (written), named tuples or plain tuples of their fields.
 
         The covariance-form filters also write the posterior's factor into ``post.chol`` (the SR-CDKF's factor
         is ``post.cov``); ``post.ok`` is False where a factorisation failed or a result is not finite; returns
@@ -464,19 +464,32 @@ def _update_kernel_for(code):
         _LOOP(prior, readings, spec, post, work, ekf)  # noqa: F821 - the copy's global
         return post.ok.all()
 
-    # each filter's kernel and loop are named for it, the kernel finding its loop as the global ``_LOOP`` of its
-    # own copy (numba_cache.specialised says why)
+    def entry(mean, chol, cov, y, mask, R, measurement, spread, center, Wm, Wc, h, gamma, iterations, n_pu,
+              post_mean, post_cov, post_chol, eps, S, loglik, nis, m, ok):
+        """The update's entry: the bundles' fields in their order, flat (numba's dispatcher types a flat
+        argument in its compiled fast path, a tuple's fields one by one: at a batch of one, a share of the
+        step), bundled for the kernel ``_KERNEL`` (inlined)."""
+        return _KERNEL(Prior(mean, chol, cov), Readings(y, mask),  # noqa: F821 - the copy's global
+                       UpdateSpec(R, measurement, spread, center, Wm, Wc, h, gamma, iterations, n_pu),
+                       Posterior(post_mean, post_cov, post_chol, eps, S, loglik, nis, m, ok))
+
+    # each filter's entry, kernel and loop are named for it, each finding the next as a global of its own copy
+    # (numba_cache.specialised says why)
     loop.__qualname__ = f"_update_loop_{code}"
     loop = loop_jit(loop)
-    return numba_cache.specialised(kernel, f"_update_kernel_{code}", njit(cache=True, error_model="numpy", nogil=True),
-                                   _LOOP=loop), loop
+    bundled = numba_cache.specialised(kernel, f"_update_kernel_{code}",
+                                      njit(cache=True, error_model="numpy", inline="always"), _LOOP=loop)
+    return numba_cache.specialised(entry, f"_update_entry_{code}", njit(cache=True, error_model="numpy", nogil=True),
+                                   _KERNEL=bundled), bundled, loop
 
 
 _UPDATE_PAIRS = {code: _update_kernel_for(code) for code in (UKF, CDKF, HUBER, EKF, PUEKF, SRCDKF)}
-UPDATE_KERNELS = {code: kernel for code, (kernel, _) in _UPDATE_PAIRS.items()}
-UPDATE_LOOPS = {code: loop for code, (_, loop) in _UPDATE_PAIRS.items()}
-"""Each filter's compiled update and its loop (:func:`_update_kernel_for`), by the filter's code (the loops
-are here so that :func:`shipsense.numba_cache.key_on_sources` stamps them too)."""
+UPDATE_KERNELS = {code: entry for code, (entry, _, _) in _UPDATE_PAIRS.items()}
+UPDATE_BUNDLED = {code: bundled for code, (_, bundled, _) in _UPDATE_PAIRS.items()}
+UPDATE_LOOPS = {code: loop for code, (_, _, loop) in _UPDATE_PAIRS.items()}
+"""Each filter's compiled update (:func:`_update_kernel_for`), by the filter's code: its entry on the bundles'
+fields (what Python calls), the kernel on the bundles (what the tracker's compiled step calls) and its loop
+(the last two here so that :func:`shipsense.numba_cache.key_on_sources` stamps them too)."""
 
 
 @njit(cache=True, error_model="numpy", nogil=True)

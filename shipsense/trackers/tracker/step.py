@@ -30,11 +30,11 @@ numpy here: the hypotheses' covariances ``L L^T`` the time update starts from (n
 compiled loop does not reproduce to the last bit).  At every batch size this is the faster path (docs:
 Results).
 
-The kernel takes its arrays in a few bundles named by meaning (:class:`StepSample`, :class:`BankArrays`,
-:class:`Motion`, :class:`StepModel`, :class:`PassageRows`, :class:`Consistency`, :class:`Selection`), each
-passed as a plain tuple of its fields and named inside the kernel: numba's dispatcher types a plain tuple in
-its compiled fast path and a named tuple in Python, field by field, which at a batch of one costs a share of
-the step (benchmarks/run.py measures the step).
+The step takes its arrays in a few bundles named by meaning (:class:`StepSample`, :class:`BankArrays`,
+:class:`Motion`, :class:`StepModel`, :class:`PassageRows`, :class:`Consistency`, :class:`Selection`).  Python
+calls its entry (:data:`STEP_KERNELS`) with the bundles' fields flat, which bundles them for the step: numba's
+dispatcher types a flat argument in its compiled fast path and a tuple's fields one by one, which at a batch of
+one costs a share of the step (benchmarks/run.py measures the step).
 """
 
 from __future__ import annotations
@@ -50,7 +50,7 @@ from shipsense.models.measurement import kernel_of
 from shipsense.parallel import in_chunks
 from shipsense.trackers.bank.selection import first_max, report
 from shipsense.trackers.filters.fused import filter_constants, no_sqrt, noise_root, noise_variances, per_element
-from shipsense.trackers.filters.kernels import CDKF, EKF, HUBER, PUEKF, SRCDKF, UKF, UPDATE_KERNELS, predict_kernel
+from shipsense.trackers.filters.kernels import CDKF, EKF, HUBER, PUEKF, SRCDKF, UKF, UPDATE_BUNDLED, predict_kernel
 from shipsense.trackers.init.detection import DOUBLE_MAX, strongest_kernel
 from shipsense.trackers.tracker.consistency import window_test
 
@@ -148,18 +148,16 @@ class Selection(NamedTuple):
 
 
 def _step_kernel_for(code):
-    """The compiled step of filter ``code``: the update kernel a global of its own copy (as fused's kernels
-    find their loops), so that each filter's step is compiled and cached apart."""
+    """The compiled step of filter ``code`` and its entry: the update kernel a global of the step's own copy,
+    the step a global of the entry's (as fused's kernels find their loops), so that each filter's step is
+    compiled and cached apart."""
     filt_code = code
 
     def kernel(runs, H, sample, bank, motion, model, passages, consistency, selection):
         """One sample of passages ``runs`` (see the module): the bundles :class:`StepSample`,
         :class:`BankArrays`, :class:`Motion`, :class:`StepModel`, :class:`PassageRows`, :class:`Consistency`
-        and :class:`Selection`, each a plain tuple of its fields (named here: numba's dispatch types a plain
-        tuple fastest).  Returns False, having written nothing, when an element's time or measurement update
-        failed."""
-        sample, bank, motion, model = StepSample(*sample), BankArrays(*bank), Motion(*motion), StepModel(*model)
-        passages, consistency, selection = PassageRows(*passages), Consistency(*consistency), Selection(*selection)
+        and :class:`Selection`.  Returns False, having written nothing, when an element's time or measurement
+        update failed."""
         square_root = filt_code == SRCDKF
         yi, cum, A, Q, lo, hi = sample.y, bank.cum, motion.A, motion.Q, model.lo, model.hi
         R = runs.shape[0]
@@ -283,8 +281,27 @@ def _step_kernel_for(code):
                 status[runs[p]] = passages.inconsistent
         return True
 
-    return numba_cache.specialised(kernel, f"_tracker_step_{code}", njit(cache=True, error_model="numpy", nogil=True),
-                                   _PREDICT=predict_kernel, _UPDATE=UPDATE_KERNELS[code])
+    def entry(runs, H, y, scale, bank_scale, mean, chol, cum, prior, A, Q, sqQ, R, measurement, spread, center, Wm,
+              Wc, h, gamma, iterations, n_pu, lo, hi, nis, trusted, status, tracking, inconsistent, test, R_used,
+              R_declared, c_gamma, outliers, c_scale, table, window, count, tests, fails, now, x_scale, mixture,
+              report_nats, far_m, excess, estimate, cov, own, gap, ambiguous, hypotheses, selected):
+        """The step's entry: the bundles' fields in their order, flat (numba's dispatch types a flat argument in
+        its fast path, an array in a tuple field by field: at a batch of one, a share of the step), bundled
+        for the step ``_STEP``."""
+        return _STEP(runs, H, StepSample(y, scale, bank_scale), BankArrays(mean, chol, cum),  # noqa: F821
+                     Motion(prior, A, Q, sqQ),
+                     StepModel((R, measurement, spread, center, Wm, Wc, h, gamma, iterations, n_pu), lo, hi),
+                     PassageRows(nis, trusted, status, tracking, inconsistent),
+                     Consistency(test, R_used, R_declared, c_gamma, outliers, c_scale, table, window, count, tests,
+                                 fails, now),
+                     Selection(x_scale, mixture, report_nats, far_m, excess, estimate, cov, own, gap, ambiguous,
+                               hypotheses, selected))
+
+    step = numba_cache.specialised(kernel, f"_tracker_step_{code}", njit(cache=True, error_model="numpy",
+                                                                          inline="always"),
+                                   _PREDICT=predict_kernel, _UPDATE=UPDATE_BUNDLED[code])
+    return numba_cache.specialised(entry, f"_tracker_step_entry_{code}",
+                                   njit(cache=True, error_model="numpy", nogil=True), _STEP=step), step
 
 
 @njit(cache=True, nogil=True)
@@ -397,8 +414,12 @@ def prepare_sample(act, t, y, ys, phase, last_t, n, y_hist, t_hist, cons_now, fi
 THREAD_ROWS = 96
 """Hypothesis rows in a chunk of :class:`TrackerStep`'s passages; the chunks are shared among the CPUs."""
 
-STEP_KERNELS = {code: _step_kernel_for(code) for code in (UKF, CDKF, HUBER, EKF, PUEKF, SRCDKF)}
-"""Each filter's compiled step, by its code (compiled at its first call)."""
+_STEP_PAIRS = {code: _step_kernel_for(code) for code in (UKF, CDKF, HUBER, EKF, PUEKF, SRCDKF)}
+STEP_KERNELS = {code: entry for code, (entry, _) in _STEP_PAIRS.items()}
+STEPS = {code: step for code, (_, step) in _STEP_PAIRS.items()}
+"""Each filter's compiled step (``STEPS``, on the bundles) and its entry (``STEP_KERNELS``, on their fields), by
+the filter's code (compiled at the entry's first call; the steps are here so that
+:func:`shipsense.numba_cache.key_on_sources` stamps them too)."""
 
 
 class TrackerStep:
@@ -422,8 +443,8 @@ class TrackerStep:
         lo, hi = (np.empty(0), np.empty(0)) if bounds is None else (np.asarray(b, dtype=float) for b in bounds)
         self.motion = (per_element(model.A, (1,), n), per_element(model.Q, (1,), n),
                        noise_root(model.Q, (1,), n) if self.square_root else no_sqrt(n))
-        self.model = StepModel((noise_variances(model), spec, *consts[1:]), np.ascontiguousarray(lo),
-                               np.ascontiguousarray(hi))
+        # StepModel's fields, its UpdateSpec's flat (the entry's arguments)
+        self.model = (noise_variances(model), spec, *consts[1:], np.ascontiguousarray(lo), np.ascontiguousarray(hi))
         self.ys_bank = np.ascontiguousarray(model.y_scale, dtype=float)
 
     def __call__(self, runs, yi, ys_in, bank, passages, consistency, selection, stepped=None):
@@ -455,18 +476,15 @@ class TrackerStep:
             n = bank.model.n
             A, Q = (per_element(a, (rows.size,), n) for a in (stepped.A, stepped.Q))
             sqQ = noise_root(stepped.Q, (rows.size,), n) if self.square_root else self.motion[2]
-        arrays = (bank.belief.mean, bank.belief.chol, bank.cum)
-        sample = (yi, ys_in, self.ys_bank)
-        model = tuple(self.model)
+        mean, chol, cum = bank.belief.mean, bank.belief.chol, bank.cum
 
         def per_row(a, part):
             return a[part] if a.shape[0] > 1 else a
 
-        def chunk(lo, hi):
+        def chunk(lo, hi):    # (the entry takes the bundles' fields, flat)
             part = slice(lo * H, hi * H)
-            return self.kernel(runs[lo:hi], H, sample, arrays, (src[part], per_row(A, part), per_row(Q, part),
-                                                                per_row(sqQ, part)),
-                               model, passages, consistency, selection)
+            return self.kernel(runs[lo:hi], H, yi, ys_in, self.ys_bank, mean, chol, cum, src[part], per_row(A, part),
+                               per_row(Q, part), per_row(sqQ, part), *self.model, *passages, *consistency, *selection)
 
         size = max(1, -(-THREAD_ROWS // H))            # passages a chunk
         count = -(-runs.size // size)

@@ -445,7 +445,7 @@ class Tracker:
         nothing of theirs written)."""
         o, h, s = self.settings, self.huber, self.state
         runs = np.asarray(runs, dtype=np.int64)
-        # the kernel's bundles (step.PassageRows, Consistency, Selection) as plain tuples (step.py says why)
+        # the fields of the step's bundles step.PassageRows, Consistency and Selection, in their order
         passages = (s.nis, s.trusted, out.status, TRACKING, INCONSISTENT)
         consistency = (self._testing, self._R_used, self.model.R,
                        *((float(h.gamma), float(h.eps), float(h.scale)) if h is not None else (np.inf, 0.0, 1.0)),
