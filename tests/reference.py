@@ -61,3 +61,24 @@ def linear_gaussian(rng):
     C = rng.standard_normal((3, 4))
     R = np.array([0.5, 1.0, 2.0])
     return (A, Q, C, R), LinearModel(A, Q, C, R)
+
+
+def terms(eps, state_var, noise_var, present, gamma=np.inf, outliers=0.0, scale=1.0):
+    """The windowed innovation consistency test's terms of one sample, in numpy (the definition the tracker's
+    compiled pass, ``shipsense.trackers.tracker.consistency.window_test``, is tested against): its
+    contributions (..., 2, m) to the window sums, ``psi(z)`` and its variance ``v`` under the declared noise,
+    per channel (zero where a component is missing)."""
+    from shipsense.trackers.tracker.consistency import psi_variance
+
+    z = eps / np.sqrt(state_var + noise_var)
+    psi = np.clip(z, -gamma, gamma) if np.isfinite(gamma) else z
+    v = psi_variance(state_var, noise_var, gamma, outliers, scale)
+    return np.where(present[..., None, :], np.stack([psi, v], axis=-2), 0.0)
+
+
+def statistic(sums):
+    """The consistency test's statistic ``T`` and its degrees of freedom (the channels with data) from window
+    sums (..., 2, m) (:func:`terms` summed over the window), in numpy."""
+    s, v = sums[..., 0, :], sums[..., 1, :]
+    has = v > 0.0
+    return np.sum(np.where(has, s * s / np.where(has, v, 1.0), 0.0), axis=-1), has.sum(axis=-1)

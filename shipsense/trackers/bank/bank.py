@@ -226,6 +226,7 @@ class BankState:
 
     def __init__(self, unit, model, seeds, P0, initial_loglik=None):
         self.unit, self.model = unit, model
+        self.filter = unit.on(model)                 # (its compiled or numpy steps, chosen once)
         seeds = np.asarray(seeds, dtype=float)
         self.R, self.H, n = seeds.shape
         xs = model.x_scale
@@ -287,10 +288,10 @@ class BankState:
         yy = np.asarray(y, dtype=float)[run] / self.model.y_scale
         mk = None if mask is None else np.asarray(mask)[run]
         if predict and model is None:
-            new, inn = self.unit.step(sub, yy, self.model, mk)
+            new, inn = self.filter.step(sub, yy, self.model, mk)
         else:
-            b = self.unit.predict(sub, model) if predict else sub
-            new, inn = self.unit.update(b, yy, self.model, mk)
+            b = self.filter.predict(sub, model) if predict else sub
+            new, inn = self.filter.update(b, yy, self.model, mk)
         new = _project(new, self.model)
         if rows is None:
             self.belief = new

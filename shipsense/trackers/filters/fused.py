@@ -1,10 +1,10 @@
 r"""Compiled filter steps: each filter's predict and update as one call of its compiled kernel over the batch
 (:mod:`~shipsense.trackers.filters.kernels`), from beliefs, models and masks as the filter units hold them.
 
-Who gets which implementation.  :class:`~shipsense.trackers.filters.FilterUnit`
-(what :func:`~shipsense.trackers.filters.run.run_filter`, the bank and the tracker
-call) runs these compiled steps whenever the model has a compiled measurement
-kernel (:func:`shipsense.models.measurement.kernel_of`):
+Which form is which.  :meth:`FilterUnit.on <shipsense.trackers.filters.FilterUnit.on>` chooses, once for a
+model (what :func:`~shipsense.trackers.filters.run.run_filter`, the bank and the tracker step with), these
+compiled steps (:class:`~shipsense.trackers.filters.CompiledSteps`) whenever the model has a compiled
+measurement kernel (:func:`shipsense.models.measurement.kernel_of`):
 
 * a :class:`~shipsense.models.field_model.FieldModel` on the fast HED path:
   magnetometers (vector, magnitude or tmi readings; the S0 model), seismic
@@ -13,12 +13,17 @@ kernel (:func:`shipsense.models.measurement.kernel_of`):
   (:meth:`~shipsense.models.field_model.FieldModel.stepped`);
 * a :class:`~shipsense.models.field_model.LinearModel`.
 
-Every other model (the series HED path; user models with a Python ``h``)
-runs the generic numpy steps of the filter modules (``ukf.update`` and so on),
-which are also the independent reference the tests compare these steps with.
-An element whose step fails numerically here (an innovation or posterior
-covariance that is not positive definite, a non-finite result) makes the whole step rerun on the
-numpy path, which flags and repairs such elements.
+For those models these kernels are the implementation.  Every other model (the series HED path; user models
+with a Python ``h``) runs the generic numpy steps of the filter modules (``ukf.update`` and so on;
+:class:`~shipsense.trackers.filters.NumpySteps`), which the tests also hold these steps equal to.  An element
+whose step fails numerically here (an innovation or posterior covariance that is not positive definite, a
+non-finite result) makes the whole step rerun on the numpy steps, which flag and repair such elements (the
+kernels stop at them).
+
+The update kernels take their arrays in named bundles (:class:`~shipsense.trackers.filters.kernels.Prior`,
+:class:`~shipsense.trackers.filters.kernels.Readings`, :class:`~shipsense.trackers.filters.kernels.UpdateSpec`,
+:class:`~shipsense.trackers.filters.kernels.Posterior`), through an entry that takes their fields flat
+(:mod:`~shipsense.trackers.filters.kernels` says why).
 
 The results equal the numpy steps' to rounding (tests/trackers/filters/test_fused.py), with one difference by
 design: the Huber update's reweighting stops for each element when its weights settle, where the numpy
@@ -46,22 +51,29 @@ from shipsense.trackers.filters.ukf import merwe_weights
 
 # -- threads --------------------------------------------------------------------------------------------------
 
-_PREDICT_ROWS = frozenset({0, 1, 2, 3, 4, 6, 7, 8, 9})    # the kernels' arguments with a row per batch element
-_UPDATE_ROWS = frozenset({0, 1, 2, 3, 4, 15, 16, 17, 18, 19, 20, 21, 22, 23})
+_PREDICT_ROWS = frozenset({0, 1, 2, 3, 4, 6, 7, 8, 9})    # the predict kernel's arguments with a row per element
+_UPDATE_ROWS = frozenset({0, 1, 2, 3, 4, 15, 16, 17, 18, 19, 20, 21, 22, 23})   # (its Prior's, Readings' and
+#                                                                                Posterior's fields)
 
 
-def _split(kernel, rows, *args):
-    """``kernel(*args)`` (True if every element is ok), over contiguous chunks of the batch in threads when the
-    batch is large (:func:`shipsense.parallel.in_chunks`): the arguments at positions ``rows`` that have a row per
-    element are sliced."""
-    nb = args[0].shape[0]
+def _rows(a, lo, hi, nb):
+    """Rows ``lo:hi`` of a kernel argument with a row per element (its arrays of ``nb`` rows, in a bundle)."""
+    if isinstance(a, tuple):
+        return tuple(_rows(v, lo, hi, nb) for v in a)
+    return a[lo:hi] if a.shape[0] == nb else a
+
+
+def _split(kernel, rows, nb, *args):
+    """``kernel(*args)`` (True if every element is ok), over contiguous chunks of the ``nb`` elements in threads
+    when the batch is large (:func:`shipsense.parallel.in_chunks`): the arguments (or bundles) at positions
+    ``rows`` that have a row per element are sliced."""
     if nb < SPLIT_MIN:              # (in_chunks would not split it: called here, without its machinery)
         return bool(kernel(*args))
 
     def chunk(lo, hi):
         if lo == 0 and hi == nb:
             return kernel(*args)
-        return kernel(*(a[lo:hi] if i in rows and a.shape[0] == nb else a for i, a in enumerate(args)))
+        return kernel(*(_rows(a, lo, hi, nb) if i in rows else a for i, a in enumerate(args)))
 
     return all(in_chunks(chunk, nb))
 
@@ -121,12 +133,7 @@ def predict(belief: Belief, model, square_root: bool = False):
     batch = _batch(mean.shape[:-1], A.shape[:-2])
     if square_root:
         src = belief.chol
-        Q = np.asarray(model.Q, dtype=float)
-        if Q.ndim == 2:
-            sqQ = _shared_sqrt(n, np.ascontiguousarray(Q).tobytes())
-        else:
-            w, V = np.linalg.eigh(np.broadcast_to(Q, batch + (n, n)))
-            sqQ = _flat(V * np.sqrt(np.clip(w, 0.0, None))[..., None, :], batch, (n, n))
+        sqQ = noise_root(model.Q, batch, n)
         Qf = np.zeros((1, 1, 1))
     else:
         cached = getattr(belief, "_cov", None)
@@ -139,13 +146,24 @@ def predict(belief: Belief, model, square_root: bool = False):
     P_out = np.empty((B, n, n)) if not square_root else np.empty((1, n, n))
     L_out = np.zeros((B, n, n))
     ok = np.empty(B, dtype=bool)
-    if not _split(predict_kernel, _PREDICT_ROWS, X, _flat(src, batch, (n, n)), per_element(A, batch, n), Qf, sqQ,
+    if not _split(predict_kernel, _PREDICT_ROWS, B, X, _flat(src, batch, (n, n)), per_element(A, batch, n), Qf, sqQ,
                   square_root, mean_out, P_out, L_out, ok):
         return None
     mean_out, L_out = _shaped(mean_out, batch), _shaped(L_out, batch)
     if square_root:
         return Belief(mean_out, L_out, _flag(belief.ok, batch))
     return BeliefWithCov.with_cov(mean_out, L_out, _flag(prior_health(belief), batch), _shaped(P_out, batch))
+
+
+def noise_root(Q, batch, n):
+    """The square-root time update's root of the process noise ``Q`` (n, n) shared, (1, n, k) (the columns of
+    :func:`~shipsense.trackers.filters.core.sqrt_psd` that are not zero), or per element (..., n, n) over
+    ``batch``, (B, n, n) (its eigen-decomposition's)."""
+    Q = np.asarray(Q, dtype=float)
+    if Q.ndim == 2:
+        return _shared_sqrt(n, np.ascontiguousarray(Q).tobytes())
+    w, V = np.linalg.eigh(np.broadcast_to(Q, batch + (n, n)))
+    return _flat(V * np.sqrt(np.clip(w, 0.0, None))[..., None, :], batch, (n, n))
 
 
 _FILTER_CODES = {"ukf": UKF, "ckf": UKF, "huber_ukf": HUBER, "cdkf": CDKF, "srcdkf": SRCDKF, "ekf": EKF,
@@ -189,22 +207,18 @@ def update(name, belief: Belief, y, model, spec, mask=None, **options):
 def _run_update(consts, X, L, P, y, mask, model, spec):
     """The update kernel of ``consts`` (:func:`filter_constants`) on flat (B, ...) arguments: ``(mean, P, L,
     (eps, S, loglik, nis, m))`` (B, ...), or None if an element failed."""
-    filt, spread, center, Wm, Wc, h, gamma, iterations, n_pu = consts
+    filt = consts[0]
     nb, n = X.shape
     m = y.shape[1]
-    mean_out = np.empty((nb, n))
-    P_out = np.empty((nb, n, n))
-    L_out = np.zeros((nb, n, n)) if filt != SRCDKF else _NO_COV
-    eps = np.empty((nb, m))
-    S = np.empty((nb, m, m))
-    loglik = np.empty(nb)
-    nis = np.empty(nb)
-    cnt = np.empty(nb, dtype=np.int64)
-    ok = np.empty(nb, dtype=bool)
-    if not _split(UPDATE_KERNELS[filt], _UPDATE_ROWS, X, L, P, y, mask, noise_variances(model), spec, spread, center,
-                  Wm, Wc, h, gamma, iterations, n_pu, mean_out, P_out, L_out, eps, S, loglik, nis, cnt, ok):
+    post = (np.empty((nb, n)), np.empty((nb, n, n)), np.zeros((nb, n, n)) if filt != SRCDKF else _NO_COV,
+            np.empty((nb, m)), np.empty((nb, m, m)), np.empty(nb), np.empty(nb), np.empty(nb, dtype=np.int64),
+            np.empty(nb, dtype=bool))           # (kernels.Posterior's fields)
+    # the entry takes the fields of the kernel's bundles kernels.Prior, Readings, UpdateSpec and Posterior, flat
+    if not _split(UPDATE_KERNELS[filt], _UPDATE_ROWS, nb, X, L, P, y, mask, noise_variances(model), spec, *consts[1:],
+                  *post):
         return None
-    return mean_out, P_out, L_out, (eps, S, loglik, nis, cnt)
+    mean_out, P_out, L_out = post[:3]
+    return mean_out, P_out, L_out, post[3:8]
 
 
 def filter_constants(name, n, options):

@@ -5,12 +5,20 @@ One step per batch element, with no Python objects, no temporaries and no refere
 the per-step cost is one call's overhead plus the arithmetic.  Each filter has its own update kernel
 (:func:`_update_kernel_for`: one source, the filter a constant of each), so a first call compiles that
 filter's statistics and gain only, not all six filters'; the kernels are cached on disk
-(:mod:`shipsense.numba_cache`).
+(:mod:`shipsense.numba_cache`).  For a model with a compiled measurement kernel these are the filters'
+implementation; the numpy updates of the filter modules are the generic path of the other models
+(:mod:`~shipsense.trackers.filters.fused` says which runs where).
+
+An update kernel takes its arrays in four bundles named by meaning -- :class:`Prior`, :class:`Readings`,
+:class:`UpdateSpec`, :class:`Posterior`.  Python calls its entry (:data:`UPDATE_KERNELS`) with the bundles'
+fields flat, which bundles them for the kernel: numba's dispatcher types a flat argument in its compiled fast
+path and a tuple's fields one by one, which at a batch of one costs a share of a filter step.
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -307,6 +315,61 @@ def _ekf_gain(subs, x, P0, present, y, R, spec, sc, mean, Pout, eps_out, S_out):
     return ok, nis, logdet
 
 
+class Prior(NamedTuple):
+    """The beliefs an update starts from, a row per batch element: means (B, n), their lower Cholesky factors
+    (B, n, n) and covariances (B, n, n) (the SR-CDKF reads no covariance: (1, 1, 1); the linearised filters
+    read no factor: their covariances again)."""
+
+    mean: np.ndarray
+    chol: np.ndarray
+    cov: np.ndarray
+
+
+class Readings(NamedTuple):
+    """What an update reads: the measurements ``y`` (B, m) in the model's internal units (NaN = missing) and
+    the channels to read, ``mask`` (B or 1, m) bool."""
+
+    y: np.ndarray
+    mask: np.ndarray
+
+
+class UpdateSpec(NamedTuple):
+    """A filter on its model, the same for every call: the measurement noise variances ``R`` (m,), the
+    model's compiled measurement description ``measurement``
+    (:func:`~shipsense.models.measurement.kernel_of`), and the filter's constants
+    (:func:`~shipsense.trackers.filters.fused.filter_constants`): the sigma points' ``spread`` and whether
+    they have a ``center`` point, their weights ``Wm``, ``Wc``, the difference step ``h``, the Huber
+    threshold ``gamma`` and its reweighting's ``iterations``, the PUEKF's sub-updates ``n_pu``."""
+
+    R: np.ndarray
+    measurement: tuple
+    spread: float
+    center: int
+    Wm: np.ndarray
+    Wc: np.ndarray
+    h: float
+    gamma: float
+    iterations: int
+    n_pu: int
+
+
+class Posterior(NamedTuple):
+    """An update's results, a row per batch element (written by the kernel): the means (B, n), covariances
+    (B, n, n) (the SR-CDKF's factors) and their factors (B, n, n) (the SR-CDKF: (1, 1, 1), unused), the
+    innovations ``eps`` (B, m), their covariances ``S`` (B, m, m), log-likelihoods ``loglik`` (B,),
+    normalised squares ``nis`` (B,), channels read ``m`` (B,) int64, and ``ok`` (B,) bool."""
+
+    mean: np.ndarray
+    cov: np.ndarray
+    chol: np.ndarray
+    eps: np.ndarray
+    S: np.ndarray
+    loglik: np.ndarray
+    nis: np.ndarray
+    m: np.ndarray
+    ok: np.ndarray
+
+
 def _update_kernel_for(code):
     """The compiled measurement update of filter ``code`` (UKF/CKF, CDKF, HUBER, EKF, PUEKF, SRCDKF): a kernel
     and its loop over the batch, with ``filt`` a constant of each, so that numba prunes the other filters'
@@ -314,71 +377,76 @@ def _update_kernel_for(code):
     six; one source for the six)."""
     filt_code = code
 
-    def loop(X, Ls_in, P_in, Yobs, mask, Rm, spec, spread, center, Wm, Wc, h, gamma, iterations, n_pu, mean_out,
-             P_out, L_out, eps_out, S_out, loglik, nis_out, m_out, ok_out, work, ekf):
-        """The kernel's loop over the batch, on its scratch ``work`` and ``ekf``."""
+    def loop(prior, readings, spec, post, work, ekf):
+        """The kernel's loop over the batch, on its scratch ``work`` and ``ekf``; the bundles as
+        :func:`_update_kernel_for`'s kernel takes them, named."""
         filt = filt_code
         (present, y, R, yhat, eps, w, Y, dY, Pxy, Pyy, S, Ls, W, Y1, Y2, Ht, pt, dx, Reff, new, My, Mx, Asc, vsc,
          nzs, B) = work
-        nb, n = X.shape
+        nb, n = prior.mean.shape
+        Yobs, mask = readings.y, readings.mask
         m = Yobs.shape[1]
-        axial = spec[9]
+        meas = spec.measurement
+        axial = meas[9]
         for b in range(nb):
-            x = X[b]
-            L = Ls_in[b]
+            x = prior.mean[b]
+            L = prior.chol[b]
             cnt = 0
             for j in range(m):
                 present[j] = math.isfinite(Yobs[b, j]) and mask[b if mask.shape[0] > 1 else 0, j]
                 y[j] = Yobs[b, j] if present[j] else 0.0
-                R[j] = Rm[j] if present[j] else 1.0
+                R[j] = spec.R[j] if present[j] else 1.0
                 cnt += present[j]
-            m_out[b] = cnt
+            post.m[b] = cnt
             ok, nis, logdet = True, 0.0, 0.0
             if filt == UKF or filt == HUBER:
-                _sigma_stats(x, L, present, spec, spread, Wm, Wc, center, pt, Y, yhat, dY, Pxy, Pyy, B)
+                _sigma_stats(x, L, present, meas, spec.spread, spec.Wm, spec.Wc, spec.center, pt, Y, yhat, dY, Pxy,
+                             Pyy, B)
                 for i in range(m):
                     eps[i] = _residual(y[i], yhat[i], axial[i]) if present[i] else 0.0
                     for j in range(m):
                         S[i, j] = Pyy[i, j]
                     S[i, i] += R[i]
                 if filt == HUBER:
-                    ok = _huber_reweight(L, present, R, eps, Pxy, Pyy, S, gamma, iterations, Ls, w, Ht, Reff, new, dx)
+                    ok = _huber_reweight(L, present, R, eps, Pxy, Pyy, S, spec.gamma, spec.iterations, Ls, w, Ht, Reff,
+                                         new, dx)
                 if ok:
-                    ok, nis, logdet = _gain(x, P_in[b], eps, Pxy, S, n, m, Ls, W, w, mean_out[b], P_out[b])
+                    ok, nis, logdet = _gain(x, prior.cov[b], eps, Pxy, S, n, m, Ls, W, w, post.mean[b], post.cov[b])
             elif filt == CDKF or filt == SRCDKF:
-                _difference_stats(x, L, present, spec, h, pt, Y, yhat, Y1, Y2, Pxy, B)
+                _difference_stats(x, L, present, meas, spec.h, pt, Y, yhat, Y1, Y2, Pxy, B)
                 for j in range(m):
                     eps[j] = _residual(y[j], yhat[j], axial[j]) if present[j] else 0.0
                 if filt == CDKF:
                     _difference_cov(Y1, Y2, R, S)
-                    ok, nis, logdet = _gain(x, P_in[b], eps, Pxy, S, n, m, Ls, W, w, mean_out[b], P_out[b])
+                    ok, nis, logdet = _gain(x, prior.cov[b], eps, Pxy, S, n, m, Ls, W, w, post.mean[b], post.cov[b])
                 else:
                     ok, nis, logdet = _srcdkf_gain(x, L, eps, Y1, Y2, Pxy, R, My, Ls, Asc, vsc, nzs, W, w, Mx, S,
-                                                   mean_out[b], P_out[b])
+                                                   post.mean[b], post.cov[b])
             else:   # EKF, PUEKF: n_pu sub-updates with R n_pu, re-linearised; the innovation is the first one's
-                ok, nis, logdet = _ekf_gain(1 if filt == EKF else n_pu, x, P_in[b], present, y, R, spec, ekf,
-                                            mean_out[b], P_out[b], eps_out[b], S_out[b])
+                ok, nis, logdet = _ekf_gain(1 if filt == EKF else spec.n_pu, x, prior.cov[b], present, y, R, meas, ekf,
+                                            post.mean[b], post.cov[b], post.eps[b], post.S[b])
             if filt != EKF and filt != PUEKF:
                 for i in range(m):
-                    eps_out[b, i] = eps[i]
+                    post.eps[b, i] = eps[i]
                     for j in range(m):
-                        S_out[b, i, j] = S[i, j]
-            nis_out[b] = nis
-            loglik[b] = -0.5 * (cnt * LOG_2PI + logdet + nis)
+                        post.S[b, i, j] = S[i, j]
+            post.nis[b] = nis
+            post.loglik[b] = -0.5 * (cnt * LOG_2PI + logdet + nis)
             if ok and filt != SRCDKF:
-                ok = cholesky_into(P_out[b], L_out[b])
-            ok_out[b] = ok
+                ok = cholesky_into(post.cov[b], post.chol[b])
+            post.ok[b] = ok
 
-    def kernel(X, Ls_in, P_in, Yobs, mask, Rm, spec, spread, center, Wm, Wc, h, gamma, iterations, n_pu, mean_out,
-               P_out, L_out, eps_out, S_out, loglik, nis_out, m_out, ok_out):
-        """One measurement update of every batch element.
+    def kernel(prior, readings, spec, post):
+        """One measurement update of every batch element: the bundles :class:`Prior`, :class:`Readings`,
+        :class:`UpdateSpec` and :class:`Posterior` (written), named tuples or plain tuples of their fields.
 
-        The covariance-form filters also write the posterior's factor into ``L_out`` (the SR-CDKF's factor is
-        ``P_out``); ``ok_out`` is False where a factorisation failed or a result is not finite; returns whether
-        every element is ok.  Allocates the scratch; the loop over the batch is ``_LOOP``, its filter's.
+        The covariance-form filters also write the posterior's factor into ``post.chol`` (the SR-CDKF's factor
+        is ``post.cov``); ``post.ok`` is False where a factorisation failed or a result is not finite; returns
+        whether every element is ok.  Allocates the scratch; the loop over the batch is ``_LOOP``, its filter's.
         """
-        n = X.shape[1]
-        m = Yobs.shape[1]
+        prior, readings, spec, post = Prior(*prior), Readings(*readings), UpdateSpec(*spec), Posterior(*post)
+        n = prior.mean.shape[1]
+        m = readings.y.shape[1]
         k = 2 * n + m
         present, y, R, yhat, eps, w = (np.empty(m, np.bool_), np.empty(m), np.empty(m), np.empty(m), np.empty(m),
                                        np.empty(m))
@@ -393,23 +461,35 @@ def _update_kernel_for(code):
                np.empty(3), np.empty(3), B, np.empty((3, 3)), np.empty((3, 3)))
         work = (present, y, R, yhat, eps, w, Y, dY, Pxy, Pyy, S, Ls, W, Y1, Y2, Ht, pt, dx, Reff, new, My, Mx, Asc, vsc,
                 nzs, B)
-        _LOOP(X, Ls_in, P_in, Yobs, mask, Rm, spec, spread, center, Wm, Wc, h, gamma, iterations, n_pu,  # noqa: F821
-              mean_out, P_out, L_out, eps_out, S_out, loglik, nis_out, m_out, ok_out, work, ekf)
-        return ok_out.all()
+        _LOOP(prior, readings, spec, post, work, ekf)  # noqa: F821 - the copy's global
+        return post.ok.all()
 
-    # each filter's kernel and loop are named for it, the kernel finding its loop as the global ``_LOOP`` of its
-    # own copy (numba_cache.specialised says why)
+    def entry(mean, chol, cov, y, mask, R, measurement, spread, center, Wm, Wc, h, gamma, iterations, n_pu,
+              post_mean, post_cov, post_chol, eps, S, loglik, nis, m, ok):
+        """The update's entry: the bundles' fields in their order, flat (numba's dispatcher types a flat
+        argument in its compiled fast path, a tuple's fields one by one: at a batch of one, a share of the
+        step), bundled for the kernel ``_KERNEL`` (inlined)."""
+        return _KERNEL(Prior(mean, chol, cov), Readings(y, mask),  # noqa: F821 - the copy's global
+                       UpdateSpec(R, measurement, spread, center, Wm, Wc, h, gamma, iterations, n_pu),
+                       Posterior(post_mean, post_cov, post_chol, eps, S, loglik, nis, m, ok))
+
+    # each filter's entry, kernel and loop are named for it, each finding the next as a global of its own copy
+    # (numba_cache.specialised says why)
     loop.__qualname__ = f"_update_loop_{code}"
     loop = loop_jit(loop)
-    return numba_cache.specialised(kernel, f"_update_kernel_{code}", njit(cache=True, error_model="numpy", nogil=True),
-                                   _LOOP=loop), loop
+    bundled = numba_cache.specialised(kernel, f"_update_kernel_{code}",
+                                      njit(cache=True, error_model="numpy", inline="always"), _LOOP=loop)
+    return numba_cache.specialised(entry, f"_update_entry_{code}", njit(cache=True, error_model="numpy", nogil=True),
+                                   _KERNEL=bundled), bundled, loop
 
 
 _UPDATE_PAIRS = {code: _update_kernel_for(code) for code in (UKF, CDKF, HUBER, EKF, PUEKF, SRCDKF)}
-UPDATE_KERNELS = {code: kernel for code, (kernel, _) in _UPDATE_PAIRS.items()}
-UPDATE_LOOPS = {code: loop for code, (_, loop) in _UPDATE_PAIRS.items()}
-"""Each filter's compiled update and its loop (:func:`_update_kernel_for`), by the filter's code (the loops
-are here so that :func:`shipsense.numba_cache.key_on_sources` stamps them too)."""
+UPDATE_KERNELS = {code: entry for code, (entry, _, _) in _UPDATE_PAIRS.items()}
+UPDATE_BUNDLED = {code: bundled for code, (_, bundled, _) in _UPDATE_PAIRS.items()}
+UPDATE_LOOPS = {code: loop for code, (_, _, loop) in _UPDATE_PAIRS.items()}
+"""Each filter's compiled update (:func:`_update_kernel_for`), by the filter's code: its entry on the bundles'
+fields (what Python calls), the kernel on the bundles (what the tracker's compiled step calls) and its loop
+(the last two here so that :func:`shipsense.numba_cache.key_on_sources` stamps them too)."""
 
 
 @njit(cache=True, error_model="numpy", nogil=True)

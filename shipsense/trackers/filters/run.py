@@ -107,6 +107,7 @@ def run_filter(unit, model, measurements, x0, P0, mask=None, progress=False, sto
     nis = np.empty(batch + (steps,))
     loglik = np.empty(batch + (steps,))
     ok = np.empty(batch + (steps,), dtype=bool)
+    filt = unit.on(model)                    # (its compiled or numpy steps, chosen once)
     iterator = range(steps)
     if progress:
         from tqdm import tqdm
@@ -114,7 +115,7 @@ def run_filter(unit, model, measurements, x0, P0, mask=None, progress=False, sto
         iterator = tqdm(iterator, desc=f"{unit.name} x {int(np.prod(batch))}", unit="step", leave=False, disable=None)
     for k in iterator:
         mk = None if mask is None else mask[..., k, :]
-        belief, inn = (unit.step if k else unit.update)(belief, y[..., k, :], model, mk)
+        belief, inn = (filt.step if k else filt.update)(belief, y[..., k, :], model, mk)
         if means is not None:
             means[..., k, :] = belief.mean
         if covs is not None:

@@ -44,9 +44,9 @@ def fit_passages(model, y, theta_init, steps, stride=1, iterations=40, return_in
     step at a damping of 1e6 or more or, unless the bounds moved it, whose
     linearised model predicted a gain below ``tol``).  A model with a compiled measurement
     kernel (every field model but the series HED path) runs each fit's
-    iterations in one compiled loop (:mod:`~shipsense.trackers.fit.lm`),
-    the others the batched numpy loop (:func:`_levenberg_marquardt`): the same
-    iteration, equal to rounding (tested).
+    iterations in one compiled loop (:mod:`~shipsense.trackers.fit.lm`, the implementation for those
+    models), the others the batched numpy loop of this module (the generic path; the compiled loop's
+    reference in the tests): the same iteration, equal to rounding (tested).
     """
     B = len(theta_init)
     if B == 0:   # no fits (a refit whose every start is NaN): empty results, as a batch of them would give

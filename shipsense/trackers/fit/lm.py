@@ -1,21 +1,26 @@
 """The compiled Levenberg-Marquardt loop of :func:`~shipsense.trackers.fit.least_squares.fit_passages`, one fit
 at a time.
 
-:func:`~shipsense.trackers.fit.least_squares.fit_passages` runs its fits here when the model has a compiled
-measurement kernel (:func:`~shipsense.models.measurement.kernel_of`): every fit is independent, so each
-runs its damped Gauss-Newton iterations to the end inside one compiled loop -- the batched numpy loop
-(:func:`~shipsense.trackers.fit.least_squares._levenberg_marquardt`, the reference, and the path of models without a
-kernel) spends most of its time in Python around small batches.  The iteration is the numpy loop's, step for
-step: the normal equations ``J^T W J`` and gradient ``J^T W r`` (``W`` the Huber weights ``min(1, gamma /
-|r|)``, 1 without Huber) accumulated sample by sample from the measurement kernel's readings and Jacobian
-(no Jacobian is stored), the damping ``lam diag(J^T W J + 1e-12)`` solved by Gaussian elimination with
-partial pivoting, the projection on the state bounds, the same acceptance, damping schedule and stall rule.
-The two agree to rounding (tests/trackers/fit/test_lm.py).
+Which form is which.  For a model with a compiled measurement kernel (:func:`~shipsense.models.measurement.kernel_of`)
+this loop is the implementation of :func:`~shipsense.trackers.fit.least_squares.fit_passages`' fits: every fit
+is independent, so each runs its damped Gauss-Newton iterations to the end inside one compiled loop.  The
+batched numpy loop of :mod:`~shipsense.trackers.fit.least_squares` is the generic path, for a model without a
+kernel (the series HED path, a user's own ``h``), and the tests' reference for this one.  The iteration is the
+numpy loop's, step for step: the normal equations ``J^T W J`` and gradient ``J^T W r`` (``W`` the Huber weights
+``min(1, gamma / |r|)``, 1 without Huber) accumulated sample by sample from the measurement kernel's readings
+and Jacobian (no Jacobian is stored), the damping ``lam diag(J^T W J + 1e-12)`` solved by Gaussian elimination
+with partial pivoting, the projection on the state bounds, the same acceptance, damping schedule and stall
+rule.  The two agree to rounding (tests/trackers/fit/test_lm.py).
+
+The kernel takes its arrays in bundles named by meaning (:class:`FitProblem`, :class:`FitPrior`,
+:class:`FitOptions`, :class:`Fits`), passed as plain tuples of their fields and named inside (numba's
+dispatcher types a plain tuple in its compiled fast path, a named one in Python).
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -46,28 +51,77 @@ def lm_fits(spec, theta, Ak, y, w, mu, root, gamma, bounds, iterations, tol, inf
     Ak = np.ascontiguousarray(Ak, dtype=float)
     if not Ak.flags.writeable:                   # (shared powers: one compiled signature, a writeable array)
         Ak = Ak.copy()
-    args = (spec, theta, Ak, y0, present, np.ascontiguousarray(w, dtype=float),
-            np.ascontiguousarray(mu, dtype=float), np.ascontiguousarray(root, dtype=float), float(gamma), lo, hi,
-            int(iterations), float(tol), _constant_velocity(Ak), cost, evaluations,
-            np.empty((0, n, n)) if information is None else information)
-    in_turns(lambda b_lo, b_hi: lm_kernel(*args, b_lo, b_hi), B)
+    # the kernel's bundles (FitProblem, FitPrior, FitOptions, Fits) as plain tuples: numba's dispatch types a
+    # plain tuple in its compiled fast path
+    problem = (spec, Ak, y0, present, np.ascontiguousarray(w, dtype=float), _constant_velocity(Ak))
+    prior = (np.ascontiguousarray(mu, dtype=float), np.ascontiguousarray(root, dtype=float))
+    options = (float(gamma), lo, hi, int(iterations), float(tol))
+    fits = (theta, cost, evaluations, np.empty((0, n, n)) if information is None else information)
+    in_turns(lambda b_lo, b_hi: lm_kernel(problem, prior, options, fits, b_lo, b_hi), B)
     return theta, cost, evaluations
 
 
+class FitProblem(NamedTuple):
+    """The fits' data: the model's compiled measurement description ``measurement``
+    (:func:`~shipsense.models.measurement.kernel_of`), the transitions ``Ak`` (B or 1, K, n, n) from the fitted
+    state to the samples ``y`` (B or 1, K, m) (internal units, 0 where missing) and which are ``present``, the
+    whitening ``w`` (m,) and whether every transition is a constant-velocity one (``cv``,
+    :func:`_constant_velocity`)."""
+
+    measurement: tuple
+    Ak: np.ndarray
+    y: np.ndarray
+    present: np.ndarray
+    w: np.ndarray
+    cv: bool
+
+
+class FitPrior(NamedTuple):
+    """A Gaussian prior on the fitted state: its mean ``mu`` (B or 1, n) and square-root information ``root``
+    (n,) (empty: no prior)."""
+
+    mu: np.ndarray
+    root: np.ndarray
+
+
+class FitOptions(NamedTuple):
+    """The Huber threshold ``gamma`` (``inf``: least squares), the state bounds ``lo``, ``hi`` (n,) (empty:
+    none), the most ``iterations`` and the relative ``tol`` of the stall rule."""
+
+    gamma: float
+    lo: np.ndarray
+    hi: np.ndarray
+    iterations: int
+    tol: float
+
+
+class Fits(NamedTuple):
+    """The fits, a row each: the states ``theta`` (B, n) (starts in, solutions out), their ``cost`` (B,),
+    ``evaluations`` (B,) int64 and normal matrices ``info`` (B, n, n) (written; (0, n, n): not wanted)."""
+
+    theta: np.ndarray
+    cost: np.ndarray
+    evaluations: np.ndarray
+    info: np.ndarray
+
+
 @njit(cache=True, error_model="numpy", nogil=True)
-def lm_kernel(spec, theta, Ak, y, present, w, mu, root, gamma, lo, hi, iterations, tol, cv, cost, evaluations, info,
-               b_lo, b_hi):
-    """:func:`lm_fits` of rows ``b_lo:b_hi`` (allocates the scratch; the loop is :func:`lm_loop`)."""
-    n, m = theta.shape[1], y.shape[2]
-    lm_loop(spec, theta, Ak, y, present, w, mu, root, gamma, lo, hi, iterations, tol, cv, cost, evaluations, info,
-             b_lo, b_hi, np.empty((6, n)), np.empty((4, n, n)), np.empty(m), np.empty((m, n)), np.empty(3), np.empty(3),
-             np.empty(3), np.empty((3, 3)), np.empty((3, 3)))
+def lm_kernel(problem, prior, options, fits, b_lo, b_hi):
+    """:func:`lm_fits` of rows ``b_lo:b_hi``: the bundles :class:`FitProblem`, :class:`FitPrior`,
+    :class:`FitOptions` and :class:`Fits`, each a plain tuple of its fields (named here).  Allocates the
+    scratch; the loop is :func:`lm_loop`."""
+    problem, prior, options, fits = FitProblem(*problem), FitPrior(*prior), FitOptions(*options), Fits(*fits)
+    n, m = fits.theta.shape[1], problem.y.shape[2]
+    lm_loop(problem, prior, options, fits, b_lo, b_hi, np.empty((6, n)), np.empty((4, n, n)), np.empty(m),
+            np.empty((m, n)), np.empty(3), np.empty(3), np.empty(3), np.empty((3, 3)), np.empty((3, 3)))
     return True
 
 
 @loop_jit
-def lm_loop(spec, theta, Ak, y, present, w, mu, root, gamma, lo, hi, iterations, tol, cv, cost, evaluations, info,
-             b_lo, b_hi, vec, mat, yhat, H, r3, m3, Bf, dBq, dBm):
+def lm_loop(problem, prior, options, fits, b_lo, b_hi, vec, mat, yhat, H, r3, m3, Bf, dBq, dBm):
+    """:func:`lm_kernel`'s loop over its fits, on its scratch."""
+    theta, lo, hi = fits.theta, options.lo, options.hi
+    iterations, tol = options.iterations, options.tol
     n = theta.shape[1]
     th, tt, g, gt, x, row = vec[0], vec[1], vec[2], vec[3], vec[4], vec[5]
     N, Nt, M = mat[0], mat[1], mat[2]
@@ -107,9 +161,8 @@ def lm_loop(spec, theta, Ak, y, present, w, mu, root, gamma, lo, hi, iterations,
             # (one call site; normal_equations is compiled on its own, not inlined here: numba copies an inlined
             # function's IR, and copying this one, with the measurement kernel inlined in it, was a large share of
             # the loop's first compilation; called once a step, it costs nothing at run time)
-            ct = normal_equations(spec, tt, b, Ak, y, present, w, mu, root, gamma, cv, Nt, gt, x, row, yhat, H, r3,
-                                  m3, Bf, dBq, dBm)
-            evaluations[b] += 1
+            ct = normal_equations(problem, prior, options.gamma, tt, b, Nt, gt, x, row, yhat, H, r3, m3, Bf, dBq, dBm)
+            fits.evaluations[b] += 1
             if it == 0:
                 c = ct
                 for p in range(n):
@@ -132,20 +185,22 @@ def lm_loop(spec, theta, Ak, y, present, w, mu, root, gamma, lo, hi, iterations,
             stall = stall + 1 if stalled else 0
         for a in range(n):
             theta[b, a] = th[a]
-            if info.shape[0] > 0:
+            if fits.info.shape[0] > 0:
                 for q in range(n):
-                    info[b, a, q] = N[a, q]
-        cost[b] = c
+                    fits.info[b, a, q] = N[a, q]
+        fits.cost[b] = c
 
 
 @loop_jit
-def normal_equations(spec, th, b, Ak, y, present, w, mu, root, gamma, cv, N, g, x, row, yhat, H, r3, m3, Bf, dBq, dBm):
+def normal_equations(problem, prior, gamma, th, b, N, g, x, row, yhat, H, r3, m3, Bf, dBq, dBm):
     """Cost (chi-square, or Huber's) of fit ``b`` at state ``th`` and its normal matrix ``N = J^T W J`` and
     gradient ``g = J^T W r`` (``W`` the Huber weights).
 
     With ``cv`` (:func:`_constant_velocity`: every transition is the identity but ``t`` at (0, 2) and (1, 3)),
     the state ``A_k th`` and the Jacobian rows ``H_i A_k`` take only their nonzero terms: the same numbers
     (a dense product adds exact zeros to them), in less time a sample."""
+    spec, Ak, y, present, w, cv = problem
+    mu, root = prior
     n = th.shape[0]
     K, m = y.shape[1], y.shape[2]
     ia = b if Ak.shape[0] > 1 else 0

@@ -25,7 +25,8 @@ form).  With Gaussian noise, a linear model, an honest filter and
 uncorrelated channels (the state's share of the innovations small against
 the noise) ``T`` is exactly chi-square, so the false-alarm rate per test is
 the test's level (``consistency_level``); with Huber's clip it is a normal
-approximation (both checked in tests/trackers/tracker/test_consistency.py).
+approximation (both checked in tests/trackers/tracker/test_consistency.py, against the test's definition in numpy:
+``terms`` and ``statistic`` of tests/reference.py).
 
 When the test fails, the tracker refits the passage
 (:class:`~shipsense.trackers.Tracker`'s restarts): a batch fit of every
@@ -92,23 +93,6 @@ def psi_variance(state_var, noise_var, gamma=np.inf, eps=0.0, scale=1.0):
         return _psi_variance_ufunc(state_var, noise_var, gamma, eps, scale)
 
 
-def terms(eps, state_var, noise_var, present, gamma=np.inf, outliers=0.0, scale=1.0):
-    """One sample's contributions (..., 2, m) to the window sums: ``psi(z)`` and its variance ``v`` under the
-    declared noise, per channel (zero where a component is missing)."""
-    z = eps / np.sqrt(state_var + noise_var)
-    psi = np.clip(z, -gamma, gamma) if np.isfinite(gamma) else z
-    v = psi_variance(state_var, noise_var, gamma, outliers, scale)
-    return np.where(present[..., None, :], np.stack([psi, v], axis=-2), 0.0)
-
-
-def statistic(sums):
-    """The test statistic ``T`` and its degrees of freedom (the channels with data) from window sums (..., 2, m)
-    (:func:`terms` summed over the window)."""
-    s, v = sums[..., 0, :], sums[..., 1, :]
-    has = v > 0.0
-    return np.sum(np.where(has, s * s / np.where(has, v, 1.0), 0.0), axis=-1), has.sum(axis=-1)
-
-
 def threshold(dof, level):
     """The chi-square quantile ``1 - level`` of ``dof`` degrees of freedom (inf at 0)."""
     dof = np.asarray(dof, dtype=int)
@@ -134,14 +118,15 @@ def _quantiles(level, top):
 @njit(cache=True, error_model="numpy", nogil=True)
 def window_test(runs, sel, H, eps, S, R_used, R_declared, present, gamma, outliers, scale, table, window, count,
                 tests, fails, now, failed):
-    """The tracker's test of passages ``runs`` at one sample, in one compiled pass: each passage's
-    :func:`terms` of its selected hypothesis ``sel`` (the innovations ``eps`` (len(runs)*H, m) and their
-    covariances' diagonals from ``S`` (len(runs)*H, m, m), less the noise on them, ``R_used``
-    (len(runs)*H or 1, m)), written into its window ``window`` (P, N, 2, m) at slot ``count % N``; once
-    the window is full (``tests`` counts it), :func:`statistic` of its sums against ``table[dof]``
-    (:func:`quantile_table`).  A passage that fails has its window emptied, ``fails`` and ``now`` set;
-    ``failed`` (len(runs),) says which.  (The numpy functions above are the definitions, this their one
-    pass: tests/trackers/tracker/test_consistency.py holds them equal.)"""
+    """The tracker's test of passages ``runs`` at one sample, in one compiled pass (the test's implementation):
+    each passage's terms of its selected hypothesis ``sel`` -- ``psi(z)`` and its variance ``v``
+    (:func:`psi_variance`) per channel, from the innovations ``eps`` (len(runs)*H, m) and their covariances'
+    diagonals from ``S`` (len(runs)*H, m, m), less the noise on them, ``R_used`` (len(runs)*H or 1, m) --
+    written into its window ``window`` (P, N, 2, m) at slot ``count % N``; once the window is full (``tests``
+    counts it), the statistic ``T`` of its sums against ``table[dof]`` (:func:`quantile_table`).  A passage
+    that fails has its window emptied, ``fails`` and ``now`` set; ``failed`` (len(runs),) says which.  (The
+    definitions in numpy, ``terms`` and ``statistic`` of tests/reference.py, are the independent reference
+    tests/trackers/tracker/test_consistency.py holds this equal to.)"""
     N, m = window.shape[1], window.shape[3]
     for p in range(runs.shape[0]):
         r = runs[p]

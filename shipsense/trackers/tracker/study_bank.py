@@ -47,4 +47,4 @@ class StudyBankTracker(Tracker, method="bank"):
         self.bank.reset_runs(starting, seeds, P0)
         self.bank.step(np.nan_to_num(y), mask=np.isfinite(y), predict=False, runs=starting)
         self.state.phase[starting] = RUNNING
-        self._report(starting, out)
+        self.report_runs(starting, out)

@@ -69,25 +69,21 @@ two agree exactly.
 from __future__ import annotations
 
 import copy
-import time
 from dataclasses import replace
 
 import numpy as np
 
 from shipsense.models.measurement import FIELD, kernel_of
-from shipsense.models.transitions import transitions
 from shipsense.trackers.bank.bank import BankState
 from shipsense.trackers.bank.selection import report
-from shipsense.trackers.filters.core import UNROLL_MIN_BATCH, Belief, symmetrize
-from shipsense.trackers.init.window_fits import depth_prior, window_fits
+from shipsense.trackers.filters.core import UNROLL_MIN_BATCH, Belief
+from shipsense.trackers.tracker import bank_starts
 from shipsense.trackers.tracker.consistency import quantile_table, window_test
-from shipsense.trackers.tracker.passages import PENDING, PHASES, RUNNING, PassageArrays
-from shipsense.trackers.tracker.restarts import due, refit_window
+from shipsense.trackers.tracker.passages import PENDING, PHASES, PassageArrays
 from shipsense.trackers.tracker.results import (
     INCONSISTENT,
     INITIALISING,
     NO_DATA,
-    RESTARTED,
     TRACKING,
     Gap,
     PassageState,
@@ -96,10 +92,6 @@ from shipsense.trackers.tracker.results import (
 )
 from shipsense.trackers.tracker.settings import TrackerSettings, initial_grid, prior_belief, resolve_settings
 from shipsense.trackers.tracker.step import TrackerStep, prepare_sample
-
-BANK_INFLATION_MAX = 100.0   # largest chi-square inflation a failed fit's bank starts from (the rest is reported)
-
-
 
 
 class Tracker:
@@ -135,17 +127,21 @@ class Tracker:
 
     def __new__(cls, scenario=None, *, settings=None, **options):
         # ``Tracker(..., method="bank")`` (or a scenario or settings that say so) is the studies' variant
-        # (:data:`VARIANTS`), as ``pathlib.Path`` is its system's path
+        # (:data:`VARIANTS`), as ``pathlib.Path`` is its system's path; a scenario read here to tell is kept for
+        # __init__ (read once)
+        loaded = None
         if cls is Tracker and scenario is not None:
             method = settings.method if settings is not None else options.get("method")
             if method is None:
                 from shipsense.config import load_scenario
 
-                tracker = load_scenario(scenario).tracker
-                method = tracker.method if tracker is not None else "tracker"
+                loaded = load_scenario(scenario)
+                method = loaded.tracker.method if loaded.tracker is not None else "tracker"
             if method != "tracker":
-                return super().__new__(Tracker.VARIANTS[method])
-        return super().__new__(cls)
+                cls = Tracker.VARIANTS[method]
+        tracker = super().__new__(cls)
+        tracker._loaded = (scenario, loaded)
+        return tracker
 
     VARIANTS: dict = {}
     """Tracker classes by ``method`` other than ``"tracker"``: a variant registers itself by its class statement,
@@ -160,7 +156,8 @@ class Tracker:
         from shipsense.config import load_scenario
         from shipsense.models.field_model import model_from_scenario
 
-        self.scenario = sc = load_scenario(scenario)
+        given, loaded = self.__dict__.pop("_loaded", (None, None))
+        self.scenario = sc = loaded if loaded is not None and given is scenario else load_scenario(scenario)
         if settings is None:
             settings = resolve_settings(sc, sensors, **options)
         elif options:
@@ -182,12 +179,12 @@ class Tracker:
         self.window = max(4, int(round(opts.window_s / sc.period)))
         self._snr_field = np.ascontiguousarray(~self.model.axial)                  # (update's SNR: strongest_snr)
         self._snr_std = np.ascontiguousarray(np.sqrt(self.model.R), dtype=float)
-        self._grid = initial_grid(sc)
+        self.grid = initial_grid(sc)                       # (the window fits' grid: bank_starts)
         self._prior = prior_belief(self.model, sc, self.bank_config)
-        self._prior_info = np.diag(self.model.x_scale ** 2 / np.diag(self._prior[1]))   # internal units
+        self.prior_info = np.diag(self.model.x_scale ** 2 / np.diag(self._prior[1]))   # internal units
         self._compiled = TrackerStep.of(self.unit, self.filter_model, self.H)
         spec = kernel_of(self.model)
-        self._pads_exactly = self.huber is None and spec is not None and spec[0] == FIELD   # (_restart's refits)
+        self.pads_exactly = self.huber is None and spec is not None and spec[0] == FIELD   # (bank_starts.refit)
         self._R_used = np.ascontiguousarray(self.filter_model.R[None], dtype=float)
         self._testing = bool(opts.consistency_window) and self.TESTS_CONSISTENCY
         self._layout = PassageArrays.layout(self.model.m, self.model.n, self.settings, self._history())
@@ -310,9 +307,9 @@ class Tracker:
     def _start_and_restart(self, starting, running, snr, yi, out, defer_fits):
         """After the step: detection and window fits of the passages ``starting``, restarts of those
         ``running`` that are due."""
-        self._initialise(starting, snr, out, defer_fits)
+        bank_starts.initialise(self, starting, snr, out, defer_fits)
         if running.size:
-            self._restart(running, snr, out)
+            bank_starts.restart(self, running, snr, out)
 
     # -- one sample ---------------------------------------------------------------------------------------------
     def update(self, t, y, passages=None, defer_fits=False) -> Sample:
@@ -353,13 +350,13 @@ class Tracker:
             for p in act[step > self.settings.gap_limit_s]:
                 self.gaps.append(Gap(int(p), float(self.state.last_t[p]), float(t[act == p][0])))
         if self.settings.robust:
-            snr = self._robust_snr(snr, yi, act)
+            snr = bank_starts.robust_snr(self.state, snr, yi, act)
         out = self.prior_sample()
         out.status[starting] = INITIALISING
         if running.size:
             self._step(running, yi, dt, out)
         self._start_and_restart(starting, running, snr, yi, out, defer_fits)
-        self._widen_inconsistent(act, out)
+        self.widen_inconsistent(act, out)
         self.state.last_t[act] = t
         self.state.n[act] += 1
         if passages is None or (act.size == self.P and (act[0] == 0 if self.P == 1 else
@@ -367,7 +364,7 @@ class Tracker:
             return out                                              # (a fresh Sample: no copy needed)
         return out.take(act)
 
-    def _widen_inconsistent(self, act, out):
+    def widen_inconsistent(self, act, out):
         """A failed fit or a diverged bank among passages ``act``: the model does not explain the data, so the
         estimate is located no better than the passage prior says (its spread is added to ``out.cov``: an
         inconsistent track's own covariance was centimetres to metres while it was 20-150 m off,
@@ -405,18 +402,6 @@ class Tracker:
                            list(self.gaps))
 
     # -- parts --------------------------------------------------------------------------------------------------
-    def _robust_snr(self, snr, yi, act):
-        """The SNR (P,) of the passages ``act`` with ``robust``: the median of the strongest field channel's
-        SNR ``snr`` over their last three samples (an outlier alone neither starts a window nor moves the
-        peak)."""
-        ring = np.roll(self.state.snr[act], -1, axis=1)
-        ring[:, -1] = np.where(np.isfinite(yi[act]).any(axis=1), snr[act], np.nan)
-        self.state.snr[act] = ring
-        with np.errstate(all="ignore"):
-            med = np.nanmedian(np.where(np.isfinite(ring).sum(axis=1, keepdims=True) >= 2, ring, 0.0), axis=1)
-        snr[act] = np.nan_to_num(med)
-        return snr
-
     def prior_sample(self):
         """A fresh :class:`Sample` of every passage at the prior (copies of one kept until the next reset)."""
         P = self.P
@@ -451,7 +436,7 @@ class Tracker:
         self.state.nis[runs, :-1] = self.state.nis[runs, 1:]                  # the window moves on by one sample
         self.state.nis[runs, -1] = np.where(m_sel > 0, inn.nis.reshape(-1)[pick] / np.maximum(m_sel, 1), np.nan)
         failed = self._consistency(runs, yi, inn, sel) if self._testing else runs[:0]
-        self._report(runs, out)
+        self.report_runs(runs, out)
         out.status[failed] = INCONSISTENT
 
     def _compiled_step(self, runs, yi, out, stepped=None):
@@ -460,15 +445,15 @@ class Tracker:
         nothing of theirs written)."""
         o, h, s = self.settings, self.huber, self.state
         runs = np.asarray(runs, dtype=np.int64)
-        test = self._testing
-        consistency = (self._R_used, self.model.R,
+        # the fields of the step's bundles step.PassageRows, Consistency and Selection, in their order
+        passages = (s.nis, s.trusted, out.status, TRACKING, INCONSISTENT)
+        consistency = (self._testing, self._R_used, self.model.R,
                        *((float(h.gamma), float(h.eps), float(h.scale)) if h is not None else (np.inf, 0.0, 1.0)),
                        quantile_table(o.consistency_level, self.model.m), s.cons, s.cons_n, s.cons_tests, s.cons_fails,
                        s.cons_now)
         selection = (self.model.x_scale, self.MIXTURE, float(o.report_nats), float(o.report_distance_m),
                      s.excess, out.estimate, out.cov, s.own, out.gap_nats, out.ambiguous, out.hypotheses, out.selected)
-        left = self._compiled(runs, yi, self.model.y_scale, self.bank, s.nis, test, consistency, selection,
-                              out.status, s.trusted, (TRACKING, INCONSISTENT), stepped)
+        left = self._compiled(runs, yi, self.model.y_scale, self.bank, passages, consistency, selection, stepped)
         if left.size < runs.size:
             self.bank.belief = Belief(*self.bank.belief)   # (as BankState.step leaves it)
         if left.size == 0:
@@ -478,7 +463,7 @@ class Tracker:
     def _consistency(self, runs, yi, inn, sel):
         """The windowed innovation test (:mod:`~shipsense.trackers.tracker.consistency`) of passages ``runs`` with the
         innovations ``inn`` of this sample (selected hypotheses ``sel``).  Returns the passages it failed on
-        (their window starts over; :meth:`_restart` refits them)."""
+        (their window starts over; :func:`~shipsense.trackers.tracker.bank_starts.restart` refits them)."""
         h = self.huber
         R_used = self.filter_model.R[None] if inn.R is None else inn.R
         failed = np.empty(runs.size, dtype=bool)
@@ -489,7 +474,7 @@ class Tracker:
                     self.state.cons_tests, self.state.cons_fails, self.state.cons_now, failed)
         return runs[failed]
 
-    def _report(self, runs, out):
+    def report_runs(self, runs, out):
         """Selected estimate, its mixture mean-square error (:attr:`MIXTURE`) or own covariance, and the
         selection figures of passages ``runs`` (:func:`~shipsense.trackers.bank.selection.report`)."""
         o, belief = self.settings, self.bank.belief
@@ -498,20 +483,6 @@ class Tracker:
                self.state.excess, out.estimate, out.cov, self.state.own, out.gap_nats, out.ambiguous, out.hypotheses,
                out.selected)
         out.status[runs] = np.where(self.state.trusted[runs], TRACKING, INCONSISTENT)
-
-    def _window(self, runs, first):
-        """Samples ``first .. k`` (R,) of passages ``runs`` from the history: y (R, W, m) internal and the times
-        after each first sample (R, W); W is the longest, shorter windows padded with missing samples."""
-        hist = self.state.y_hist.shape[1]
-        cur = self.state.n[runs]
-        W = int((cur - first).max()) + 1
-        ks = first[:, None] + np.arange(W)[None, :]
-        inside = ks <= cur[:, None]
-        slots = np.where(inside, ks, cur[:, None]) % hist
-        yw = np.where(inside[..., None], self.state.y_hist[runs[:, None], slots], np.nan)
-        tw = self.state.t_hist[runs[:, None], slots]
-        taus = np.where(inside, tw - tw[:, :1], tw[:, -1:] - tw[:, :1])
-        return yw, taus
 
     def pending(self, passages=None):
         """Whether the passages (indices; default all) have window fits deferred by ``update(...,
@@ -522,182 +493,4 @@ class Tracker:
         """Fit the deferred windows of every pending passage in one batch (a passage's fits do not depend on
         the passages beside it in a batch) and start their banks as :meth:`update` would have at the sample
         their windows completed.  Returns the passages (indices) and their :class:`Sample` at that sample."""
-        pend = np.flatnonzero(self.state.phase == PENDING)
-        out = self.prior_sample()
-        if pend.size:
-            self.state.n[pend] -= 1                       # back at the sample the window completed at, for its fits
-            try:
-                out.status[pend] = INITIALISING
-                self._fit_windows(pend, out)
-                self._widen_inconsistent(pend, out)            # (as update)
-            finally:
-                self.state.n[pend] += 1
-        return pend, out.take(pend)
-
-    def _initialise(self, starting, snr, out, defer=False):
-        """Detection and, once a passage's window is complete, its global fits: the bank starts from them
-        (with ``defer``, the passage is left pending for :meth:`fit_pending`)."""
-        if starting.size == 0:
-            return
-        o = self.settings
-        detect = starting[(self.state.k0[starting] < 0) & (snr[starting] > o.snr_start)]
-        self.state.k0[detect] = self.state.n[detect]
-        seen = starting[self.state.k0[starting] >= 0]
-        self.state.peak[seen] = np.maximum(self.state.peak[seen], snr[seen])
-        have = self.state.n[seen] - self.state.k0[seen] + 1
-        # the window is complete, or the signal has passed its peak: a fit then spans the closest approach
-        passed = (o.through_peak is not None) & (snr[seen] < (o.through_peak or 0.0) * self.state.peak[seen])
-        ready = seen[(have >= self.window) | (passed & (have >= max(4, self.window // 5)))]
-        if ready.size == 0:
-            return
-        if defer:
-            self.state.phase[ready] = PENDING
-            return
-        self._fit_windows(ready, out)
-
-    def _fit_windows(self, ready, out):
-        """The global fits of the windows of passages ``ready`` (complete at their current sample) and their
-        banks' start, one batch per window length: a passage's fits are those it would have alone (a batch of
-        windows of different lengths would pad the shorter ones, and their fits would move at rounding)."""
-        o = self.settings
-        have = self.state.n[ready] - self.state.k0[ready] + 1
-        for length in np.unique(have):
-            group = ready[have == length]
-            yw, taus = self._window(group, self.state.k0[group])
-            t0 = time.perf_counter()
-            fits = self._fits(yw, taus)
-            self.seconds["initialiser"] += time.perf_counter() - t0
-            self.state.win[group] = fits.theta
-            self.state.win_t0[group] = self.state.t_hist[group, self.state.k0[group] % self.state.y_hist.shape[1]]
-            self.state.scan[group] = self.state.n[group]
-            self.state.phase[group] = RUNNING
-            self._start_banks(group, fits, taus[:, -1], o.inflate, out)
-
-    def _fits(self, yw, taus):
-        """The global initialiser's fits of windows ``yw`` (R, W, m) with times ``taus`` (R, W)."""
-        o = self.settings
-        regular = np.allclose(taus, np.arange(taus.shape[1]) * self.model.period, rtol=0, atol=1e-9)
-        return window_fits(self.model, yw, **self._grid, taus=None if regular else taus, keep=o.keep_init,
-                           grid_samples=o.grid_samples, grid_reserve=self.window,
-                           distinct_m=o.distinct_m, z_std=o.z_std, refine=o.refine, gof=o.gof,
-                           explore_samples=o.explore_samples, huber=self.huber)
-
-    def _global_starts(self, yw, taus, which, lengths):
-        """Starts (R, keep_init, n) at the windows' first samples: the global fits of the windows ``which``
-        (a restart after an alarm need not stay near the track that diverged), NaN for the others; ``lengths``
-        (R,): each window's samples (the others padding)."""
-        starts = np.full((yw.shape[0], self.settings.keep_init, self.model.n), np.nan)
-        # (they are only starts, which the refit takes to all the samples: the global fits see at most a
-        # window's worth of them, evenly spread from the first to the last, so their cost does not grow; one
-        # batch per window length, its own samples: a passage's starts do not depend on the windows beside it)
-        for W in np.unique(lengths[which]):
-            rows = np.flatnonzero(which & (lengths == W))
-            pick = np.unique(np.round(np.linspace(0, W - 1, min(W, self.window))).astype(int))
-            starts[rows] = self._fits(yw[rows][:, pick], taus[rows][:, pick]).theta
-        return starts
-
-    def _start_banks(self, runs, fits, tau, inflate, out):
-        """(Re)start the banks of passages ``runs`` at this sample from window fits at times ``tau`` (R,) before
-        it; a fit that fails its test has its covariance inflated by its chi-square over the expected."""
-        H, xs = self.H, self.model.x_scale
-        A = transitions(self.model, tau)                                               # (R, n, n)
-        birge = np.where(fits.fit_ok[:, None], 1.0,
-                         np.maximum(1.0, fits.chi2[:, :1] / np.maximum(fits.expected[:, None], 1e-300)))
-        # the bank starts from at most BANK_INFLATION_MAX times the fit's covariance (a nonlinear filter
-        # started from a covariance 1e6 times too wide throws its sigma points far outside the model's
-        # domain, and the track is lost); the rest of the inflation is
-        # reported on top of the bank's covariance until a fit passes
-        bank_birge = np.minimum(birge, BANK_INFLATION_MAX)
-        self.state.excess[runs] = (birge / bank_birge)[:, 0]
-        # no start is wider than the passage prior: the fit's information plus the prior's (a weak fit -- the
-        # range-moment trade-off of one magnetometer -- otherwise starts a bank kilometres wide)
-        scale = (inflate * self.kappa) * bank_birge[..., None, None]
-        cov = symmetrize(np.linalg.inv(fits.info / scale + self._prior_info))
-        seeds = np.einsum("rij,rmj->rmi", A, fits.theta)
-        P0 = A[:, None] @ cov @ np.swapaxes(A, -1, -2)[:, None]
-        loglik = fits.loglik
-        M = seeds.shape[1]
-        if M < H:   # fewer fits than hypotheses: the best again, with no weight
-            pad = (slice(None), np.zeros(H - M, dtype=int))
-            seeds, P0 = np.concatenate([seeds, seeds[pad]], 1), np.concatenate([P0, P0[pad]], 1)
-            loglik = np.concatenate([loglik, np.full((len(runs), H - M), -np.inf)], axis=1)
-        self.bank.reset_runs(runs, seeds * xs, P0 * np.outer(xs, xs)[None, None], loglik)
-        self.state.start[runs], self.state.trusted[runs] = self.state.n[runs], fits.fit_ok
-        self.state.ref[runs] = np.trace(P0[np.arange(len(runs)), 0, :2, :2] * np.outer(xs[:2], xs[:2]), axis1=-2,
-                                        axis2=-1)
-        self.state.nis[runs] = np.nan
-        self.state.cons[runs], self.state.cons_n[runs], self.state.cons_now[runs] = 0.0, 0, False
-        self._report(runs, out)
-
-    def _restart(self, runs, snr, out):
-        """Refit the passages among ``runs`` whose bank is due (alarms, schedule, peak, collapse, a failed
-        consistency test: :func:`~shipsense.trackers.tracker.restarts.due`)."""
-        flags, s = np.empty((runs.size, 4), dtype=bool), self.state
-        due(np.asarray(runs, dtype=np.int64), s.n, s.start, s.nis, s.trusted, s.alarms, s.peak, s.peak_done, snr,
-            s.scan, s.own, s.ref, s.cons_now, *_restart_options(self.settings), out.status, out.cov, INCONSISTENT,
-            flags)
-        due_, alarm, after_peak, rescan = flags.T
-        if due_.any():
-            sel = runs[due_]
-            self.state.scan[runs[rescan]] = self.state.n[runs[rescan]]
-            self.state.peak_done[sel] |= after_peak[due_]
-            self.state.alarms[sel] += alarm[due_]
-            self.state.restarts[sel] += 1
-            failed_test = self.state.cons_now[runs]
-            self._refit(sel, alarm[due_], rescan[due_], out)
-            # a refit after a failed consistency test: the sample is still the test's (inconsistent), with the
-            # refit's covariance -- unless the fit failed its own test (then as any failed fit)
-            ok = runs[failed_test & self.state.trusted[runs]]
-            out.status[ok], self.state.cons_now[ok] = INCONSISTENT, True
-
-    def _refit(self, runs, alarm, rescan, out):
-        """Batch refits of passages ``runs`` to their samples since the window start (at most ``history``),
-        started from the selected estimate, the bank's live hypotheses and (``multistart``) the initial
-        window fits; the bank restarts from the ``keep`` best distinct fits."""
-        o, H, n = self.settings, self.H, self.model.n
-        first = np.maximum(self.state.k0[runs], self.state.n[runs] - self.state.y_hist.shape[1] + 1)
-        lengths = self.state.n[runs] - first + 1
-        if not self._pads_exactly and np.unique(lengths).size > 1:
-            # one batch pads the shorter windows with missing samples: the compiled least-squares fits and their
-            # information skip them (a passage's refit is the one it gets alone), numpy's fits (a model without
-            # a compiled kernel) and a robust fit's information do not (they move at rounding with the length)
-            for w in np.unique(lengths):
-                group = lengths == w
-                self._refit(runs[group], alarm[group], rescan[group], out)
-            return
-        yw, taus = self._window(runs, first)
-        back = transitions(self.model, -taus[:, -1])                                    # now -> window start
-        rows = (runs[:, None] * H + np.arange(H)).ravel()
-        means = self.bank.belief.mean[rows].reshape(runs.size, H, n)
-        cum = self.bank.cum[runs]
-        sel = np.argmax(cum, axis=1)
-        live = cum > cum[np.arange(runs.size), sel][:, None] - o.ambiguity_nats
-        live[np.arange(runs.size), sel] = True
-        starts = np.where(live[..., None], means, np.nan)
-        starts = np.concatenate([starts[np.arange(runs.size), sel][:, None], np.where(
-            (np.arange(H) == sel[:, None])[..., None], np.nan, starts)], axis=1)
-        theta = np.einsum("rij,rhj->rhi", back, starts)
-        t_first = self.state.t_hist[runs, first % self.state.y_hist.shape[1]]
-        win = np.einsum("rij,rhj->rhi", transitions(self.model, t_first - self.state.win_t0[runs]),
-                        self.state.win[runs])
-        theta = np.concatenate([theta, np.where(alarm[:, None, None], win, np.nan)], axis=1)
-        t0 = time.perf_counter()
-        multistart = alarm | rescan
-        if multistart.any():   # an alarm: the global initialiser again, on everything since the detection
-            theta = np.concatenate([theta, self._global_starts(yw, taus, multistart, lengths)], axis=1)
-        prior = depth_prior(self.model, o.z_std)
-        fits = refit_window(self.model, yw, theta, taus=taus, prior=prior, keep=o.keep, distinct_m=o.distinct_m,
-                            gof=o.gof, huber=self.huber)
-        self.seconds["refits"] += time.perf_counter() - t0
-        self._start_banks(runs, fits, taus[:, -1], 1.0, out)
-        out.status[runs] = np.where(fits.fit_ok, RESTARTED, INCONSISTENT)
-
-
-def _restart_options(o):
-    """The options of :func:`~shipsense.trackers.tracker.restarts.due` as it takes them: numbers as given (a fractional,
-    infinite or negative value compares as it did in numpy), NaN for None (every comparison with it False)."""
-    def number(value):
-        return np.nan if value is None else float(value)
-
-    return (bool(o.robust), float(o.nis_window), float(o.nis_limit), float(o.max_restarts), number(o.through_peak),
-            number(o.refit_every), bool(o.rescan), number(o.collapse))
+        return bank_starts.fit_pending(self)

@@ -2,12 +2,13 @@
 
 import numpy as np
 import pytest
+from reference import statistic, terms
 from scipy import stats
 
 from shipsense import load_scenario, simulate
 from shipsense.trackers import Tracker
 from shipsense.trackers.fit.robust import Huber
-from shipsense.trackers.tracker.consistency import psi_variance, statistic, terms, threshold
+from shipsense.trackers.tracker.consistency import psi_variance, threshold
 from shipsense.trackers.tracker.results import INCONSISTENT, TRACKING
 
 FAULTY = {"model": "contaminated", "eps": 0.2, "outlier_scale": 10.0, "dropout": 0.3}

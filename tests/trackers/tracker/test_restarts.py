@@ -105,8 +105,8 @@ def test_the_compiled_restart_test_is_the_trackers_rules(robust, which):
     np.nanmedian's, to the bit); the peak updated; passages not asked about untouched.  Options None, False,
     fractional, infinite and negative, as a user may give them."""
     from shipsense.config import TrackerOptions
+    from shipsense.trackers.tracker.bank_starts import restart_options as _restart_options
     from shipsense.trackers.tracker.restarts import due
-    from shipsense.trackers.tracker.tracker import _restart_options
 
     o = _RESTART_OPTIONS[which]
     # (model_construct: the values a user may hand the compiled rule directly, outside the options' ranges)

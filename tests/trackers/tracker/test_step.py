@@ -42,6 +42,8 @@ def _track(scenario, runs, seed, compiled, samples=None, jitter=0.0, **options):
     ("S0", 3, {"unit": "puekf"}),
     ("S2", 3, {"unit": "ckf"}),
     ("S2", 4, {"jitter": 0.2}),                     # irregular sampling (the model's stepped transitions)
+    ("S2", 3, {"unit": "srcdkf"}),                  # the square-root filter (its factor's time update)
+    ("S2", 3, {"method": "bank", "unit": "srcdkf", "jitter": 0.2}),   # with process noise, per-sample roots
 ])
 def test_tracked_passages_equal_the_step_by_step_path_bit_for_bit(scenario, runs, options):
     fast, trk, used = _track(scenario, runs, 7, True, **options)

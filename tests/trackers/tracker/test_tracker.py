@@ -173,12 +173,12 @@ def test_robust_refits_are_batched_per_window_length():
     y = sim.measurements[[1, 0]]
     alone = Tracker(sc, passages=1).track(sim.times, y[:1])
     both = Tracker(sc, passages=2)
-    assert both.huber is not None and not both._pads_exactly
+    assert both.huber is not None and not both.pads_exactly
     res = both.track(sim.times, y)
     np.testing.assert_array_equal(res.estimates[0], alone.estimates[0])
     np.testing.assert_array_equal(res.covs[0], alone.covs[0])
     padded = Tracker(sc, passages=2)
-    padded._pads_exactly = True                          # one padded batch, as the compiled fits take
+    padded.pads_exactly = True                          # one padded batch, as the compiled fits take
     assert not np.array_equal(padded.track(sim.times, y).estimates[0], alone.estimates[0])
 
 
@@ -433,7 +433,7 @@ def test_the_grid_search_samples_follow_the_array_family():
     """Several magnetometers search their grid on every second sample of S2's 30-sample window (15); one
     magnetometer and the electrodes keep at least 16 (docs: Results: 15 of S0's 75 lost two of 1,000 faulty
     passages); an explicit value wins, and window_fits is called with it."""
-    from shipsense.trackers.tracker import tracker as tracker_module
+    from shipsense.trackers.tracker import bank_starts
 
     assert Tracker("S2").settings.grid_samples == 15
     assert Tracker("S0").settings.grid_samples == 16
@@ -441,13 +441,13 @@ def test_the_grid_search_samples_follow_the_array_family():
     sc = load_scenario("S2")
     sim = simulate(sc, runs=1, seed=2, random=True)
     seen = []
-    window_fits = tracker_module.window_fits
+    window_fits = bank_starts.window_fits
 
     def spy(model, yw, **kw):
         seen.append(kw["grid_samples"])
         return window_fits(model, yw, **kw)
 
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(tracker_module, "window_fits", spy)
+        mp.setattr(bank_starts, "window_fits", spy)
         Tracker(sc, grid_samples=10).track(sim.times, sim.measurements)
     assert seen and set(seen) == {10}
