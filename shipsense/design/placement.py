@@ -43,11 +43,10 @@ from itertools import combinations
 
 import numpy as np
 
+from shipsense.design.criteria import CRITERIA, criterion_value, value_of_sets
 from shipsense.design.fisher import passage_fim
 from shipsense.design.observability import DEFAULT_CHI2, check_array
 from shipsense.models.transitions import powers
-
-CRITERIA = ("D", "A", "E")
 
 
 # -- candidates -------------------------------------------------------------------
@@ -173,23 +172,11 @@ def _matrices(problem, w):
     return problem.eps * np.eye(n) + X.reshape(X.shape[:-1] + (n, n))
 
 
-def _criterion(M, criterion):
-    """The criterion of matrices M (..., S, n, n), averaged (D, A) or minimised (E) over S -> (...)."""
-    if criterion == "D":
-        sign, logdet = np.linalg.slogdet(M)
-        return np.where(sign > 0, logdet, -np.inf).mean(axis=-1)
-    if criterion == "A":
-        return -np.trace(np.linalg.inv(M), axis1=-2, axis2=-1).mean(axis=-1)
-    if criterion == "E":
-        return np.linalg.eigvalsh(M)[..., 0].min(axis=-1)
-    raise ValueError(f"criterion must be one of {CRITERIA}, got {criterion!r}")
-
-
 def objective(problem, w, criterion="D"):
     """The criterion (to maximise) at weights w (..., N)."""
     if criterion not in CRITERIA:
         raise ValueError(f"criterion must be one of {CRITERIA}, got {criterion!r}")
-    return _criterion(_matrices(problem, w), criterion)
+    return criterion_value(_matrices(problem, w), criterion)
 
 
 def gradient(problem, w, criterion="D"):
@@ -395,20 +382,6 @@ def solve_frank_wolfe(problem, criterion="D", cuts=None, iterations=300, tol=1e-
 
 
 # -- rounding ----------------------------------------------------------------------------
-def value_of_sets(problem, sets, criterion, chunk=None):
-    """Criterion of 0/1 designs given as index arrays (B, k): the chosen matrices are gathered, not weighted."""
-    sets = np.asarray(sets)
-    out = np.empty(len(sets))
-    if chunk is None:   # about 64 MB of gathered matrices at a time
-        chunk = max(1, int(8e6 // (problem.J.shape[0] * max(1, sets.shape[-1]) * problem.n ** 2)))
-    eye = problem.eps * np.eye(problem.n)
-    for start in range(0, len(sets), chunk):
-        idx = sets[start:start + chunk]
-        M = eye + problem.J[:, idx].sum(axis=2)                      # (S, B, n, n)
-        out[start:start + chunk] = _criterion(np.swapaxes(M, 0, 1), criterion)
-    return out
-
-
 def feasible(sets, cuts, problem=None):
     sets = np.asarray(sets)
     ok = np.ones(len(sets), dtype=bool)
@@ -428,7 +401,7 @@ def _add_each(problem, M, criterion, subset=None, chunk=1024):
     for start in range(0, len(idx), chunk):
         part = idx[start:start + chunk]
         T = M[None] + np.swapaxes(problem.J[:, part], 0, 1)                      # (B, S, n, n)
-        out[part] = _criterion(T, criterion)
+        out[part] = criterion_value(T, criterion)
     return out
 
 

@@ -38,6 +38,7 @@ import numba
 import numpy as np
 
 from shipsense import numba_cache
+from shipsense.design.criteria import value_of_sets
 
 MAX_WORK = 20_000_000
 """Default work limit of :func:`subset_search`: subset values computed plus children screened through the pair
@@ -384,7 +385,6 @@ def subset_search(problem, incumbent=None, max_work=MAX_WORK, time_guard=None, t
         ``complete`` (every subset was accounted for: the design is optimal within ``tol``), ``work``,
         ``stopped_by`` (None, "work" or "time guard"), ``seconds`` and ``method``.
     """
-    from shipsense.design.placement import value_of_sets
 
     t0 = time.perf_counter()
     N, k = problem.N, problem.k
