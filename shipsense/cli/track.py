@@ -41,7 +41,7 @@ def first_use_notice(filter_name=None):
     tracker's step) are not yet compiled on disk for the current sources, else None."""
     from shipsense import numba_cache
     from shipsense.models import measurement
-    from shipsense.trackers.filters import fused, kernels
+    from shipsense.trackers.filters import fused, kernels, time_update
     from shipsense.trackers.fit import lm
     from shipsense.trackers.init import grid
     from shipsense.trackers.tracker import restarts
@@ -50,7 +50,7 @@ def first_use_notice(filter_name=None):
     code = fused.filter_code(filter_name or "ukf")
     step = (tracker_step.prepare_sample,) + ((tracker_step.STEP_KERNELS[code],) if code in tracker_step.STEP_KERNELS
                                        else ())
-    ready = numba_cache.cached(kernels.UPDATE_KERNELS[code], kernels.UPDATE_LOOPS[code], kernels.predict_kernel,
+    ready = numba_cache.cached(kernels.UPDATE_KERNELS[code], kernels.UPDATE_LOOPS[code], time_update.predict_kernel,
                                measurement.batch_kernel, lm.lm_kernel, grid.grid_solve_kernel,
                                grid.ridge_inverses, restarts.due, *step)
     return None if ready else FIRST_USE

@@ -46,7 +46,8 @@ from shipsense.defaults import HUBER_GAMMA, N_PU
 from shipsense.parallel import SPLIT_MIN, in_chunks
 from shipsense.trackers.filters.cdkf import H_STIRLING
 from shipsense.trackers.filters.core import Belief, BeliefWithCov, Innovation, prior_health, sqrt_psd
-from shipsense.trackers.filters.kernels import CDKF, EKF, HUBER, PUEKF, SRCDKF, UKF, UPDATE_KERNELS, predict_kernel
+from shipsense.trackers.filters.kernels import CDKF, EKF, HUBER, PUEKF, SRCDKF, UKF, UPDATE_KERNELS
+from shipsense.trackers.filters.time_update import predict_kernel
 from shipsense.trackers.filters.ukf import merwe_weights
 
 # -- threads --------------------------------------------------------------------------------------------------

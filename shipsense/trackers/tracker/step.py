@@ -50,7 +50,8 @@ from shipsense.models.measurement import kernel_of
 from shipsense.parallel import in_chunks
 from shipsense.trackers.bank.selection import first_max, report
 from shipsense.trackers.filters.fused import filter_constants, no_sqrt, noise_root, noise_variances, per_element
-from shipsense.trackers.filters.kernels import CDKF, EKF, HUBER, PUEKF, SRCDKF, UKF, UPDATE_BUNDLED, predict_kernel
+from shipsense.trackers.filters.kernels import CDKF, EKF, HUBER, PUEKF, SRCDKF, UKF, UPDATE_BUNDLED
+from shipsense.trackers.filters.time_update import predict_kernel
 from shipsense.trackers.init.detection import DOUBLE_MAX, strongest_kernel
 from shipsense.trackers.tracker.consistency import window_test
 
