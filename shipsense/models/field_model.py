@@ -115,7 +115,7 @@ class FieldModel:
         from shipsense.models.transitions import transitions
 
         dt = np.asarray(dt, dtype=float)
-        return _Stepped(self, transitions(self, dt), self.Q * (dt / self.period)[..., None, None])
+        return Transitioned(self, transitions(self, dt), self.Q * (dt / self.period)[..., None, None])
 
     def without_process_noise(self) -> FieldModel:
         """The same model with Q = 0: a straight, constant-velocity passage with a constant source."""
@@ -283,8 +283,9 @@ class FieldModel:
         return y, J / self.y_scale[:, None]
 
 
-class _Stepped:
-    """A :class:`FieldModel` whose ``A`` and ``Q`` are per batch element (:meth:`FieldModel.stepped`)."""
+class Transitioned:
+    """A model (a :class:`FieldModel` or a :class:`LinearModel`) with other transitions: ``A`` and ``Q`` per batch
+    element (..., n, n) (:meth:`FieldModel.stepped`, the motion modes of an IMM); it measures as ``model``."""
 
     def __init__(self, model, A, Q):
         self._model, self.A, self.Q = model, A, Q
