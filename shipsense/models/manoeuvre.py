@@ -80,9 +80,9 @@ class MotionModes:
     turn_accel: float = 0.05
     speed_accel: float = 0.1
     body_fixed: float = 0.5
-    sojourn_cv: float = 60.0
+    sojourn_cv: float = 600.0
     sojourn_manoeuvre: float = 15.0
-    initial: tuple = (0.85, 0.05, 0.05, 0.05)
+    initial: tuple = (0.97, 0.01, 0.01, 0.01)
 
     names = MODES
 
