@@ -1,6 +1,6 @@
 r"""The interacting multiple model (IMM) filter over any filter unit: motion modes as one more batch axis.
 
-A belief of the IMM (:class:`ModeBelief`) is one Gaussian per motion mode (:mod:`shipsense.models.manoeuvre`)
+A belief of the IMM (:class:`ModeBelief`) is one Gaussian per motion mode (:mod:`shipsense.models.motion_modes`)
 and the modes' probabilities, for every batch element: means (..., M, n), factors (..., M, n, n),
 probabilities (..., M).  One cycle (Blom & Bar-Shalom 1988; Bar-Shalom, Li & Kirubarajan 2001, section 11.6.6):
 
@@ -92,7 +92,7 @@ def _logsumexp(a, axis=-1):
 
 class IMM:
     """An interacting multiple model filter: a filter ``unit`` run on every motion mode of ``modes``
-    (:class:`~shipsense.models.manoeuvre.MotionModes`), batched over leading axes (see the module).
+    (:class:`~shipsense.models.motion_modes.MotionModes`), batched over leading axes (see the module).
 
     ``start`` makes the first belief from a Gaussian; ``step`` runs one cycle (mixing, the modes' time and
     measurement updates, the mode probabilities) and returns the new :class:`ModeBelief` and the step's

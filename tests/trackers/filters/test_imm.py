@@ -7,7 +7,7 @@ import pytest
 from filterpy.kalman import IMMEstimator, KalmanFilter
 
 from shipsense.models.field_model import LinearModel
-from shipsense.models.manoeuvre import MODES, MotionModes, motion_modes
+from shipsense.models.motion_modes import MODES, MotionModes, motion_modes
 from shipsense.trackers.filters import get_filter
 from shipsense.trackers.filters.core import Belief
 from shipsense.trackers.filters.imm import IMM, ModeBelief, combine
