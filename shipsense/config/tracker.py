@@ -90,8 +90,9 @@ class MotionConfig(ConfigModel):
     manoeuvre.  ``cv``: the constant-velocity filter alone (the source studies' model).
     """
 
-    model: Literal["imm", "cv"] = Field("imm", description="imm: motion modes mixed by an IMM filter; cv: "
-                                        "constant velocity only.")
+    model: Literal["imm", "cv"] = Field("cv", description="imm: motion modes mixed by an IMM filter; cv: "
+                                        "constant velocity only (the default while the IMM's calibration after "
+                                        "a manoeuvre is below the project's targets: docs, Results).")
     turn_rate_deg_s: Annotated[Positive, within(30.0, "deg/s")] = Field(
         3.5, description="The turn modes' rates (left and right), deg/s.")
     turn_accel: Annotated[Positive, within(10.0, "m/s²")] = Field(

@@ -7,7 +7,7 @@ component (:mod:`shipsense.trackers.filters.imm`).  The modes:
 ``cv``
     nearly constant velocity, the model's own transition ``A`` and process noise ``Q`` (the filter of a
     straight passage; the turn rate is held at zero);
-``turn+`` / ``turn-``
+``turn_left`` / ``turn_right``
     coordinated turns at the fixed rates :math:`\pm\omega` (Li & Jilkov 2003, section V.A; Bar-Shalom, Li &
     Kirubarajan 2001, section 11.7): with :math:`s = \sin\omega\tau`, :math:`c = \cos\omega\tau`,
 
@@ -42,7 +42,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-MODES = ("cv", "turn+", "turn-", "speed")
+MODES = ("cv", "turn_left", "turn_right", "speed")
 """The motion modes, in the order of the IMM's mode axis."""
 
 

@@ -103,7 +103,7 @@ def test_the_turn_modes_move_a_ship_on_its_circle():
     A, _ = modes.transitions(np.broadcast_to(x, (modes.M, 4)), 3.0)
     w = modes.turn_rate
     centre = np.array([0.0, 6.0 / w])                     # (a left turn from the course +x)
-    for j, sign in ((MODES.index("turn+"), 1.0), (MODES.index("turn-"), -1.0)):
+    for j, sign in ((MODES.index("turn_left"), 1.0), (MODES.index("turn_right"), -1.0)):
         y = A[j] @ x
         assert np.hypot(*y[2:]) == pytest.approx(6.0)
         assert math.atan2(y[3], y[2]) == pytest.approx(sign * w * 3.0)
@@ -125,7 +125,7 @@ def test_the_speed_mode_accelerates_along_the_course_only():
 
 def test_a_turn_is_followed_by_the_turn_mode():
     """On a passage measured in position (sd 2 m) that turns left at 2.5 deg/s for a third of its length, the
-    ``turn+`` mode's probability rises during the turn and the IMM's error during and after the turn is smaller
+    ``turn_left`` mode's probability rises during the turn and the IMM's error during and after the turn is smaller
     than the constant-velocity filter's, which lags the turn."""
     rng = np.random.default_rng(11)
     T = 2.0
@@ -142,7 +142,7 @@ def test_a_turn_is_followed_by_the_turn_mode():
     for k in range(1, len(ys)):
         belief, _ = imm.step(belief, ys[k], model)
         plain, _ = unit.step(plain, ys[k], model)
-        turn_prob.append(belief.prob[MODES.index("turn+")])
+        turn_prob.append(belief.prob[MODES.index("turn_left")])
         err_imm.append(np.hypot(*(combine(belief)[0][:2] - truth[k, :2])))
         err_cv.append(np.hypot(*(plain.mean[:2] - truth[k, :2])))
     turn_prob = np.array(turn_prob)
