@@ -12,7 +12,7 @@ body-fixed share is drawn per run of chunks (0 or 1 alternately: the tracker mus
 Per family, condition, method and kind of passage (``manoeuvring`` / ``straight``):
 
 * ``convergence`` and ``convergence_bounded`` (over the passages whose position bound sd at the judged sample is
-  at most :data:`~shipsense.trackers.metrics.BOUND_SD_M`; the bound is the PCRLB conditional on the true
+  at most :data:`~shipsense.trackers.metrics.CRLB_SD_LIMIT_M`; the bound is the PCRLB conditional on the true
   manoeuvres, :func:`shipsense.design.manoeuvre_bound.simulation_bound`);
 * on the samples after the manoeuvre ended (manoeuvring passages) or of the second half (straight ones), while
   the method reports a track: ``rmse``, ``rmse_over_bound`` (against the root-mean of the bound's position
@@ -35,13 +35,18 @@ import numpy as np
 from shipsense import load_scenario, simulate
 from shipsense.design.manoeuvre_bound import simulation_bound
 from shipsense.trackers import Tracker
-from shipsense.trackers.metrics import CHI2_2DOF_95, converged_until, passage_ends
+from shipsense.trackers.metrics import (
+    CHI2_2DOF_95,
+    converged_until,
+    convergence_allowed,
+    judged_sample,
+    passage_ends,
+)
+from shipsense.trackers.tracker.settings import prior_belief
 
 FAMILIES = {"one_magnetometer": ("S0", None), "two_magnetometers": ("S2", ["M1", "M2"]),
             "envelope_p2": ("S1-P2", None)}
 FAULTY = {"model": "contaminated", "eps": 0.2, "outlier_scale": 10.0, "dropout": 0.3}
-BOUND_SD_M = 10.0 / np.sqrt(2.0 * np.log(20.0))
-"""A 2-D position error's standard deviation (m) at which an efficient estimate is within 10 m in 95 % of cases."""
 CHUNK = 50
 
 
@@ -66,16 +71,15 @@ def chunk_stats(family, condition, seed, passages):
         res = tr.track(sim.times, sim.measurements[..., cols])
         seconds = time.perf_counter() - t0
         model = tr.model
-        if method == "imm":
-            J0 = np.linalg.inv(tr.prior_covariance_internal)
-            bound = simulation_bound(model, sim, J0)
-            pos_bound = np.trace(model.cov_to_si(bound)[..., :2, :2], axis1=-2, axis2=-1)      # (R, K) m²
+        if method == "imm":                 # (the bound of the passages, the same for both methods)
+            J0 = np.linalg.inv(model.cov_to_internal(prior_belief(model, sc, tr.bank_config)[1]))
+            bound = model.cov_to_si(simulation_bound(model, sim, J0))[..., :2, :2]            # (R, K, 2, 2) m²
+            pos_bound = np.trace(bound, axis1=-2, axis2=-1)
         truth = sim.truth
         K = truth.shape[1]
         ends = passage_ends(truth, model.array.positions[:, :2].mean(0), sc.period)
         conv, err, valid = converged_until(res.estimates, truth, ends)
-        judged = np.maximum(0, ends - np.maximum(1, (0.1 * (ends + 1)).astype(int)) + 1)
-        bounded = np.sqrt(0.5 * pos_bound[np.arange(passages), judged]) <= BOUND_SD_M
+        bounded = convergence_allowed(bound[np.arange(passages), judged_sample(ends)])
         moving = sim.manoeuvre != 0
         manoeuvring = moving.any(axis=1)
         last = np.array([np.flatnonzero(m).max() + 1 if m.any() else K // 2 for m in moving])
@@ -109,21 +113,46 @@ def summarise(parts, method, kind):
             "us_per_sample": 1e6 * sum(r["seconds"] for r in rows) / sum(r["samples_total"] for r in rows)}
 
 
-def plot_turn(path, seed=3):
-    """A turning passage of S2's pair: truth, the track by status, ellipses, the modes' probabilities."""
+def plot_turn(path, seed=2):
+    """A turning passage of S2-turn's pair of magnetometers: truth, the track by status with its 95 % ellipses,
+    and the motion modes' probabilities over time."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from shipsense.plotting import track_figure
+    from matplotlib.patches import Ellipse
 
     sc = load_scenario("S2-turn")
+    sc = sc.with_updates(manoeuvres={**sc.manoeuvres.model_dump(), "turns": [
+        {"start": 20.0, "duration": 20.0, "rate_deg_s": 3.0}], "speed_changes": [
+        {"start": 45.0, "duration": 10.0, "factor": 0.6}]})
     sim = simulate(sc, runs=1, seed=seed)
     tr = Tracker(sc, sensors=["M1", "M2"])
     cols = np.isin([c[0] for c in sim.channels], tr.model.array.ids)
     res = tr.track(sim.times, sim.measurements[..., cols])
-    fig = track_figure(res, sim, tr.model.array)
+    names = res.status_names()[0]
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(11, 4.5))
+    ax.plot(*sim.truth[0, :, :2].T, "k-", lw=1, label="truth")
+    colours = {"tracking": "tab:blue", "manoeuvring": "tab:orange", "restarted": "tab:green",
+               "inconsistent": "tab:red"}
+    for status, colour in colours.items():
+        on = names == status
+        ax.plot(*res.estimates[0, on, :2].T, ".", ms=3, color=colour, label=status)
+    for k in range(0, sim.times.size, 10):
+        if names[k] in colours:
+            w, V = np.linalg.eigh(res.covs[0, k, :2, :2])
+            ax.add_patch(Ellipse(res.estimates[0, k, :2], *(2 * np.sqrt(CHI2_2DOF_95 * np.maximum(w, 0))),
+                                 angle=np.degrees(np.arctan2(V[1, 1], V[0, 1])), fill=False, lw=0.6,
+                                 color=colours[names[k]]))
+    ax.plot(*tr.model.array.positions[:, :2].T, "k^", label="sensors")
+    ax.set(xlabel="x (m)", ylabel="y (m)", aspect="equal", title="a turn then a slow-down (S2-turn)")
+    ax.legend(fontsize=7)
+    for j, name in enumerate(res.mode_names):
+        bx.plot(sim.times, res.modes[0, :, j], label=name)
+    bx.fill_between(sim.times, 0, 1, where=sim.manoeuvre[0] != 0, color="0.9", label="true manoeuvre")
+    bx.set(xlabel="time (s)", ylabel="mode probability", ylim=(0, 1))
+    bx.legend(fontsize=7)
+    fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
 
@@ -154,7 +183,8 @@ def main(argv=None):
     keys = list(next(iter(results.values())))
     lines = ["case," + ",".join(keys)] + [f"{case}," + ",".join(str(v[k]) for k in keys) for case, v in results.items()]
     (out / "manoeuvres.csv").write_text("\n".join(lines) + "\n")
-    print(f"wrote {out}/manoeuvres.json and .csv")
+    plot_turn(out / "turn.png")
+    print(f"wrote {out}/manoeuvres.json, .csv and turn.png")
 
 
 if __name__ == "__main__":
