@@ -78,3 +78,13 @@ def test_a_passage_state_carries_its_modes_to_a_sibling(turning):
         b = other.update(sim.times[k], y[::-1, k])
         np.testing.assert_array_equal(a.estimate, b.estimate[::-1])
         np.testing.assert_array_equal(a.modes, b.modes[::-1])
+
+
+@pytest.mark.parametrize("field, value", [("threshold", 1.5), ("turn_rate_deg_s", 0.0), ("model", "ct"),
+                                          ("sojourn_manoeuvre_s", -1.0), ("hull_share", 2.0)])
+def test_a_bad_motion_option_is_refused_naming_it(field, value):
+    from shipsense.errors import ShipsenseError
+    from shipsense.trackers.tracker.settings import resolve_settings
+
+    with pytest.raises(ShipsenseError, match=f"motion.{field}"):
+        resolve_settings("S2", motion={field: value})
