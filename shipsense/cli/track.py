@@ -5,7 +5,9 @@
 
 * ``estimates.csv``: ``time``, the state (SI), ``std_x``, ``std_y``, ``selected`` (hypothesis), the truth and
   the error when known (``true_x``, ``true_y``, ``error_m``), then the position covariance ``cov_xx``,
-  ``cov_xy``, ``cov_yy`` and the ``status`` (no data, initialising, tracking, restarted, inconsistent);
+  ``cov_xy``, ``cov_yy`` and the ``status`` (no data, initialising, tracking, restarted, inconsistent,
+  manoeuvring); with ``[tracker.motion] model = "imm"``, the motion modes' probabilities ``p_cv``,
+  ``p_turn_left``, ``p_turn_right``, ``p_speed``;
 * ``selection_log.csv``: ``time``, ``status``, ``selected``, ``hypotheses`` (with weight),
   ``gap_to_second_nats`` (the selected hypothesis's log-likelihood over the runner-up's) and ``ambiguous``
   (hypotheses far apart within a few nats: the tracker cannot tell them apart);
@@ -87,9 +89,10 @@ def _fmt(col, spec):
     return np.char.mod(spec, col)
 
 
-def _write_block(est_fh, log_fh, t, s, truth, labels):
+def _write_block(est_fh, log_fh, t, s, truth, labels, modes=()):
     """Rows of a block of samples: ``s`` holds (B, ...) arrays of
-    :class:`~shipsense.trackers.tracker.results.Sample`."""
+    :class:`~shipsense.trackers.tracker.results.Sample`; ``modes``: the tracker's motion modes' names (their
+    probabilities are columns ``p_<mode>``)."""
     status = np.asarray(STATUSES)[s["status"]]
     P = s["cov"][:, :2, :2]
     cols = [_fmt(t, "%.6g"), *(_fmt(s["estimate"][:, i], "%.6g") for i in range(len(labels))),
@@ -98,6 +101,7 @@ def _write_block(est_fh, log_fh, t, s, truth, labels):
         err = np.hypot(s["estimate"][:, 0] - truth[:, 0], s["estimate"][:, 1] - truth[:, 1])
         cols += [_fmt(truth[:, 0], "%.6g"), _fmt(truth[:, 1], "%.6g"), _fmt(err, "%.4g")]
     cols += [_fmt(P[:, 0, 0], "%.6g"), _fmt(P[:, 0, 1], "%.6g"), _fmt(P[:, 1, 1], "%.6g"), status]
+    cols += [_fmt(s["modes"][:, j], "%.4g") for j in range(len(modes))]
     est_fh.write("\n".join(",".join(row) for row in zip(*cols)) + "\n")
     gap = np.where(np.isfinite(s["gap_nats"]), s["gap_nats"], np.nan)
     cols = [_fmt(t, "%.6g"), status, _fmt(s["selected"], "%d"), _fmt(s["hypotheses"], "%d"), _fmt(gap, "%.4g"),
@@ -115,12 +119,13 @@ def track_to_files(scenario, times, measurements, out, *, truth=None, method="tr
     t = np.asarray(times, dtype=float)
     K = len(t)
     labels = list(tracker.labels)
-    keys = ("estimate", "cov", "status", "selected", "hypotheses", "gap_nats", "ambiguous")
+    keys = ("estimate", "cov", "status", "selected", "hypotheses", "gap_nats", "ambiguous", "modes")
     thin = max(1, -(-K // PLOT_POINTS))
     keep = {k: [] for k in (*keys, "k")}
     header = ["time", *labels, "std_x", "std_y", "selected"]
     header += ["true_x", "true_y", "error_m"] if truth is not None else []
     header += ["cov_xx", "cov_xy", "cov_yy", "status"]
+    header += [f"p_{name}" for name in tracker.mode_names]
     steps = range(0, K, BLOCK)
     if progress:
         from tqdm import tqdm
@@ -171,7 +176,7 @@ def _track_blocks(tracker, t, y, truth, steps, parts, header, labels, keys, keep
                     block[name].append(getattr(s, name)[0])
             block = {k: np.asarray(v) for k, v in block.items()}
             tb = None if truth is None else np.asarray(truth)[ks]
-            _write_block(est_fh, log_fh, t[ks], block, tb, labels)
+            _write_block(est_fh, log_fh, t[ks], block, tb, labels, tracker.mode_names)
             if tb is not None:
                 tracked = block["status"] > INITIALISING
                 e = np.hypot(*(block["estimate"][tracked, :2] - tb[tracked, :2]).T)

@@ -31,10 +31,17 @@ from shipsense.config.scenario import (
     to_toml,
     validate_scenario,
 )
-from shipsense.config.tracker import FILTERS, BankConfig, ProcessNoiseConfig, TrackerConfig, TrackerOptions
+from shipsense.config.tracker import (
+    FILTERS,
+    BankConfig,
+    MotionConfig,
+    ProcessNoiseConfig,
+    TrackerConfig,
+    TrackerOptions,
+)
 
 __all__ = ["FILTERS", "MIN_SENSOR_SPACING", "MIN_SOURCE_DISTANCE", "BankConfig", "EarthConfig", "EnvelopeChainConfig",
-           "ManoeuvreConfig", "MediumConfig", "NoiseConfig", "PassageConfig", "PriorConfig", "ProcessNoiseConfig",
-           "RandomManoeuvreConfig", "Scenario", "ScenarioError", "SeismicConfig", "SensorConfig", "SpeedChangeConfig",
-           "TrackerConfig", "TrackerOptions", "TurnConfig", "format_error", "load_scenario", "shipped_scenarios",
-           "to_toml", "validate_scenario"]
+           "ManoeuvreConfig", "MediumConfig", "MotionConfig", "NoiseConfig", "PassageConfig", "PriorConfig",
+           "ProcessNoiseConfig", "RandomManoeuvreConfig", "Scenario", "ScenarioError", "SeismicConfig", "SensorConfig",
+           "SpeedChangeConfig", "TrackerConfig", "TrackerOptions", "TurnConfig", "format_error", "load_scenario",
+           "shipped_scenarios", "to_toml", "validate_scenario"]

@@ -80,6 +80,37 @@ class BankConfig(ConfigModel):
         return np.array([std[c] for c in labels])
 
 
+class MotionConfig(ConfigModel):
+    """The ``[tracker.motion]`` table: how the project's tracker follows a ship that turns or changes speed.
+
+    ``imm``: an interacting multiple model filter over four motion modes (:mod:`shipsense.models.motion_modes`:
+    constant velocity, left and right coordinated turns at ``turn_rate_deg_s``, a speed change), every
+    hypothesis of the bank carrying the modes' probabilities; a passage whose manoeuvre modes hold more than
+    ``threshold`` of the probability is reported ``manoeuvring``, and its refits use only the samples after the
+    manoeuvre.  ``cv``: the constant-velocity filter alone (the source studies' model).
+    """
+
+    model: Literal["imm", "cv"] = Field("cv", description="imm: motion modes mixed by an IMM filter; cv: "
+                                        "constant velocity only (the default while the IMM's calibration after "
+                                        "a manoeuvre is below the project's targets: docs, Results).")
+    turn_rate_deg_s: Annotated[Positive, within(30.0, "deg/s")] = Field(
+        3.5, description="The turn modes' rates (left and right), deg/s.")
+    turn_accel: Annotated[Positive, within(10.0, "m/s²")] = Field(
+        0.1, description="White acceleration of the turn modes (covers rates between them), m/s².")
+    speed_accel: Annotated[Positive, within(10.0, "m/s²")] = Field(
+        0.3, description="White acceleration along the course of the speed-change mode, m/s².")
+    hull_share: Fraction = Field(0.5, description="Share of the horizontal magnetic moment the turn modes "
+                                 "turn with the hull (the rest is a random walk of the unknown share).")
+    sojourn_straight_s: Annotated[Positive, within(1e6, "s")] = Field(
+        600.0, description="Mean time between manoeuvres (the constant-velocity mode's sojourn), s.")
+    sojourn_manoeuvre_s: Annotated[Positive, within(1e6, "s")] = Field(
+        15.0, description="Mean duration of a manoeuvre mode, s.")
+    manoeuvre_prior: Annotated[Finite, Field(gt=0, lt=1)] = Field(
+        0.03, description="Probability of the manoeuvre modes together at a (re)start.")
+    threshold: Annotated[Finite, Field(gt=0, lt=1)] = Field(
+        0.5, description="Manoeuvre modes' probability above which the ship is reported manoeuvring.")
+
+
 FILTERS = ("ekf", "ukf", "ckf", "cdkf", "srcdkf", "puekf", "huber_ukf")
 """The filter units (:mod:`shipsense.trackers.filters`)."""
 
@@ -154,6 +185,7 @@ class TrackerOptions(ConfigModel):
     consistency_level: Fraction = Field(0.01, description="Level of the consistency test.")
     rescan: Flag | None = Field(None, description="Rerun the global initialiser on the schedule until the "
                                 "closest approach (default: one magnetometer).")
+    motion: MotionConfig = MotionConfig()
 
     @model_validator(mode="after")
     def _check_options(self):

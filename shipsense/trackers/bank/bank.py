@@ -25,6 +25,7 @@ import numpy as np
 
 from shipsense.trackers.bank.selection import mixture_mse
 from shipsense.trackers.filters import Belief, FilterUnit, get_filter
+from shipsense.trackers.filters.imm import IMM, ModeBelief, combine
 
 
 @dataclass(frozen=True)
@@ -222,16 +223,22 @@ class BankState:
         Initial means (SI).
     P0 : ndarray, shape (n, n) or (R, H, n, n)
         Initial covariances (SI).
+    modes : MotionModes, optional
+        Motion modes of an interacting multiple model filter (:mod:`~shipsense.trackers.filters.imm`): each
+        hypothesis then carries one belief per mode and the modes' probabilities (:attr:`modal`), and
+        :attr:`belief` is their moment-matched combination; None: the unit's own (constant-velocity) filter.
     """
 
-    def __init__(self, unit, model, seeds, P0, initial_loglik=None):
+    def __init__(self, unit, model, seeds, P0, initial_loglik=None, modes=None):
         self.unit, self.model = unit, model
         self.filter = unit.on(model)                 # (its compiled or numpy steps, chosen once)
+        self.imm = None if modes is None else IMM(unit, modes)
         seeds = np.asarray(seeds, dtype=float)
         self.R, self.H, n = seeds.shape
         xs = model.x_scale
         P0 = np.broadcast_to(np.asarray(P0, dtype=float) / np.outer(xs, xs), (self.R, self.H, n, n))
         self.belief = Belief.from_cov(seeds.reshape(-1, n) / xs, P0.reshape(-1, n, n))
+        self.modal = None if self.imm is None else self.imm.start(self.belief)
         self.cum = np.zeros((self.R, self.H)) if initial_loglik is None else np.array(initial_loglik, float)
         self.idx = np.arange(self.R * self.H)        # active (not pruned) flat elements
         self.steps = 0
@@ -263,7 +270,20 @@ class BankState:
         for arr, new in zip(self.belief, fresh):
             arr[rows] = new
         self.belief = Belief(*self.belief)   # written in place: drop a filter's covariance cache
+        if self.imm is not None:
+            for arr, new in zip(self.modal, self.imm.start(fresh)):
+                arr[rows] = new
         self.cum[runs] = 0.0 if loglik is None else loglik
+
+    def set_rows(self, rows, belief, modal=None):
+        """Rows ``rows`` of the bank set to ``belief`` (and, with modes, to ``modal``, or every mode at
+        ``belief`` with the modes' prior when None)."""
+        for arr, new in zip(self.belief, belief):
+            arr[rows] = new
+        self.belief = Belief(*self.belief)   # written in place: drop a filter's covariance cache
+        if self.imm is not None:
+            for arr, new in zip(self.modal, self.imm.start(Belief(*belief)) if modal is None else modal):
+                arr[rows] = new
 
     def step(self, y, mask=None, predict=True, runs=None, model=None):
         """Predict (unless ``predict`` is False) and update with the samples ``y`` (R, m) SI.
@@ -284,9 +304,11 @@ class BankState:
             runs = np.asarray(runs, dtype=int)
             rows = (runs[:, None] * self.H + np.arange(self.H)).ravel()
             sub = Belief(*(a[rows] for a in self.belief))
-            run = np.repeat(runs, self.H)
+            run, hyp = np.repeat(runs, self.H), None
         yy = np.asarray(y, dtype=float)[run] / self.model.y_scale
         mk = None if mask is None else np.asarray(mask)[run]
+        if self.imm is not None:
+            return self._step_modes(yy, mk, predict, rows, runs, run, hyp, model)
         if predict and model is None:
             new, inn = self.filter.step(sub, yy, self.model, mk)
         else:
@@ -308,6 +330,33 @@ class BankState:
         self.steps += 1
         return inn
 
+    def _step_modes(self, yy, mk, predict, rows, runs, run, hyp, model):
+        """:meth:`step` of an IMM bank: one IMM cycle of the rows (all active ones when ``rows`` is None)."""
+        sub = self.modal if rows is None else ModeBelief(*(a[rows] for a in self.modal))
+        if predict:
+            tau = None if model is None else getattr(model, "tau", None)
+            predicted, c = self.imm.predict(sub, self.model, tau)
+        else:
+            predicted, c = Belief(sub.mean, sub.chol, sub.ok), sub.prob
+        modal, inn = self.imm.update(predicted, c, yy, self.model, mk)
+        bounds = getattr(self.model, "state_bounds", None)
+        if bounds is not None:
+            modal = modal._replace(mean=np.clip(modal.mean, *bounds))
+        x, P = combine(modal)
+        new = Belief.from_cov(x, P)
+        if rows is None:
+            self.belief, self.modal = new, modal
+        else:
+            self.set_rows(rows, new, modal)
+        if rows is not None:
+            self.cum[runs] += inn.loglik.reshape(runs.size, self.H)
+        elif len(self.idx) == self.R * self.H:
+            self.cum += inn.loglik.reshape(self.R, self.H)
+        else:
+            self.cum[run, hyp] += inn.loglik
+        self.steps += 1
+        return inn
+
     def prune(self, nats):
         """Drop active elements more than ``nats`` below the best of their run."""
         run = self.run_of
@@ -318,6 +367,8 @@ class BankState:
         if not keep.all():
             self.idx = self.idx[keep]
             self.belief = Belief(*(a[keep] for a in self.belief))
+            if self.modal is not None:
+                self.modal = ModeBelief(*(a[keep] for a in self.modal))
             dropped = np.zeros(self.R * self.H, dtype=bool)
             dropped[:] = True
             dropped[self.idx] = False

@@ -173,7 +173,13 @@ def start_banks(trk, runs, fits, tau, inflate, out):
 
 def restart(trk, runs, snr, out):
     """Refit the passages among ``runs`` whose bank is due (alarms, schedule, peak, collapse, a failed
-    consistency test: :func:`~shipsense.trackers.tracker.restarts.due`)."""
+    consistency test: :func:`~shipsense.trackers.tracker.restarts.due`); with motion modes, not before a window
+    of samples has come after the last manoeuvring one (a refit's line starts after the manoeuvre)."""
+    if trk.modes is not None:
+        since = trk.state.since[runs]
+        runs = runs[(since < 0) | (trk.state.n[runs] - since > trk.window)]
+        if runs.size == 0:
+            return
     flags, s = np.empty((runs.size, 4), dtype=bool), trk.state
     due(np.asarray(runs, dtype=np.int64), s.n, s.start, s.nis, s.trusted, s.alarms, s.peak, s.peak_done, snr,
         s.scan, s.own, s.ref, s.cons_now, *restart_options(trk.settings), out.status, out.cov, INCONSISTENT,
@@ -198,7 +204,8 @@ def refit(trk, runs, alarm, rescan, out):
     started from the selected estimate, the bank's live hypotheses and (``multistart``) the initial
     window fits; the bank restarts from the ``keep`` best distinct fits."""
     o, H, n = trk.settings, trk.H, trk.model.n
-    first = np.maximum(trk.state.k0[runs], trk.state.n[runs] - trk.state.y_hist.shape[1] + 1)
+    first = np.maximum(np.maximum(trk.state.k0[runs], trk.state.since[runs] + 1),
+                       trk.state.n[runs] - trk.state.y_hist.shape[1] + 1)
     lengths = trk.state.n[runs] - first + 1
     if not trk.pads_exactly and np.unique(lengths).size > 1:
         # one batch pads the shorter windows with missing samples: the compiled least-squares fits and their

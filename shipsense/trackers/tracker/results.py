@@ -8,9 +8,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-STATUSES = ("no data", "initialising", "tracking", "restarted", "inconsistent")
-"""Status names, indexed by the status codes of :class:`TrackResult`."""
-NO_DATA, INITIALISING, TRACKING, RESTARTED, INCONSISTENT = range(5)
+STATUSES = ("no data", "initialising", "tracking", "restarted", "inconsistent", "manoeuvring")
+"""Status names, indexed by the status codes of :class:`TrackResult`.  ``manoeuvring``: tracking, with the
+motion modes of a turn or a speed change holding most of the probability (``[tracker.motion]``)."""
+NO_DATA, INITIALISING, TRACKING, RESTARTED, INCONSISTENT, MANOEUVRING = range(6)
 
 
 @dataclass(frozen=True)
@@ -33,7 +34,9 @@ class Sample:
     ``estimate`` (P, n), ``cov`` (P, n, n), ``status`` (P,) (codes of :data:`STATUSES`), ``gap_nats`` (P,)
     (log-likelihood of the selected hypothesis over the runner-up; inf with one), ``ambiguous`` (P,)
     (hypotheses far apart within ``report_nats``), ``hypotheses`` (P,) (with weight), ``selected`` (P,) (the
-    selected hypothesis of the bank, -1 before there is one).
+    selected hypothesis of the bank, -1 before there is one), ``modes`` (P, M) (the selected hypothesis's motion
+    modes' probabilities, :data:`~shipsense.models.motion_modes.MODES`; NaN before there is one; (P, 0) without
+    motion modes).
     """
 
     estimate: np.ndarray
@@ -43,6 +46,7 @@ class Sample:
     ambiguous: np.ndarray
     hypotheses: np.ndarray
     selected: np.ndarray
+    modes: np.ndarray
 
     def take(self, rows):
         """The :class:`Sample` of passages ``rows`` (indices or a slice; fancy indices copy)."""
@@ -57,7 +61,8 @@ class PassageState:
     ``fields``: the per-passage state (name -> array without the passage axis); the sample history holds only
     its ``hist`` first rows (the rest unwritten: a passage that has seen fewer samples than the history keeps);
     ``mean``, ``chol``, ``ok``, ``loglik``: its bank's hypotheses (internal units); ``gaps``: its gaps (start
-    and end times, s)."""
+    and end times, s); ``modal``: its hypotheses' motion modes (the rows of the bank's
+    :class:`~shipsense.trackers.filters.imm.ModeBelief`), None without motion modes."""
 
     model: object
     hist: int
@@ -67,12 +72,14 @@ class PassageState:
     ok: np.ndarray
     loglik: np.ndarray
     gaps: tuple
+    modal: tuple | None = None
 
 
 @dataclass
 class TrackResult:
     """A batch of tracked passages (SI): per sample estimates (P, K, n), full covariances (P, K, n, n), status
-    codes (P, K) (:data:`STATUSES`), the selection figures of :class:`Sample`, the times (P, K), and the gaps."""
+    codes (P, K) (:data:`STATUSES`), the selection figures of :class:`Sample`, the times (P, K), the gaps, and the
+    motion modes' probabilities (P, K, M) of the modes ``mode_names`` (M = 0 without motion modes)."""
 
     labels: tuple
     times: np.ndarray
@@ -83,6 +90,8 @@ class TrackResult:
     ambiguous: np.ndarray
     hypotheses: np.ndarray
     gaps: list = field(default_factory=list)
+    modes: np.ndarray | None = None
+    mode_names: tuple = ()
 
     @property
     def position_cov(self):

@@ -8,11 +8,14 @@ The tracker, the environments, the studies, ``check``, ``design`` and ``sweep`` 
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from pydantic import ValidationError
 
 from shipsense.config import TrackerConfig, format_error, load_scenario
 from shipsense.errors import ShipsenseError
+from shipsense.models.motion_modes import MotionModes, motion_modes
 from shipsense.trackers.bank.bank import default_bank
 from shipsense.trackers.filters import FilterUnit, get_filter
 from shipsense.trackers.fit.robust import Huber
@@ -52,6 +55,18 @@ class TrackerSettings(TrackerConfig):
     def study_unit(self) -> FilterUnit:
         """The source studies' filter unit (``filter``) with its options."""
         return unit_of(self.filter, self)
+
+    def motion_modes(self, model) -> MotionModes | None:
+        """The IMM's motion modes on ``model`` (:mod:`shipsense.models.motion_modes`) from ``[tracker.motion]``,
+        or None for the constant-velocity filter alone (``model = "cv"``, and the studies' bank)."""
+        m = self.motion
+        if m.model == "cv" or self.method == "bank":
+            return None
+        share = m.manoeuvre_prior / 3.0
+        return motion_modes(model, turn_rate=math.radians(m.turn_rate_deg_s), turn_accel=m.turn_accel,
+                            speed_accel=m.speed_accel, body_fixed=m.hull_share, sojourn_cv=m.sojourn_straight_s,
+                            sojourn_manoeuvre=m.sojourn_manoeuvre_s, initial=(1.0 - m.manoeuvre_prior, share, share,
+                                                                              share))
 
     def huber(self, noise) -> Huber | None:
         """The robust fits' noise model (None unless ``robust``): Huber's cost at ``huber_gamma`` under the

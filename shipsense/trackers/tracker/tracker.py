@@ -79,10 +79,11 @@ from shipsense.trackers.bank.selection import report
 from shipsense.trackers.filters.core import UNROLL_MIN_BATCH, Belief
 from shipsense.trackers.tracker import bank_starts
 from shipsense.trackers.tracker.consistency import quantile_table, window_test
-from shipsense.trackers.tracker.passages import PENDING, PHASES, PassageArrays
+from shipsense.trackers.tracker.passages import PENDING, PHASES, RUNNING, PassageArrays
 from shipsense.trackers.tracker.results import (
     INCONSISTENT,
     INITIALISING,
+    MANOEUVRING,
     NO_DATA,
     TRACKING,
     Gap,
@@ -182,7 +183,9 @@ class Tracker:
         self.grid = initial_grid(sc)                       # (the window fits' grid: bank_starts)
         self._prior = prior_belief(self.model, sc, self.bank_config)
         self.prior_info = np.diag(self.model.x_scale ** 2 / np.diag(self._prior[1]))   # internal units
-        self._compiled = TrackerStep.of(self.unit, self.filter_model, self.H)
+        # the motion modes of an IMM (None: constant velocity alone, and the compiled step of the bank)
+        self.modes = opts.motion_modes(self.filter_model)
+        self._compiled = TrackerStep.of(self.unit, self.filter_model, self.H) if self.modes is None else None
         spec = kernel_of(self.model)
         self.pads_exactly = self.huber is None and spec is not None and spec[0] == FIELD   # (bank_starts.refit)
         self._R_used = np.ascontiguousarray(self.filter_model.R[None], dtype=float)
@@ -205,8 +208,13 @@ class Tracker:
         self.seconds = {"initialiser": 0.0, "refits": 0.0}   # time spent in window fits and in refits
         self._blank = None                                    # the prior Sample of P passages (prior_sample)
         self.bank = BankState(self.unit, self.filter_model, np.broadcast_to(self._prior[0], (P, H, n)),
-                              self._prior[1])
+                              self._prior[1], modes=self.modes)
         return self
+
+    @property
+    def mode_names(self):
+        """The motion modes' names (:data:`~shipsense.models.motion_modes.MODES`), () without them."""
+        return () if self.modes is None else tuple(self.modes.names)
 
     def reset_passages(self, passages):
         """Start passages ``passages`` (indices) over, leaving the others as they are."""
@@ -241,10 +249,11 @@ class Tracker:
         for p in idx.tolist():
             fields, hist = self.state.row(p)
             rows = slice(p * H, (p + 1) * H)
-            b = self.bank.belief
+            b, modal = self.bank.belief, self.bank.modal
             out.append(PassageState(self.model, hist, fields, b.mean[rows].copy(), b.chol[rows].copy(),
                                     b.ok[rows].copy(), self.bank.cum[p].copy(),
-                                    tuple((g.start_s, g.end_s) for g in self.gaps if g.passage == p)))
+                                    tuple((g.start_s, g.end_s) for g in self.gaps if g.passage == p),
+                                    None if modal is None else tuple(a[rows].copy() for a in modal)))
         return out
 
     def set_passage_states(self, passages, states):
@@ -266,6 +275,9 @@ class Tracker:
             self.state.put_row(p, st.fields, st.hist, self._layout)
             rows = slice(p * H, (p + 1) * H)
             b.mean[rows], b.chol[rows], b.ok[rows] = st.mean, st.chol, st.ok
+            if self.bank.modal is not None:
+                for arr, part in zip(self.bank.modal, st.modal):
+                    arr[rows] = part
             self.bank.cum[p] = st.loglik
             self.gaps.extend(Gap(p, start, end) for start, end in st.gaps)
         self.bank.belief = Belief(*b)       # written in place: drop a filter's covariance cache
@@ -356,6 +368,9 @@ class Tracker:
         if running.size:
             self._step(running, yi, dt, out)
         self._start_and_restart(starting, running, snr, yi, out, defer_fits)
+        if self.modes is not None:            # the selected hypotheses' modes, after any (re)start
+            live = act[self.state.phase[act] == RUNNING]
+            out.modes[live] = self.bank.modal.prob[live * self.H + np.argmax(self.bank.cum[live], axis=1)]
         self.widen_inconsistent(act, out)
         self.state.last_t[act] = t
         self.state.n[act] += 1
@@ -394,12 +409,13 @@ class Tracker:
             from tqdm import tqdm
 
             steps = tqdm(steps, desc=f"tracking {P} passage(s)", unit="sample", leave=False, disable=None)
+        modes = np.empty((P, K, len(self.mode_names)))
         for k in steps:
             s = self.update(times[:, k], y[:, k])
             est[:, k], cov[:, k], status[:, k] = s.estimate, s.cov, s.status
-            gap_nats[:, k], amb[:, k], hyps[:, k] = s.gap_nats, s.ambiguous, s.hypotheses
+            gap_nats[:, k], amb[:, k], hyps[:, k], modes[:, k] = s.gap_nats, s.ambiguous, s.hypotheses, s.modes
         return TrackResult(tuple(self.labels), np.array(times), est, cov, status, gap_nats, amb, hyps,
-                           list(self.gaps))
+                           list(self.gaps), modes, self.mode_names)
 
     # -- parts --------------------------------------------------------------------------------------------------
     def prior_sample(self):
@@ -409,10 +425,11 @@ class Tracker:
             mean, cov = self._prior
             self._blank = Sample(np.repeat(mean[None], P, axis=0), np.repeat(cov[None], P, axis=0),
                                  np.full(P, NO_DATA, dtype=np.int8), np.full(P, np.inf), np.zeros(P, dtype=bool),
-                                 np.zeros(P, dtype=np.int16), np.full(P, -1, dtype=np.int16))
+                                 np.zeros(P, dtype=np.int16), np.full(P, -1, dtype=np.int16),
+                                 np.full((P, len(self.mode_names)), np.nan))
         b = self._blank
         return Sample(b.estimate.copy(), b.cov.copy(), b.status.copy(), b.gap_nats.copy(), b.ambiguous.copy(),
-                      b.hypotheses.copy(), b.selected.copy())
+                      b.hypotheses.copy(), b.selected.copy(), b.modes.copy())
 
     def _step(self, runs, yi, dt, out):
         """Predict (time steps ``dt``) and update the banks of passages ``runs``; write their output (one
@@ -438,6 +455,18 @@ class Tracker:
         failed = self._consistency(runs, yi, inn, sel) if self._testing else runs[:0]
         self.report_runs(runs, out)
         out.status[failed] = INCONSISTENT
+        if self.modes is not None:
+            self._manoeuvres(runs, sel, out)
+
+    def _manoeuvres(self, runs, sel, out):
+        """The motion modes' probabilities of the selected hypotheses ``sel`` of passages ``runs`` into ``out``;
+        a passage whose manoeuvre modes hold more than ``[tracker.motion] threshold`` is ``manoeuvring`` (unless
+        inconsistent), and its later refits start after this sample (the samples of a manoeuvre lie about the
+        line after it)."""
+        prob = self.bank.modal.prob[runs * self.H + sel]
+        man = runs[1.0 - prob[:, 0] > self.settings.motion.threshold]
+        self.state.since[man] = self.state.n[man]
+        out.status[man] = np.where(out.status[man] == INCONSISTENT, INCONSISTENT, MANOEUVRING)
 
     def _compiled_step(self, runs, yi, out, stepped=None):
         """:meth:`_step` of passages ``runs`` in compiled calls (``stepped``: the filter model with their
