@@ -77,9 +77,15 @@ def _psi_variance(state_var, noise_var, gamma, eps, scale):
     return v
 
 
-@vectorize(["float64(float64, float64, float64, float64, float64)"], cache=True)
-def _psi_variance_ufunc(state_var, noise_var, gamma, eps, scale):
+def _psi_variance_scalar(state_var, noise_var, gamma, eps, scale):
     return _psi_variance(state_var, noise_var, gamma, eps, scale)
+
+
+@lru_cache(maxsize=1)
+def _psi_variance_ufunc():
+    """:func:`psi_variance`'s compiled ufunc, made (loaded from numba's cache, or compiled) at its first use, not
+    when this module is imported: an eager ufunc costs every process that imports the tracker its load."""
+    return vectorize(["float64(float64, float64, float64, float64, float64)"], cache=True)(_psi_variance_scalar)
 
 
 def psi_variance(state_var, noise_var, gamma=np.inf, eps=0.0, scale=1.0):
@@ -90,7 +96,7 @@ def psi_variance(state_var, noise_var, gamma=np.inf, eps=0.0, scale=1.0):
     (state_var + noise_var)``.  Arrays broadcast.
     """
     with np.errstate(all="ignore"):   # (the compiled loop may evaluate an unused branch: inf * 0 for no clip)
-        return _psi_variance_ufunc(state_var, noise_var, gamma, eps, scale)
+        return _psi_variance_ufunc()(state_var, noise_var, gamma, eps, scale)
 
 
 def threshold(dof, level):
