@@ -118,14 +118,19 @@ def _top_sum(values, start, r):
         return 0.0
     top = np.full(r, -np.inf)
     for q in range(start, values.shape[0]):
-        v = values[q]
-        if v > top[r - 1]:
-            j = r - 1
-            while j > 0 and top[j - 1] < v:
-                top[j] = top[j - 1]
-                j -= 1
-            top[j] = v
+        _keep_top(top, r, values[q])
     return top.sum()
+
+
+@numba.njit(cache=True, inline="always")
+def _keep_top(top, r, v):
+    """``v`` into ``top[:r]``, the r largest values so far in decreasing order (insertion)."""
+    if v > top[r - 1]:
+        j = r - 1
+        while j > 0 and top[j - 1] < v:
+            top[j] = top[j - 1]
+            j -= 1
+        top[j] = v
 
 
 @numba.njit(cache=True)
@@ -146,13 +151,7 @@ def _suffix_top_sums(u, r, out):
     out[N] = 0.0 if r == 0 else -np.inf
     for q in range(N - 1, -1, -1):
         if r > 0:
-            v = u[q]
-            if v > top[r - 1]:
-                j = r - 1
-                while j > 0 and top[j - 1] < v:
-                    top[j] = top[j - 1]
-                    j -= 1
-                top[j] = v
+            _keep_top(top, r, u[q])
             out[q] = top[:r].sum()
         else:
             out[q] = 0.0

@@ -266,13 +266,7 @@ class BankState:
         n = xs.size
         P0 = np.broadcast_to(np.asarray(P0, float) / np.outer(xs, xs), (len(runs), self.H, n, n))
         fresh = Belief.from_cov(np.asarray(seeds, float).reshape(-1, n) / xs, P0.reshape(-1, n, n))
-        rows = (runs[:, None] * self.H + np.arange(self.H)).ravel()
-        for arr, new in zip(self.belief, fresh):
-            arr[rows] = new
-        self.belief = Belief(*self.belief)   # written in place: drop a filter's covariance cache
-        if self.imm is not None:
-            for arr, new in zip(self.modal, self.imm.start(fresh)):
-                arr[rows] = new
+        self.set_rows((runs[:, None] * self.H + np.arange(self.H)).ravel(), fresh)
         self.cum[runs] = 0.0 if loglik is None else loglik
 
     def set_rows(self, rows, belief, modal=None):
@@ -318,9 +312,11 @@ class BankState:
         if rows is None:
             self.belief = new
         else:
-            for arr, part in zip(self.belief, new):
-                arr[rows] = part
-            self.belief = Belief(*self.belief)   # written in place: drop a filter's covariance cache
+            self.set_rows(rows, new)
+        return self._accumulate(inn, rows, runs, run, hyp)
+
+    def _accumulate(self, inn, rows, runs, run, hyp):
+        """The stepped elements' log-likelihoods into the cumulative ones; the step counted; ``inn`` back."""
         if rows is not None:
             self.cum[runs] += inn.loglik.reshape(runs.size, self.H)
         elif len(self.idx) == self.R * self.H:
@@ -348,14 +344,7 @@ class BankState:
             self.belief, self.modal = new, modal
         else:
             self.set_rows(rows, new, modal)
-        if rows is not None:
-            self.cum[runs] += inn.loglik.reshape(runs.size, self.H)
-        elif len(self.idx) == self.R * self.H:
-            self.cum += inn.loglik.reshape(self.R, self.H)
-        else:
-            self.cum[run, hyp] += inn.loglik
-        self.steps += 1
-        return inn
+        return self._accumulate(inn, rows, runs, run, hyp)
 
     def prune(self, nats):
         """Drop active elements more than ``nats`` below the best of their run."""
