@@ -56,21 +56,16 @@ def raw_cartpole_rate(steps):
     """Steps per second of raw CartPole (``gym.make("CartPole-v1").unwrapped``: no wrappers), random actions (drawn
     beforehand), reset when an episode ends (:func:`sustained_rate`)."""
     env = gym.make("CartPole-v1").unwrapped
-    actions = np.random.default_rng(0).integers(0, 2, steps).tolist()
+    return single_rate(env, steps, actions=np.random.default_rng(0).integers(0, 2, steps).tolist())
+
+
+def single_rate(env, steps, action=None, actions=None):
+    """Steps per second of one environment stepped with ``action`` every step, or with ``actions`` in turn."""
+    actions = [action] * steps if actions is None else actions
 
     def run():
         for a in actions:
             _, _, term, trunc, _ = env.step(a)
-            if term or trunc:
-                env.reset()
-
-    return sustained_rate(lambda seed: env.reset(seed=seed), run, steps)
-
-
-def single_rate(env, steps, action):
-    def run():
-        for _ in range(steps):
-            _, _, term, trunc, _ = env.step(action)
             if term or trunc:
                 env.reset()
 
