@@ -72,6 +72,8 @@ UNITS = {
     ("ManoeuvreConfig", "body_fixed_share"): "- (fraction)", ("SpeedChangeConfig", "factor"): "- (ratio)",
     ("RandomManoeuvreConfig", "probability"): "- (probability)",
     ("RandomManoeuvreConfig", "turn_share"): "- (fraction)",
+    ("MotionConfig", "model"): "-", ("MotionConfig", "hull_share"): "- (fraction)",
+    ("MotionConfig", "manoeuvre_prior"): "- (probability)", ("MotionConfig", "threshold"): "- (probability)",
 }
 
 SUFFIXES = {"_deg": "degrees", "_hz": "Hz", "_s": "s", "_m": "m"}
@@ -82,7 +84,8 @@ TOML_TABLE = {"Scenario": "top level", "SensorConfig": "[[sensors]]", "MediumCon
               "TrackerConfig": "[tracker] (the source studies' filter and bank)",
               "ProcessNoiseConfig": "[tracker.process_noise]", "BankConfig": "[tracker.bank]",
               "ManoeuvreConfig": "[manoeuvres]", "TurnConfig": "[[manoeuvres.turns]]",
-              "SpeedChangeConfig": "[[manoeuvres.speed_changes]]", "RandomManoeuvreConfig": "[manoeuvres.random]"}
+              "SpeedChangeConfig": "[[manoeuvres.speed_changes]]", "RandomManoeuvreConfig": "[manoeuvres.random]",
+              "MotionConfig": "[tracker.motion]"}
 
 
 def _strip_annotated(tp):

@@ -225,8 +225,9 @@ class BankState:
         Initial covariances (SI).
     modes : MotionModes, optional
         Motion modes of an interacting multiple model filter (:mod:`~shipsense.trackers.filters.imm`): each
-        hypothesis then carries one belief per mode and the modes' probabilities (:attr:`modal`), and
-        :attr:`belief` is their moment-matched combination; None: the unit's own (constant-velocity) filter.
+        hypothesis then carries one belief per mode and the modes' probabilities (``modal``, a
+        :class:`~shipsense.trackers.filters.imm.ModeBelief`), and ``belief`` is their moment-matched
+        combination; None: the unit's own (constant-velocity) filter.
     """
 
     def __init__(self, unit, model, seeds, P0, initial_loglik=None, modes=None):
