@@ -31,6 +31,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from tracker_consistency import FAMILIES, FAULTY  # (this folder: the consistency experiment's families and faults)
 
 from shipsense import load_scenario, simulate
 from shipsense.design.manoeuvre_bound import simulation_bound
@@ -44,9 +45,6 @@ from shipsense.trackers.metrics import (
 )
 from shipsense.trackers.tracker.settings import prior_belief
 
-FAMILIES = {"one_magnetometer": ("S0", None), "two_magnetometers": ("S2", ["M1", "M2"]),
-            "envelope_p2": ("S1-P2", None)}
-FAULTY = {"model": "contaminated", "eps": 0.2, "outlier_scale": 10.0, "dropout": 0.3}
 CHUNK = 50
 
 

@@ -42,6 +42,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from shipsense.models.transitions import transitions
+from shipsense.physics.motion import cv_transition
+
 MODES = ("cv", "turn_left", "turn_right", "speed")
 """The motion modes, in the order of the IMM's mode axis."""
 
@@ -92,6 +95,12 @@ class MotionModes:
         return len(MODES)
 
     @property
+    def A(self) -> np.ndarray:
+        """The constant-velocity transition over one period (n, n) (:func:`shipsense.physics.motion.cv_transition`),
+        which :func:`shipsense.models.transitions.transitions` scales to any step."""
+        return cv_transition(self.period, self.n - 4)
+
+    @property
     def prior(self) -> np.ndarray:
         """Mode probabilities at a (re)start (M,)."""
         p = np.asarray(self.initial, dtype=float)
@@ -117,8 +126,8 @@ class MotionModes:
         batch = np.broadcast_shapes(mean.shape[:-2], tau.shape)
         n, M = self.n, self.M
         r = tau / self.period
-        A = np.broadcast_to(np.eye(n), batch + (M, n, n)).copy()
-        A[..., :, 0, 2] = A[..., :, 1, 3] = tau[..., None]
+        A = np.broadcast_to(transitions(self, np.broadcast_to(tau, batch))[..., None, :, :],
+                            batch + (M, n, n)).copy()    # every mode from the constant-velocity transition
         Q = np.broadcast_to(self.Q, batch + (M, n, n)) * r[..., None, None, None]
         Q = Q.copy()
         for j, sign in ((1, 1.0), (2, -1.0)):
