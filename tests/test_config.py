@@ -1,8 +1,7 @@
 """Scenario validation: one test per class of bad configuration, each with a clear, single message."""
 
-import textwrap
-
 import pytest
+from scenario_text import MAGNETOMETER, PASSAGE, load_text, refused
 
 from shipsense.config import ScenarioError, load_scenario, shipped_scenarios
 
@@ -15,44 +14,14 @@ steps = 20
 sigma_water = 4.0
 sigma_seabed = 0.04
 water_depth = 15.0
-
-[[sensors]]
-id = "M1"
-type = "magnetometer"
-kind = "vector"
-position = [-5.0, 0.0, -15.0]
-noise_std = 1e-9
-
+""" + MAGNETOMETER.format(x="-5.0") + """
 [[sensors]]
 id = "E1"
 type = "electrode"
 kind = "envelope"
 position = [5.0, 0.0, -15.0]
 noise_std = 1e-7
-
-[passage]
-start = [-100.0, 30.0]
-velocity = [5.0, 0.0]
-z = -3.0
-moment = [1e6, 0.0, 0.0]
-p = 100.0
-"""
-
-
-def load_text(tmp_path, text):
-    path = tmp_path / "scenario.toml"
-    path.write_text(textwrap.dedent(text))
-    return load_scenario(path)
-
-
-def bad(tmp_path, text, *fragments):
-    with pytest.raises(ScenarioError) as info:
-        load_text(tmp_path, text)
-    msg = str(info.value)
-    assert "\n" not in msg and "Traceback" not in msg
-    for f in fragments:
-        assert f in msg, msg
-    return msg
+""" + PASSAGE + "p = 100.0\n"
 
 
 def test_base_is_valid(tmp_path):
@@ -80,8 +49,8 @@ def test_shipped_values_match_the_spec():
 
 
 def test_nan_and_inf_are_rejected(tmp_path):
-    bad(tmp_path, BASE.replace("[-5.0, 0.0, -15.0]", "[nan, 0.0, -15.0]"), "sensors[0].position", "finite")
-    bad(tmp_path, BASE.replace("velocity = [5.0, 0.0]", "velocity = [inf, 0.0]"), "passage.velocity", "finite")
+    refused(tmp_path, BASE.replace("[-5.0, 0.0, -15.0]", "[nan, 0.0, -15.0]"), "sensors[0].position", "finite")
+    refused(tmp_path, BASE.replace("velocity = [5.0, 0.0]", "velocity = [inf, 0.0]"), "passage.velocity", "finite")
 
 
 def test_coincident_sensors(tmp_path):
@@ -93,7 +62,7 @@ kind = "vector"
 position = [-5.0, 0.0, -15.0]
 noise_std = 1e-9
 """
-    bad(tmp_path, text, "sensors[2].position", "coincides", "M1")
+    refused(tmp_path, text, "sensors[2].position", "coincides", "M1")
 
 
 def test_sensors_of_different_types_may_share_a_node(tmp_path):
@@ -109,69 +78,71 @@ noise_std = 0.03
 
 
 def test_sensor_outside_the_water(tmp_path):
-    bad(tmp_path, BASE.replace("[5.0, 0.0, -15.0]", "[5.0, 0.0, 2.0]"), "sensors[1].position", "above the sea surface")
-    bad(tmp_path, BASE.replace("[5.0, 0.0, -15.0]", "[5.0, 0.0, -16.0]"), "sensors[1].position", "below the seabed")
+    refused(tmp_path, BASE.replace("[5.0, 0.0, -15.0]", "[5.0, 0.0, 2.0]"), "sensors[1].position",
+            "above the sea surface")
+    refused(tmp_path, BASE.replace("[5.0, 0.0, -15.0]", "[5.0, 0.0, -16.0]"), "sensors[1].position", "below the seabed")
 
 
 def test_source_outside_the_water(tmp_path):
-    bad(tmp_path, BASE.replace("z = -3.0", "z = -20.0"), "passage.z", "below the seabed")
-    bad(tmp_path, BASE.replace("z = -3.0", "z = 1.0"), "passage.z")
-    bad(tmp_path, BASE.replace("z = -3.0", "z = 0.0"), "passage.z", "strictly inside the water")
+    refused(tmp_path, BASE.replace("z = -3.0", "z = -20.0"), "passage.z", "below the seabed")
+    refused(tmp_path, BASE.replace("z = -3.0", "z = 1.0"), "passage.z")
+    refused(tmp_path, BASE.replace("z = -3.0", "z = 0.0"), "passage.z", "strictly inside the water")
 
 
 def test_source_inside_a_sensor(tmp_path):
     text = BASE.replace("z = -3.0", "z = -14.5").replace("start = [-100.0, 30.0]", "start = [-30.0, 0.0]")
-    bad(tmp_path, text, "passage", "inside the sensor", "M1")
+    refused(tmp_path, text, "passage", "inside the sensor", "M1")
 
 
 def test_non_positive_conductivity(tmp_path):
-    bad(tmp_path, BASE.replace("sigma_seabed = 0.04", "sigma_seabed = -0.04"), "medium.sigma_seabed", "> 0")
-    bad(tmp_path, BASE.replace("sigma_water = 4.0", "sigma_water = 0.0"), "medium.sigma_water", "> 0")
+    refused(tmp_path, BASE.replace("sigma_seabed = 0.04", "sigma_seabed = -0.04"), "medium.sigma_seabed", "> 0")
+    refused(tmp_path, BASE.replace("sigma_water = 4.0", "sigma_water = 0.0"), "medium.sigma_water", "> 0")
 
 
 def test_moment_of_the_wrong_shape(tmp_path):
-    bad(tmp_path, BASE.replace("moment = [1e6, 0.0, 0.0]", "moment = [1e6, 0.0]"), "passage.moment")
-    bad(tmp_path, BASE.replace("moment = [1e6, 0.0, 0.0]\n", ""), "passage.moment", "magnetometers need")
+    refused(tmp_path, BASE.replace("moment = [1e6, 0.0, 0.0]", "moment = [1e6, 0.0]"), "passage.moment")
+    refused(tmp_path, BASE.replace("moment = [1e6, 0.0, 0.0]\n", ""), "passage.moment", "magnetometers need")
 
 
 def test_unknown_measurement_kind(tmp_path):
-    bad(tmp_path, BASE.replace('kind = "envelope"', 'kind = "tmi"'), "sensors[1]",
+    refused(tmp_path, BASE.replace('kind = "envelope"', 'kind = "tmi"'), "sensors[1]",
         "unknown measurement kind 'tmi' for a electrode", "vector, envelope, magnitude")
-    bad(tmp_path, BASE.replace('type = "electrode"', 'type = "hydrophone"'), "sensors[1].type")
+    refused(tmp_path, BASE.replace('type = "electrode"', 'type = "hydrophone"'), "sensors[1].type")
 
 
 def test_magnitude_electrode_has_one_channel(tmp_path):
     sc = load_text(tmp_path, BASE.replace('kind = "envelope"', 'kind = "magnitude"'))
     assert sc.array().n_channels == 4 and sc.array().channels[-1] == ("E1", "e")
-    bad(tmp_path, BASE.replace('kind = "envelope"', 'kind = "magnitude"').replace(
+    refused(tmp_path, BASE.replace('kind = "envelope"', 'kind = "magnitude"').replace(
         "noise_std = 1e-7", "noise_std = [1e-7, 1e-7, 1e-7]"), "sensors[1]",
         "a magnitude electrode has 1 components, got 3 values")
 
 
 def test_unknown_field_and_missing_field(tmp_path):
-    bad(tmp_path, BASE.replace("steps = 20", "stepz = 20"), "stepz", "unknown field")
-    bad(tmp_path, BASE.replace("steps = 20", "steps = 20\n").replace("period = 0.5\n", ""), "period", "missing")
+    refused(tmp_path, BASE.replace("steps = 20", "stepz = 20"), "stepz", "unknown field")
+    refused(tmp_path, BASE.replace("steps = 20", "steps = 20\n").replace("period = 0.5\n", ""), "period", "missing")
 
 
 def test_noise_given_twice_or_with_wrong_length(tmp_path):
-    bad(tmp_path, BASE.replace("noise_std = 1e-9", "noise_std = 1e-9\nnoise_var = 1e-18"), "sensors[0]", "exactly one")
-    bad(tmp_path, BASE.replace("noise_std = 1e-9", "noise_std = [1e-9, 1e-9]"), "sensors[0]", "3 components")
+    refused(tmp_path, BASE.replace("noise_std = 1e-9", "noise_std = 1e-9\nnoise_var = 1e-18"), "sensors[0]",
+            "exactly one")
+    refused(tmp_path, BASE.replace("noise_std = 1e-9", "noise_std = [1e-9, 1e-9]"), "sensors[0]", "3 components")
 
 
 def test_electrodes_need_a_medium(tmp_path):
     text = BASE.replace("[medium]\nsigma_water = 4.0\nsigma_seabed = 0.04\nwater_depth = 15.0\n", "")
-    bad(tmp_path, text, "medium", "electrode")
+    refused(tmp_path, text, "medium", "electrode")
 
 
 def test_not_toml_and_missing_file(tmp_path):
-    bad(tmp_path, "name = [", "not valid TOML")
+    refused(tmp_path, "name = [", "not valid TOML")
     with pytest.raises(ScenarioError, match="no such file"):
         load_scenario(tmp_path / "nope.toml")
 
 
 def test_orientation_must_be_a_rotation(tmp_path):
     text = BASE.replace("noise_std = 1e-9", "noise_std = 1e-9\norientation = [[1, 0, 0], [0, 1, 0], [0, 0, 2]]")
-    bad(tmp_path, text, "sensors[0]", "rotation matrix")
+    refused(tmp_path, text, "sensors[0]", "rotation matrix")
 
 
 def test_with_updates_validates():
@@ -185,11 +156,11 @@ def test_values_beyond_the_physical_ranges_are_refused(tmp_path):
     """Values that passed as finite but overflow later (a speed of 1e308 m/s, a bank level of 1e308, a noise
     variance of 1e-320 whose inverse is infinite) are refused, naming the field and the range with its unit."""
     prior = "\n[prior]\nspeed = [4.0, 1e308]\nmoment = [1e6, 1e7]\np = [50.0, 200.0]\n"
-    bad(tmp_path, BASE + prior, "prior.speed", "100 m/s")
+    refused(tmp_path, BASE + prior, "prior.speed", "100 m/s")
     bank = "\n[tracker.bank]\nlevels = [1e308]\nbearings_deg = [0.0]\n"
-    bad(tmp_path, BASE + bank, "tracker.bank.levels[0]", "1e+12")
-    bad(tmp_path, BASE.replace("noise_std = 1e-9", "noise_var = 1e-320"), "sensors[0].noise_var", "at least 1e-30")
-    bad(tmp_path, BASE.replace("noise_std = 1e-9", "noise_std = 1e-200"), "sensors[0].noise_std", "at least 1e-15")
+    refused(tmp_path, BASE + bank, "tracker.bank.levels[0]", "1e+12")
+    refused(tmp_path, BASE.replace("noise_std = 1e-9", "noise_var = 1e-320"), "sensors[0].noise_var", "at least 1e-30")
+    refused(tmp_path, BASE.replace("noise_std = 1e-9", "noise_std = 1e-200"), "sensors[0].noise_std", "at least 1e-15")
     at_floor = load_text(tmp_path, BASE.replace("noise_std = 1e-9", "noise_var = 1e-30"))
     assert at_floor.sensors[0].channel_std == pytest.approx((1e-15,) * 3)
 
@@ -199,8 +170,8 @@ def test_the_conductivity_ratio_must_keep_the_image_series_bounded(tmp_path):
     is refused by the ratio range, at either end; the ends of the range themselves load."""
     from shipsense.physics.electric import CONDUCTIVITY_RATIO
 
-    bad(tmp_path, BASE.replace("sigma_seabed = 0.04", "sigma_seabed = 1e-308"), "medium.sigma_seabed", "ratio")
-    bad(tmp_path, BASE.replace("sigma_seabed = 0.04", "sigma_seabed = 100.0").replace("sigma_water = 4.0",
+    refused(tmp_path, BASE.replace("sigma_seabed = 0.04", "sigma_seabed = 1e-308"), "medium.sigma_seabed", "ratio")
+    refused(tmp_path, BASE.replace("sigma_seabed = 0.04", "sigma_seabed = 100.0").replace("sigma_water = 4.0",
                                                                                      "sigma_water = 0.01"),
         "medium.sigma_seabed", "ratio")
     lo, hi = CONDUCTIVITY_RATIO
