@@ -25,13 +25,16 @@ Writes ``manoeuvres.json``, ``manoeuvres.csv`` and ``turn.png`` (a turning passa
 
 from __future__ import annotations
 
-import argparse
 import json
 import time
 from pathlib import Path
 
 import numpy as np
-from tracker_consistency import FAMILIES, FAULTY  # (this folder: the consistency experiment's families and faults)
+from tracker_consistency import (  # (this folder: the consistency experiment's families and faults)
+    FAMILIES,
+    FAULTY,
+    passage_arguments,
+)
 
 from shipsense import load_scenario, simulate
 from shipsense.design.manoeuvre_bound import simulation_bound
@@ -156,13 +159,7 @@ def plot_turn(path, seed=2):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--passages", type=int, default=1000)
-    ap.add_argument("--family", nargs="+", default=list(FAMILIES), choices=list(FAMILIES))
-    ap.add_argument("--condition", nargs="+", default=["clean", "faulty"], choices=["clean", "faulty"])
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--out", default="results/manoeuvres")
-    a = ap.parse_args(argv)
+    a = passage_arguments(__doc__.splitlines()[0], "results/manoeuvres").parse_args(argv)
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     results = {}

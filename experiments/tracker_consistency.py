@@ -152,14 +152,21 @@ def plot(results, path):
     plt.close(fig)
 
 
-def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def passage_arguments(description, out):
+    """The options every experiment over the families' passages takes: how many, which families and conditions,
+    the seed and the output folder."""
+    ap = argparse.ArgumentParser(description=description)
     ap.add_argument("--passages", type=int, default=1000)
     ap.add_argument("--family", nargs="+", default=list(FAMILIES), choices=list(FAMILIES))
     ap.add_argument("--condition", nargs="+", default=["clean", "faulty"], choices=["clean", "faulty"])
-    ap.add_argument("--method", nargs="+", default=["tracker", "bank"], choices=["tracker", "bank"])
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--out", default="results/tracker")
+    ap.add_argument("--out", default=out)
+    return ap
+
+
+def main(argv=None):
+    ap = passage_arguments(__doc__.splitlines()[0], "results/tracker")
+    ap.add_argument("--method", nargs="+", default=["tracker", "bank"], choices=["tracker", "bank"])
     args = ap.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
