@@ -139,20 +139,11 @@ def tria_into(M, S, A, v, nz):
 
 @njit(cache=True, error_model="numpy", inline="always")
 def cho_solve_into(L, B, X):
-    """Solve ``L L^T X = B`` (``L`` lower triangular (k, k), ``B`` and ``X`` (k, c)) by forward then backward
-    substitution, column by column."""
-    k = L.shape[0]
+    """Solve ``L L^T X = B`` (``L`` lower triangular (k, k), ``B`` and ``X`` (k, c)) column by column: forward
+    substitution (:func:`forward_into`) then backward (:func:`backward_into`)."""
     for j in range(B.shape[1]):
-        for a in range(k):
-            t = B[a, j]
-            for q in range(a):
-                t -= L[a, q] * X[q, j]
-            X[a, j] = t / L[a, a]
-        for a in range(k - 1, -1, -1):
-            t = X[a, j]
-            for q in range(a + 1, k):
-                t -= L[q, a] * X[q, j]
-            X[a, j] = t / L[a, a]
+        forward_into(L, B[:, j], X[:, j])
+        backward_into(L, X[:, j])
 
 
 @njit(cache=True, error_model="numpy", inline="always")
