@@ -83,13 +83,14 @@ def build_parser() -> argparse.ArgumentParser:
     t.set_defaults(func=cmd_track)
 
     c = sub.add_parser("check", parents=[limits],
-                       help="observability and ambiguity verdict of arrays (exit 0/3/4; a CI gate)",
+                       help="observability and ambiguity verdict of arrays (exit 0/3/4; a CI gate) and the "
+                       "separation at which they tell two ships apart",
                        description="Exit codes (the worst over the files): 0 observable, 3 ambiguous, 4 degenerate, "
                        "2 bad input.")
     c.add_argument("layout", metavar="SCENARIO_OR_LAYOUT", nargs="+",
                    help="shipped scenario names or TOML files (several: one verdict each)")
-    c.add_argument("--json", action="store_true", help="print {verdict, min_chi2, pairs, fim_rank, fim_condition} "
-                   "(a list of them, with 'layout', for several files)")
+    c.add_argument("--json", action="store_true", help="print {verdict, min_chi2, pairs, fim_rank, fim_condition, "
+                   "resolvability} (a list of them, with 'layout', for several files)")
     c.add_argument("--junit", default=None, metavar="FILE.xml",
                    help="also write a JUnit XML report: one test case per layout")
     c.add_argument("--passages", type=whole_flag(1, PASSAGES_MAX), default=8,

@@ -85,6 +85,17 @@ class Resolvability:
     share: float
     per_draw_m: np.ndarray
 
+    def describe(self) -> str:
+        """One line of text: the separation, the share and what it means."""
+        P = len(self.per_draw_m)
+        pairs = f"{self.share:.0%} of {P} drawn pair{'s' * (P != 1)}"
+        if not np.isfinite(self.separation_m):
+            return (f"two ships not told apart up to {SEPARATIONS_M[-1]:.0f} m for {pairs} "
+                    f"({np.isfinite(self.per_draw_m).sum()} resolved within the grid)")
+        at_most = "at most " if self.separation_m <= SEPARATIONS_M[0] else ""
+        return (f"two ships told apart from a separation of {at_most}{self.separation_m:.3g} m ({pairs}; twin ships "
+                f"abreast; joint Fisher information: the separation's CRLB sd <= the separation)")
+
     def to_json(self):
         def finite(x):
             return float(x) if np.isfinite(x) else None
