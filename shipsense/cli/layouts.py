@@ -107,7 +107,7 @@ def cmd_design(args) -> int:
         result = design_array(sc, args.k, criterion=args.criterion, candidates=cands, costs=costs, budget=args.budget,
                               passages=args.passages, seed=args.seed, solver=args.solver, cuts=not args.no_cuts,
                               prior_floor=args.prior_floor, bb_work=args.bb_work, bb_seconds=args.bb_seconds,
-                              progress=not QUIET["on"])
+                              progress=not QUIET["on"], separation=args.separation)
     except ValueError as err:
         raise BadInput(str(err)) from None
     paths = write_design(result, out)

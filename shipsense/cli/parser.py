@@ -101,7 +101,12 @@ def build_parser() -> argparse.ArgumentParser:
     g = sub.add_parser("design", parents=[limits], help="place k sensors (convex relaxation, rounding, ambiguity cuts)")
     g.add_argument("scenario", help="a shipped scenario name or a TOML file (its first sensor is the template)")
     g.add_argument("--k", type=whole_flag(1, 1000), required=True, help="number of sensors to place")
-    g.add_argument("--criterion", default="D", help="D, A or E (default D)")
+    g.add_argument("--criterion", default="D",
+                   help="D, A or E (default D), or resolvability: the layout that best tells two ships apart at "
+                        "--separation")
+    g.add_argument("--separation", type=float, default=None, metavar="METRES",
+                   help="with --criterion resolvability: the two ships' separation the layouts are valued at "
+                        "(default 20)")
     g.add_argument("--candidates", default=None, help="candidate positions: CSV x,y[,z] or TOML [candidates] "
                    "polygon, spacing, z, exclusions, min_spacing (default: a grid around the array)")
     g.add_argument("--out", default="shipsense-design",

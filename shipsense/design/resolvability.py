@@ -281,3 +281,94 @@ def scenario_resolvability(scenario, passages=8, seed=0, share=RESOLVE_SHARE):
     truth = sample_passages(sc, passages if sc.prior is not None else 1, seed=seed, random=sc.prior is not None)
     thetas = model.to_internal(model.state_from_truth(truth))
     return resolvable_separation(model, thetas, sc.steps, share=share)
+
+
+# -- design: the value of a set of candidate sensors --------------------------------------------------------
+DESIGN_SEPARATION_M = 20.0
+"""Default separation (m) at which ``design --criterion resolvability`` values a layout: the smallest
+closest-approach separation of the project's two-ship tracking experiments."""
+EXHAUSTIVE_SETS = 200_000
+"""The design search values every k-subset when there are at most this many; otherwise the best of
+:data:`RANDOM_STARTS` random sets, improved by exchanges."""
+RANDOM_STARTS = 1000
+
+
+def candidate_information(model, thetas, steps, separation=DESIGN_SEPARATION_M, *, stride=STRIDE):
+    """Per-candidate joint information of the twin pairs of ``thetas`` (P, n) at ``separation`` (m):
+    ``(J, theta1, theta2)``, J (P, N, 2n, 2n) for the N sensors of the candidate ``model`` (one sensor per
+    candidate), the pairs (P, n) each.  A set's joint information is the sum of its candidates'."""
+    t1, t2 = abreast(model, thetas, [separation])
+    t1, t2 = t1[:, 0], t2[:, 0]
+    return joint_fim(model, t1, t2, steps, stride=stride, per_sensor=True), t1, t2
+
+
+def set_values(model, information, steps, sets, separation=DESIGN_SEPARATION_M, *, share=RESOLVE_SHARE,
+               stride=STRIDE, chunk=4096):
+    r"""The resolvability criterion of candidate sets ``sets`` (B, k) (indices): to maximise.
+
+    .. math::  V(T) = -\ln \rho_{(q)}(T), \qquad \rho_p(T) = \sigma_{\delta,p}(d_0; J_T) / d_0,
+
+    :math:`\rho_{(q)}` the share statistic (:func:`share_statistic`, share ``q``) over the drawn pairs of the
+    ratio of the separation's CRLB sd to the separation :math:`d_0`, with the set's joint information
+    :math:`J_T = \sum_{i \in T} J_i`.  :math:`V \ge 0` exactly when at least the share ``q`` of the pairs is
+    told apart at :math:`d_0` (the criterion of :func:`resolvable_separation`), and every unit of ``V`` is a
+    factor ``e`` of margin; ``-inf`` where the pairs are not seen apart at all.  More sensors never lower it.
+
+    ``information``: :func:`candidate_information`'s ``(J, theta1, theta2)``; ``model`` gives the transition.
+    Returns (B,).
+    """
+    J, t1, t2 = information
+    sets = np.atleast_2d(np.asarray(sets))
+    out = np.empty(len(sets))
+    for b0 in range(0, len(sets), chunk):
+        idx = sets[b0:b0 + chunk]
+        M = np.swapaxes(J[:, idx].sum(axis=2), 0, 1)                      # (b, P, 2n, 2n)
+        ratio = separation_sd(model, M, t1, t2, steps, stride=stride) / separation
+        with np.errstate(divide="ignore"):
+            out[b0:b0 + chunk] = -np.log(share_statistic(ratio, share))
+    return out
+
+
+def best_set(values, N, k, *, exhaustive=EXHAUSTIVE_SETS, starts=RANDOM_STARTS, seed=0, max_rounds=50):
+    """The k-subset of N candidates with the largest ``values(sets)`` (a function of (B, k) index arrays).
+
+    Every subset is valued when there are at most ``exhaustive`` of them (the result is then optimal);
+    otherwise the best of ``starts`` random sets is improved by exchanges (replace one chosen candidate by
+    the best other, all N x k exchanges valued at once, while the value improves).
+
+    Returns
+    -------
+    chosen : ndarray, shape (k,)
+    value : float
+    complete : bool
+        Whether every subset was valued.
+    evaluated : int
+        Sets valued.
+    """
+    from itertools import combinations
+    from math import comb
+
+    total = comb(N, k)
+    if total <= exhaustive:
+        sets = np.array(list(combinations(range(N), k)), dtype=np.int64).reshape(total, k)
+        vals = values(sets)
+        best = int(np.argmax(vals))
+        return sets[best], float(vals[best]), True, total
+    rng = np.random.default_rng(seed)
+    sets = np.sort(np.argsort(rng.random((starts, N)), axis=1)[:, :k], axis=1)
+    vals = values(sets)
+    evaluated = len(sets)
+    chosen, value = sets[int(np.argmax(vals))], float(vals.max())
+    for _ in range(max_rounds):
+        trial = np.repeat(chosen[None], k * N, axis=0).reshape(k, N, k)
+        trial[np.arange(k), :, np.arange(k)] = np.arange(N)              # slot i takes candidate j
+        trial = trial.reshape(-1, k)
+        ordered = np.sort(trial, axis=1)
+        trial = trial[np.all(ordered[:, 1:] != ordered[:, :-1], axis=1)]   # no candidate twice
+        vals = values(trial)
+        evaluated += len(trial)
+        j = int(np.argmax(vals))
+        if not vals[j] > value:
+            break
+        chosen, value = np.sort(trial[j]), float(vals[j])
+    return chosen, value, False, evaluated
