@@ -149,3 +149,83 @@ def test_scenario_figure_is_reproducible_and_on_the_grid():
     np.testing.assert_array_equal(a.per_draw_m, b.per_draw_m)
     assert a.separation_m in SEPARATIONS_M and a.separation_m == a.per_draw_m.max()
     assert a.to_json()["separation_m"] == a.separation_m
+
+
+# -- design -------------------------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def grid():
+    from shipsense import load_scenario
+    from shipsense.design import placement as pl
+
+    sc = load_scenario("S1-P2")
+    cands = pl.grid_candidates([(-30, -30), (30, -30), (30, 30), (-30, 30)], 20.0, -15.0)    # 4 x 4
+    model = candidate_model(sc, cands)
+    thetas = model.to_internal(model.state_from_truth(sample_passages(sc, 4, seed=3)))
+    return sc, cands, model, thetas
+
+
+def test_set_values_are_the_resolvability_of_the_set_and_grow_with_sensors(grid):
+    from itertools import combinations
+
+    from shipsense.design.resolvability import candidate_information, set_values
+
+    sc, cands, model, thetas = grid
+    d0 = 5.0
+    info = candidate_information(model, thetas, sc.steps, d0)
+    pairs = np.array(list(combinations(range(len(cands)), 2)))
+    v2 = set_values(model, info, sc.steps, pairs, d0)
+    # a set's value is the share statistic of the ratios its own model gives (the subset's joint information)
+    for i in (0, 7, 50):
+        part = subset_model(model, pairs[i])
+        t1, t2 = abreast(part, thetas, [d0])
+        sd = separation_sd(part, joint_fim(part, t1, t2, sc.steps, stride=2), t1, t2, sc.steps, stride=2)[:, 0]
+        assert v2[i] == pytest.approx(-np.log(share_statistic(sd / d0)), rel=1e-6)
+    # adding a third sensor to a pair never lowers the value
+    third = np.array([[*p, j] for p in pairs[:40] for j in range(len(cands)) if j not in p])
+    v3 = set_values(model, info, sc.steps, third, d0)
+    base = dict(zip(map(tuple, pairs[:40]), v2[:40]))
+    assert np.all(v3 >= np.array([base[tuple(t[:2])] for t in third]) - 1e-9)
+
+
+def test_the_search_is_exhaustive_when_it_can_be_and_exchanges_otherwise(grid):
+    from itertools import combinations
+
+    from shipsense.design.resolvability import best_set, candidate_information, set_values
+
+    sc, cands, model, thetas = grid
+    info = candidate_information(model, thetas, sc.steps, 10.0)
+
+    def values(sets):
+        return set_values(model, info, sc.steps, sets, 10.0)
+
+    every = np.array(list(combinations(range(len(cands)), 3)))
+    top = values(every).max()
+    chosen, value, complete, evaluated = best_set(values, len(cands), 3)
+    assert complete and evaluated == len(every) and value == top and values(chosen[None])[0] == top
+    chosen, value, complete, _ = best_set(values, len(cands), 3, exhaustive=0, starts=5, seed=1)
+    assert not complete and len(set(chosen)) == 3 and value <= top
+    starts = np.sort(np.argsort(np.random.default_rng(1).random((5, len(cands))), axis=1)[:, :3], axis=1)
+    assert value >= values(starts).max()                           # the exchanges never lose the best start
+
+
+def test_design_with_the_resolvability_criterion(grid, tmp_path):
+    import json
+
+    from shipsense.design.designer import design_array, summary_lines, write_design
+
+    sc, cands, model, thetas = grid
+    res = design_array(sc, 2, criterion="resolvability", candidates=cands, passages=4, seed=3, separation=10.0,
+                       random_layouts=50)
+    assert res.placement.status == "optimal" and res.placement.certified_gap == 0
+    assert all(b["value"] is None or b["value"] <= res.placement.value + 1e-12 for b in res.baselines.values())
+    write_design(res, tmp_path / "out")
+    report = json.loads((tmp_path / "out" / "design.json").read_text(), parse_constant=lambda c: 1 / 0)
+    assert report["criterion"] == "resolvability" and report["separation_m"] == 10.0
+    assert report["resolvability"]["separation_m"] == res.resolvability.separation_m
+    assert any("told apart" in line for line in summary_lines(res))
+    for kwargs, field in (({"criterion": "D", "separation": 10.0}, "--separation"),
+                          ({"criterion": "resolvability", "separation": -1.0}, "--separation"),
+                          ({"criterion": "resolvability", "costs": np.ones(len(cands)), "budget": 5.0}, "--budget"),
+                          ({"criterion": "F"}, "--criterion")):
+        with pytest.raises(ValueError, match=field):
+            design_array(sc, 2, candidates=cands, passages=2, **kwargs)
