@@ -68,18 +68,9 @@ eigenvalue would let a larger array's extra information push a real direction un
 
 @dataclass(frozen=True)
 class Resolvability:
-    """The outcome of :func:`resolvable_separation`.
-
-    Attributes
-    ----------
-    separation_m : float
-        The array's resolvable separation (m); ``inf`` if fewer than ``share`` of the draws are resolved
-        within the grid.
-    share : float
-        The share of draws the figure holds for.
-    per_draw_m : ndarray, shape (P,)
-        Each draw's resolvable separation (m; ``inf`` unresolved within the grid).
-    """
+    """The outcome of :func:`resolvable_separation`: the array's resolvable separation ``separation_m`` (m;
+    ``inf`` if fewer than ``share`` of the draws are told apart within the grid), the share of draws it holds
+    for, and each draw's own figure ``per_draw_m`` (P,) (m; ``inf`` where none on the grid)."""
 
     separation_m: float
     share: float
@@ -90,8 +81,8 @@ class Resolvability:
         P = len(self.per_draw_m)
         pairs = f"{self.share:.0%} of {P} drawn pair{'s' * (P != 1)}"
         if not np.isfinite(self.separation_m):
-            return (f"two ships not told apart up to {SEPARATIONS_M[-1]:.0f} m for {pairs} "
-                    f"({np.isfinite(self.per_draw_m).sum()} resolved within the grid)")
+            return (f"two ships: fewer than {pairs} told apart at any separation up to {SEPARATIONS_M[-1]:.0f} m "
+                    f"({np.isfinite(self.per_draw_m).sum()} of them are)")
         at_most = "at most " if self.separation_m <= SEPARATIONS_M[0] else ""
         return (f"two ships told apart from a separation of {at_most}{self.separation_m:.3g} m ({pairs}; twin ships "
                 f"abreast; joint Fisher information: the separation's CRLB sd <= the separation)")
