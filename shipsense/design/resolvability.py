@@ -41,6 +41,13 @@ that a share ``share`` (default :data:`RESOLVE_SHARE`) of the draws reach: at le
 pairs is told apart at a separation no larger than it.  Adding sensors adds information to every sample
 (:math:`J` grows in the Loewner order), so a larger array never has a larger resolvable separation than its
 subset.
+
+The figure is a bound, local to the pair: no unbiased estimator tells the ships apart closer than it, and an
+array whose figure is large cannot; estimators leave the bound at small separations and low signal (the
+threshold effect Smith describes), and the point-dipole model stops holding when the ships are closer than
+their own length, so a tracker needs more separation than the figure.  ``shipsense check`` reports it
+(:mod:`~shipsense.design.gate`); ``shipsense design --criterion resolvability`` maximises
+:func:`set_values`, the criterion at a fixed separation.
 """
 
 from __future__ import annotations
