@@ -152,7 +152,7 @@ def score_baselines(problem, candidates, placement, criterion, seed=0, random_la
     named = {f"best_of_{len(rand)}_random": rand[best], "line": sets["line"], "triangle": sets["triangle"]}
     for name, idx in named.items():
         v = float(values(np.asarray(idx)[None])[0])
-        eff = _efficiency(criterion, v, placement.value, placement.dimension)
+        eff = _efficiency(criterion, v, placement.value, problem.n if problem is not None else placement.dimension)
         out[name] = {"value": _finite(v), "efficiency_vs_design": eff,
                      "sensors": [list(map(float, p)) for p in candidates[idx]]}
     return out
