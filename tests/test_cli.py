@@ -196,8 +196,10 @@ def test_check_exit_codes_and_json(capsys):
 
     assert main(["check", "S1-P2", "--json", "--passages", "2"]) == 0
     data = json.loads(capsys.readouterr().out)
-    assert set(data) >= {"verdict", "min_chi2", "pairs", "fim_rank", "fim_condition"}
+    assert set(data) >= {"verdict", "min_chi2", "pairs", "fim_rank", "fim_condition", "resolvability"}
     assert data["verdict"] == "observable"
+    res = data["resolvability"]
+    assert res["share"] == 0.9 and len(res["per_draw_m"]) == 2 and res["separation_m"] == max(res["per_draw_m"])
     assert main(["check", "S1-P1", "--json", "--passages", "2"]) == 3
     data = json.loads(capsys.readouterr().out)
     assert data["verdict"] == "ambiguous" and data["pairs"]
@@ -332,6 +334,10 @@ def test_check_gates_several_layouts_with_junit_and_the_worst_exit_code(tmp_path
     assert suite.get("tests") == "2" and suite.get("failures") == "1" and suite.get("errors") == "0"
     cases = {c.get("name"): c for c in suite.iter("testcase")}
     assert cases["S1-P2"].find("failure") is None and cases["S1-P1"].find("failure").get("type") == "ambiguous"
+    for case in cases.values():   # the resolvability rides along as a property, whatever the verdict
+        prop = case.find("properties/property")
+        assert prop.get("name") == "resolvable_separation_m" and float(prop.get("value")) > 0
+        assert "two ships" in case.find("system-out").text
     capsys.readouterr()
     assert main(["check", "S1-P2", str(tmp_path / "missing.toml"), "--passages", "2", "--json",
                  "--junit", str(junit)]) == 2

@@ -51,7 +51,8 @@ def cmd_check(args) -> int:
         atomic_write_bytes(Path(args.junit), junit_xml(results))
     if args.json:
         docs = [{"layout": r.layout, "verdict": "error", "error": r.detail} if r.verdict == "error"
-                else {"layout": r.layout, **r.detail.to_json()} for r in results]
+                else {"layout": r.layout, **r.detail.to_json(), "resolvability": r.resolvability.to_json()}
+                for r in results]
         print(json.dumps(docs[0] if len(docs) == 1 else docs, indent=2))
     else:
         for r in results:
@@ -76,6 +77,7 @@ def _print_verdict(result):
     print(f"  Fisher information: rank {verdict.fim_rank} of {len(verdict.labels)}, "
           f"condition number {verdict.fim_condition:.3g} (internal units)")
     print(f"  closest far-apart passage: chi-square {verdict.min_chi2:.3g} (ambiguous below 25)")
+    print(f"  {result.resolvability.describe()}")
     for p in verdict.pairs[:5]:
         a, b = p.passage, p.alternative
         print(f"  ambiguous pair ({p.source}): start ({a[0]:.0f}, {a[1]:.0f}) m heading "
@@ -105,7 +107,7 @@ def cmd_design(args) -> int:
         result = design_array(sc, args.k, criterion=args.criterion, candidates=cands, costs=costs, budget=args.budget,
                               passages=args.passages, seed=args.seed, solver=args.solver, cuts=not args.no_cuts,
                               prior_floor=args.prior_floor, bb_work=args.bb_work, bb_seconds=args.bb_seconds,
-                              progress=not QUIET["on"])
+                              progress=not QUIET["on"], separation=args.separation)
     except ValueError as err:
         raise BadInput(str(err)) from None
     paths = write_design(result, out)

@@ -83,13 +83,14 @@ def build_parser() -> argparse.ArgumentParser:
     t.set_defaults(func=cmd_track)
 
     c = sub.add_parser("check", parents=[limits],
-                       help="observability and ambiguity verdict of arrays (exit 0/3/4; a CI gate)",
+                       help="observability and ambiguity verdict of arrays (exit 0/3/4; a CI gate) and the "
+                       "separation at which they tell two ships apart",
                        description="Exit codes (the worst over the files): 0 observable, 3 ambiguous, 4 degenerate, "
                        "2 bad input.")
     c.add_argument("layout", metavar="SCENARIO_OR_LAYOUT", nargs="+",
                    help="shipped scenario names or TOML files (several: one verdict each)")
-    c.add_argument("--json", action="store_true", help="print {verdict, min_chi2, pairs, fim_rank, fim_condition} "
-                   "(a list of them, with 'layout', for several files)")
+    c.add_argument("--json", action="store_true", help="print {verdict, min_chi2, pairs, fim_rank, fim_condition, "
+                   "resolvability} (a list of them, with 'layout', for several files)")
     c.add_argument("--junit", default=None, metavar="FILE.xml",
                    help="also write a JUnit XML report: one test case per layout")
     c.add_argument("--passages", type=whole_flag(1, PASSAGES_MAX), default=8,
@@ -100,7 +101,12 @@ def build_parser() -> argparse.ArgumentParser:
     g = sub.add_parser("design", parents=[limits], help="place k sensors (convex relaxation, rounding, ambiguity cuts)")
     g.add_argument("scenario", help="a shipped scenario name or a TOML file (its first sensor is the template)")
     g.add_argument("--k", type=whole_flag(1, 1000), required=True, help="number of sensors to place")
-    g.add_argument("--criterion", default="D", help="D, A or E (default D)")
+    g.add_argument("--criterion", default="D",
+                   help="D, A or E (default D), or resolvability: the layout that best tells two ships apart at "
+                        "--separation")
+    g.add_argument("--separation", type=float, default=None, metavar="METRES",
+                   help="with --criterion resolvability: the two ships' separation the layouts are valued at "
+                        "(default 20)")
     g.add_argument("--candidates", default=None, help="candidate positions: CSV x,y[,z] or TOML [candidates] "
                    "polygon, spacing, z, exclusions, min_spacing (default: a grid around the array)")
     g.add_argument("--out", default="shipsense-design",

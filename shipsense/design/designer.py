@@ -6,6 +6,13 @@ with ambiguity cuts unless disabled), scores baselines on the same passages
 and returns a :class:`DesignResult`; :func:`write_design` writes the layout
 (TOML), the report (JSON) and the plots, all atomically.  Errors the caller
 can cause raise ``ValueError`` with one line naming the argument.
+
+The criterion ``resolvability`` is not a relaxation's: a layout is valued by how well it tells two ships apart
+at a given separation (:func:`~shipsense.design.resolvability.set_values`, from the per-candidate joint Fisher
+information of twin ships abreast), over every k-subset when there are few enough of them (the design is then
+optimal) and otherwise by random starts and exchanges (:func:`~shipsense.design.resolvability.best_set`); no
+ambiguity cuts (the design's verdict is reported) and no cost budget.  Every design reports its resolvable
+separation (:func:`~shipsense.design.resolvability.resolvable_separation`, as ``shipsense check`` does).
 """
 
 from __future__ import annotations
@@ -19,6 +26,11 @@ from pathlib import Path
 import numpy as np
 
 from shipsense.design import placement as pl
+from shipsense.design import resolvability as rv
+
+CRITERIA = (*pl.CRITERIA, "resolvability")
+"""The design criteria: the relaxation's D, A and E (:data:`~shipsense.design.placement.CRITERIA`) and the
+two-ship resolvability at a separation (:func:`~shipsense.design.resolvability.set_values`)."""
 
 RANDOM_LAYOUTS = 1000
 BB_GUARD_SECONDS = 120.0
@@ -42,6 +54,8 @@ class DesignResult:
     prior_floor: float | None
     baselines: dict = field(default_factory=dict)
     timings: dict = field(default_factory=dict)
+    resolvability: object = None   # the design's Resolvability (its two-ship resolvable separation)
+    separation: float | None = None   # the separation (m) the resolvability criterion values layouts at
 
     @property
     def sensors(self) -> np.ndarray:
@@ -54,15 +68,23 @@ class DesignResult:
             "criterion": self.criterion, "k": self.k, "candidates": len(self.candidates),
             "passages": len(self.thetas), "method": r.method, "solver": r.solver, "converged": r.converged,
             "solver_status": r.status, "solver_message": r.message, "prior_floor": self.prior_floor,
-            "relaxation_objective": r.relaxation, "upper_bound": r.upper_bound, "design_objective": r.value,
-            "certified_gap": r.certified_gap, "guaranteed_efficiency": r.guaranteed_efficiency,
+            "relaxation_objective": _finite(r.relaxation), "upper_bound": _finite(r.upper_bound),
+            "design_objective": _finite(r.value), "certified_gap": _finite(r.certified_gap),
+            "guaranteed_efficiency": r.guaranteed_efficiency,
             "branch_and_bound": r.branch_and_bound, "ambiguity_cuts": len(r.cuts),
             "verdict": r.verdict.verdict if r.verdict is not None else None,
             "min_chi2": r.verdict.min_chi2 if r.verdict is not None else None,
             "sensors": [list(map(float, p)) for p in self.sensors],
             "baselines": self.baselines,
+            "separation_m": self.separation,
+            "resolvability": self.resolvability.to_json() if self.resolvability is not None else None,
             "seconds": self.timings.get("total"), "timings": self.timings,
         }
+
+
+def _finite(x):
+    """A number for the JSON report: None where it is not finite (no relaxation, no bound)."""
+    return float(x) if x is not None and np.isfinite(x) else None
 
 
 def default_candidates(scenario):
@@ -108,25 +130,31 @@ def baseline_layouts(candidates, k, rng, random_layouts=RANDOM_LAYOUTS):
     return {"random": random, "line": _nearest_unused(candidates, line), "triangle": _nearest_unused(candidates, tri)}
 
 
-def score_baselines(problem, candidates, placement, criterion, seed=0, random_layouts=RANDOM_LAYOUTS):
+def score_baselines(problem, candidates, placement, criterion, seed=0, random_layouts=RANDOM_LAYOUTS, values=None):
     """The baselines' criterion values on the design's own passages, and their efficiency against the design.
 
     Efficiency (D): ``exp((value - design value) / d)``; only layouts that
-    satisfy the budget (if any) count.
+    satisfy the budget (if any) count.  ``values``: a function valuing index sets (B, k) instead of the
+    problem's criterion (the resolvability criterion; ``problem`` is then unused).
     """
-    sets = baseline_layouts(candidates, problem.k, np.random.default_rng(seed), random_layouts)
+    k = len(placement.chosen)
+    if values is None:
+        def values(sets):
+            return pl.value_of_sets(problem, sets, criterion)
+    sets = baseline_layouts(candidates, k, np.random.default_rng(seed), random_layouts)
     out = {}
     rand = sets["random"]
-    ok = pl.feasible(rand, None, problem)
+    ok = pl.feasible(rand, None, problem) if problem is not None else np.ones(len(rand), dtype=bool)
     vals = np.full(len(rand), -np.inf)
     if ok.any():
-        vals[ok] = pl.value_of_sets(problem, rand[ok], criterion)
+        vals[ok] = values(rand[ok])
     best = int(np.argmax(vals))
     named = {f"best_of_{len(rand)}_random": rand[best], "line": sets["line"], "triangle": sets["triangle"]}
     for name, idx in named.items():
-        v = float(pl.value_of_sets(problem, np.asarray(idx)[None], criterion)[0])
-        eff = _efficiency(criterion, v, placement.value, problem.n)
-        out[name] = {"value": v, "efficiency_vs_design": eff, "sensors": [list(map(float, p)) for p in candidates[idx]]}
+        v = float(values(np.asarray(idx)[None])[0])
+        eff = _efficiency(criterion, v, placement.value, problem.n if problem is not None else placement.dimension)
+        out[name] = {"value": _finite(v), "efficiency_vs_design": eff,
+                     "sensors": [list(map(float, p)) for p in candidates[idx]]}
     return out
 
 
@@ -137,12 +165,14 @@ def _efficiency(criterion, value, reference, d):
         return float(np.exp((value - reference) / d))
     if criterion == "A":
         return float(reference / value) if value < 0 else None
-    return float(value / reference) if reference > 0 else None
+    if criterion == "E":
+        return float(value / reference) if reference > 0 else None
+    return None
 
 
 def design_array(scenario, k, *, criterion="D", candidates=None, costs=None, budget=None, passages=8, seed=0,
                  solver="auto", cuts=True, prior_floor=None, stride=2, random_layouts=RANDOM_LAYOUTS,
-                 bb_work=None, bb_seconds=BB_GUARD_SECONDS, check=True, progress=False):
+                 bb_work=None, bb_seconds=BB_GUARD_SECONDS, check=True, progress=False, separation=None):
     """Design an array of ``k`` copies of the scenario's first sensor.
 
     Parameters
@@ -150,7 +180,8 @@ def design_array(scenario, k, *, criterion="D", candidates=None, costs=None, bud
     scenario : Scenario
     k : int
         Sensors to place.
-    criterion : {"D", "A", "E"}
+    criterion : {"D", "A", "E", "resolvability"}
+        ``resolvability``: the layout that best tells two ships apart at ``separation`` (module docstring).
     candidates : ndarray, shape (N, 3), optional
         Allowed positions, m (default :func:`default_candidates`).
     costs, budget : optional
@@ -181,6 +212,9 @@ def design_array(scenario, k, *, criterion="D", candidates=None, costs=None, bud
         A time guard on that search (inf: none); the report says when it fired.
     progress : bool
         A progress bar on a terminal.
+    separation : float, optional
+        The separation (m) the ``resolvability`` criterion values layouts at (default
+        :data:`~shipsense.design.resolvability.DESIGN_SEPARATION_M`); only with that criterion.
 
     Returns
     -------
@@ -188,14 +222,22 @@ def design_array(scenario, k, *, criterion="D", candidates=None, costs=None, bud
     """
     from tqdm import tqdm
 
-    from shipsense.design.observability import check_array
     from shipsense.models.field_model import candidate_model, subset_model
     from shipsense.simulator import sample_passages
     from shipsense.trackers.tracker.settings import resolve_settings
 
     t_start = time.perf_counter()
-    if criterion not in pl.CRITERIA:
-        raise ValueError(f"--criterion must be one of {', '.join(pl.CRITERIA)}, got {criterion!r}")
+    if criterion not in CRITERIA:
+        raise ValueError(f"--criterion must be one of {', '.join(CRITERIA)}, got {criterion!r}")
+    if separation is not None and criterion != "resolvability":
+        raise ValueError("--separation goes with --criterion resolvability only")
+    if criterion == "resolvability":
+        separation = rv.DESIGN_SEPARATION_M if separation is None else separation
+        if not (np.isfinite(separation) and 0 < separation <= rv.SEPARATIONS_M[-1]):
+            raise ValueError(f"--separation must be a number of metres in (0, {rv.SEPARATIONS_M[-1]:g}], "
+                             f"got {separation!r}")
+        if costs is not None:
+            raise ValueError("--budget (candidate costs) is not supported with --criterion resolvability")
     if solver not in pl.SOLVERS:
         raise ValueError(f"--solver must be one of {', '.join(pl.SOLVERS)}, got {solver!r}")
     if not (bb_seconds == bb_seconds and bb_seconds > 0):
@@ -224,32 +266,16 @@ def design_array(scenario, k, *, criterion="D", candidates=None, costs=None, bud
                unit="%", leave=False, disable=None if progress else True,
                bar_format="{desc}: {percentage:3.0f}%|{bar}| {elapsed}")
     try:
-        t0 = time.perf_counter()
-        problem = pl.build_problem(model, thetas, scenario.steps, k, prior_std, stride=stride,
-                                   prior_floor=prior_floor, progress=lambda f: bar.update(int(100 * f) - bar.n))
-        timings["fisher"] = time.perf_counter() - t0
-        if costs is not None:
-            problem = problem.with_costs(costs, budget)
-        bar.set_description("design: relaxation, rounding" + ("" if not cuts else " and ambiguity cuts"))
-        if cuts:
-            result = pl.place_with_cuts(problem, model, thetas, scenario.steps, criterion, solver=solver,
-                                        bb_work=bb_work, bb_seconds=guard)
-            timings["relaxation_and_rounding"] = result.seconds
-            timings["ambiguity_check"] = result.check_seconds
+        if criterion == "resolvability":
+            result, baselines = _resolvability_design(model, thetas, scenario.steps, k, cands, separation, seed,
+                                                      random_layouts, timings, check, bar)
         else:
-            result = pl.place(problem, criterion, solver, bb_work=bb_work, bb_seconds=guard)
-            timings["relaxation_and_rounding"] = result.seconds
-            t0 = time.perf_counter()
-            if check:
-                result.verdict = check_array(subset_model(model, result.chosen), thetas[:4], scenario.steps,
-                                             starts=8)
-            timings["ambiguity_check"] = time.perf_counter() - t0 if check else None
-        bar.set_description("design: baselines")
-        t0 = time.perf_counter()
-        baselines = score_baselines(problem, cands, result, criterion, seed=seed, random_layouts=random_layouts)
-        timings["baselines"] = time.perf_counter() - t0
+            result, baselines = _relaxation_design(model, thetas, scenario.steps, k, cands, criterion, costs,
+                                                   budget, prior_std, stride, prior_floor, solver, cuts, bb_work,
+                                                   guard, seed, random_layouts, timings, check, bar)
     finally:
         bar.close()
+    resolvability = rv.resolvable_separation(subset_model(model, result.chosen), thetas, scenario.steps)
     sensors = [template.model_copy(update={"id": f"D{i + 1}", "position": tuple(map(float, p))})
                for i, p in enumerate(cands[result.chosen])]
     layout = scenario.model_copy(update={"sensors": sensors, "name": f"{scenario.name}-design-k{k}",
@@ -257,7 +283,78 @@ def design_array(scenario, k, *, criterion="D", candidates=None, costs=None, bud
                                                         f"({template.kind}) designed from {scenario.name}"})
     timings["total"] = time.perf_counter() - t_start
     return DesignResult(scenario, layout, cands, result, truth, thetas, model, k, criterion, prior_floor,
-                        baselines, timings)
+                        baselines, timings, resolvability, separation)
+
+
+def _relaxation_design(model, thetas, steps, k, cands, criterion, costs, budget, prior_std, stride, prior_floor,
+                       solver, cuts, bb_work, guard, seed, random_layouts, timings, check, bar):
+    """The D, A and E criteria's design: per-candidate Fisher matrices, the relaxation, rounding and ambiguity
+    cuts (:func:`~shipsense.design.placement.place_with_cuts`), the verdict and the baselines; ``(Placement,
+    baselines)``."""
+    from shipsense.design.observability import check_array
+    from shipsense.models.field_model import subset_model
+
+    t0 = time.perf_counter()
+    problem = pl.build_problem(model, thetas, steps, k, prior_std, stride=stride,
+                               prior_floor=prior_floor, progress=lambda f: bar.update(int(100 * f) - bar.n))
+    timings["fisher"] = time.perf_counter() - t0
+    if costs is not None:
+        problem = problem.with_costs(costs, budget)
+    bar.set_description("design: relaxation, rounding" + ("" if not cuts else " and ambiguity cuts"))
+    if cuts:
+        result = pl.place_with_cuts(problem, model, thetas, steps, criterion, solver=solver,
+                                    bb_work=bb_work, bb_seconds=guard)
+        timings["relaxation_and_rounding"] = result.seconds
+        timings["ambiguity_check"] = result.check_seconds
+    else:
+        result = pl.place(problem, criterion, solver, bb_work=bb_work, bb_seconds=guard)
+        timings["relaxation_and_rounding"] = result.seconds
+        t0 = time.perf_counter()
+        if check:
+            result.verdict = check_array(subset_model(model, result.chosen), thetas[:4], steps, starts=8)
+        timings["ambiguity_check"] = time.perf_counter() - t0 if check else None
+    bar.set_description("design: baselines")
+    t0 = time.perf_counter()
+    baselines = score_baselines(problem, cands, result, criterion, seed=seed, random_layouts=random_layouts)
+    timings["baselines"] = time.perf_counter() - t0
+    return result, baselines
+
+
+def _resolvability_design(model, thetas, steps, k, cands, separation, seed, random_layouts, timings, check, bar):
+    """The ``resolvability`` criterion's design: per-candidate joint information, the search over sets
+    (:func:`~shipsense.design.resolvability.best_set`), the verdict and the baselines; ``(Placement,
+    baselines)``."""
+    from shipsense.design.observability import check_array
+    from shipsense.models.field_model import subset_model
+
+    t0 = time.perf_counter()
+    bar.set_description("design: joint Fisher matrices of two ships")
+    info = rv.candidate_information(model, thetas, steps, separation)
+    timings["fisher"] = time.perf_counter() - t0
+
+    def values(sets):
+        return rv.set_values(model, info, steps, sets, separation)
+
+    bar.set_description("design: search over sets")
+    t0 = time.perf_counter()
+    chosen, value, complete, evaluated = rv.best_set(values, len(cands), k, seed=seed)
+    weights = np.zeros(len(cands))
+    weights[chosen] = 1.0
+    result = pl.Placement(chosen, weights, "resolvability", float("nan"), value if complete else float("inf"), value,
+                          "exhaustive" if complete else "exchange", time.perf_counter() - t0,
+                          solver=f"{evaluated:,} sets valued", converged=True,
+                          status="optimal" if complete else "not proved optimal", dimension=2 * model.n)
+    timings["search"] = result.seconds
+    t0 = time.perf_counter()
+    if check:
+        result.verdict = check_array(subset_model(model, chosen), thetas[:4], steps, starts=8)
+    timings["ambiguity_check"] = time.perf_counter() - t0 if check else None
+    bar.set_description("design: baselines")
+    t0 = time.perf_counter()
+    baselines = score_baselines(None, cands, result, "resolvability", seed=seed, random_layouts=random_layouts,
+                                values=values)
+    timings["baselines"] = time.perf_counter() - t0
+    return result, baselines
 
 
 #: The files of a design report, inside its output folder.
@@ -318,13 +415,21 @@ def summary_lines(result):
     eff = r.guaranteed_efficiency
     lines = [f"{result.criterion}-optimal design of {k} {template.type}s ({template.kind}) from "
              f"{len(result.candidates)} candidates and {len(result.thetas)} prior passages "
-             f"({result.timings['total']:.1f} s)",
-             f"  solver: {r.solver} ({r.method} relaxation), {'converged' if r.converged else 'NOT converged'}: "
-             f"{r.status}"]
-    if r.message:
-        lines.append(f"  note: {r.message}")
-    lines.append(f"  objective {r.value:.4g}; relaxation {r.relaxation:.4g}; certified upper bound "
-                 f"{r.upper_bound:.4g}; gap {r.certified_gap:.3g} (no {k}-sensor design does better by more)")
+             f"({result.timings['total']:.1f} s)"]
+    if result.criterion == "resolvability":
+        d0 = result.separation
+        lines.append(f"  search: {r.method} ({r.solver}): "
+                     + ("every subset valued, the design is optimal" if r.status == "optimal" else
+                        "the best of random sets improved by exchanges, not proved optimal"))
+        lines.append(f"  objective {r.value:.4g}: at {d0:g} m, {rv.RESOLVE_SHARE:.0%} of the drawn twin pairs have "
+                     f"the separation's CRLB sd at most {d0 * np.exp(-r.value):.3g} m")
+    else:
+        lines.append(f"  solver: {r.solver} ({r.method} relaxation), "
+                     f"{'converged' if r.converged else 'NOT converged'}: {r.status}")
+        if r.message:
+            lines.append(f"  note: {r.message}")
+        lines.append(f"  objective {r.value:.4g}; relaxation {r.relaxation:.4g}; certified upper bound "
+                     f"{r.upper_bound:.4g}; gap {r.certified_gap:.3g} (no {k}-sensor design does better by more)")
     if r.branch_and_bound is not None:
         b = r.branch_and_bound
         stop = {"work": "stopped at its work limit", "time guard": "stopped by the time guard (--bb-seconds)"}
@@ -335,9 +440,12 @@ def summary_lines(result):
         lines.append(f"  guaranteed efficiency {eff:.3f} against the best {k}-sensor design")
     lines.append(f"  ambiguity cuts added: {len(r.cuts)}; verdict: "
                  f"{r.verdict.verdict if r.verdict is not None else None}")
+    if result.resolvability is not None:
+        lines.append(f"  {result.resolvability.describe()}")
     for name, b in result.baselines.items():
         e = b["efficiency_vs_design"]
-        lines.append(f"  baseline {name}: objective {b['value']:.4g}"
+        value = "-inf" if b["value"] is None else f"{b['value']:.4g}"
+        lines.append(f"  baseline {name}: objective {value}"
                      + (f" (efficiency {e:.3f} of the design)" if e is not None else ""))
     for i, p in enumerate(result.sensors):
         lines.append(f"  D{i + 1}: ({p[0]:.1f}, {p[1]:.1f}, {p[2]:.1f})")

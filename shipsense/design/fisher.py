@@ -31,6 +31,26 @@ def trajectory(model, theta, steps):
     return np.einsum("kij,...j->...ki", powers(model.A, steps), np.asarray(theta, dtype=float))
 
 
+def weighted_jacobian(model, theta, Ak):
+    r"""Whitened Jacobian rows of passages about their initial states: :math:`R^{-1/2} H(A^k \theta) A^k`.
+
+    Parameters
+    ----------
+    model : model with ``H`` and ``R`` (internal units)
+    theta : ndarray, shape (..., n)
+        Initial states (internal units).
+    Ak : ndarray, shape (K, n, n)
+        The transition's powers at the samples used (:func:`~shipsense.models.transitions.powers`).
+
+    Returns
+    -------
+    W : ndarray, shape (..., K, m, n)
+        ``W^T W`` summed over samples and channels is the passage's Fisher information.
+    """
+    X = np.einsum("kij,...j->...ki", Ak, np.asarray(theta, dtype=float))
+    return (model.H(X) @ Ak) * (1.0 / np.sqrt(model.R))[:, None]
+
+
 def passage_fim(model, theta, steps, per_sensor=False, stride=1, block=10_000, progress=None):
     """Fisher information of passages about their initial state (internal units).
 
@@ -68,7 +88,6 @@ def passage_fim(model, theta, steps, per_sensor=False, stride=1, block=10_000, p
     starts = np.searchsorted(sensor[order], np.arange(S))
     per = len(sensor) // S if S else 0
     uniform = S > 0 and per * S == len(sensor) and np.array_equal(sensor[order], np.repeat(np.arange(S), per))
-    inv_sd = 1.0 / np.sqrt(model.R)
     K = len(Ak)
     m = len(sensor)
 
@@ -90,8 +109,7 @@ def passage_fim(model, theta, steps, per_sensor=False, stride=1, block=10_000, p
     if passages_per_block >= 1:       # short passages or small arrays: whole passages at once
         for b0 in range(0, len(flat), passages_per_block):
             th = flat[b0:b0 + passages_per_block]
-            X = np.einsum("kij,bj->bki", Ak, th)
-            out[b0:b0 + len(th)] = information((model.H(X) @ Ak) * inv_sd[:, None])
+            out[b0:b0 + len(th)] = information(weighted_jacobian(model, th, Ak))
             done += len(th) * K
             if progress is not None:
                 progress(done / total)
@@ -100,7 +118,7 @@ def passage_fim(model, theta, steps, per_sensor=False, stride=1, block=10_000, p
         for b, th in enumerate(flat):
             for k0 in range(0, K, per_block):
                 A = Ak[k0:k0 + per_block]
-                W = (model.H(A @ th) @ A) * inv_sd[:, None]            # (kb, m, n)
+                W = weighted_jacobian(model, th, A)                    # (kb, m, n)
                 out[b] += information(W[None])[0]
                 done += len(A)
                 if progress is not None:

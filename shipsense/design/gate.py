@@ -1,11 +1,15 @@
 """The CI gate: the observability and ambiguity verdicts of several layout files, as exit codes and JUnit XML.
 
 ``shipsense check LAYOUT.toml [...] [--junit FILE]`` checks each file
-(:func:`~shipsense.design.observability.check_scenario`); the exit code is
+(:func:`~shipsense.design.observability.check_scenario`) and reports its two-ship resolvable separation
+(:func:`~shipsense.design.resolvability.scenario_resolvability`, on the same prior passages: a figure, not a
+verdict -- it does not change the exit code); the exit code is
 the worst outcome -- 2 a file that cannot be read or validated, 4 a
 degenerate array, 3 an ambiguous one, 0 all observable -- and the JUnit
 report has one test case per file (a failure for an ambiguous or degenerate
-array, an error for a bad file), which CI systems display per layout.
+array, an error for a bad file), which CI systems display per layout; a case's ``resolvable_separation_m``
+property (m; ``inf`` when the pairs are not told apart within the separations tried) and its standard output
+carry the resolvability.
 """
 
 from __future__ import annotations
@@ -26,6 +30,7 @@ class GateResult:
     seconds: float
     detail: object = None   # the Verdict, or the error message
     scenario: object = None   # the validated Scenario (None for an error)
+    resolvability: object = None   # the Resolvability (None for an error)
 
     @property
     def failed(self) -> bool:
@@ -37,6 +42,7 @@ def check_layouts(layouts, passages=8, seed=0, progress=False, errors=(ValueErro
     message kept), not an exception, so one bad file does not hide the others' verdicts."""
     from shipsense.config import load_scenario
     from shipsense.design.observability import check_scenario
+    from shipsense.design.resolvability import scenario_resolvability
 
     out = []
     for layout in layouts:
@@ -44,7 +50,8 @@ def check_layouts(layouts, passages=8, seed=0, progress=False, errors=(ValueErro
         try:
             sc = load_scenario(layout)
             v = check_scenario(sc, passages=passages, seed=seed, progress=progress)
-            out.append(GateResult(str(layout), v.verdict, time.perf_counter() - t0, v, sc))
+            res = scenario_resolvability(sc, passages=passages, seed=seed)
+            out.append(GateResult(str(layout), v.verdict, time.perf_counter() - t0, v, sc, res))
         except errors as err:
             out.append(GateResult(str(layout), "error", time.perf_counter() - t0, str(err)))
     return out
@@ -63,6 +70,10 @@ def junit_xml(results) -> bytes:
                        time=f"{sum(r.seconds for r in results):.3f}")
     for r in results:
         case = ET.SubElement(suite, "testcase", classname="shipsense.check", name=r.layout, time=f"{r.seconds:.3f}")
+        if r.resolvability is not None:
+            props = ET.SubElement(case, "properties")
+            ET.SubElement(props, "property", name="resolvable_separation_m",
+                          value=f"{r.resolvability.separation_m:.6g}")
         if r.verdict == "error":
             ET.SubElement(case, "error", message=str(r.detail), type="bad input")
         elif r.failed:
@@ -70,5 +81,7 @@ def junit_xml(results) -> bytes:
             text = f"{r.verdict}: closest far-apart passage at chi-square {v.min_chi2:.3g} (ambiguous below 25); " \
                    f"Fisher rank {v.fim_rank} of {len(v.labels)}"
             ET.SubElement(case, "failure", message=text, type=r.verdict).text = text
+        if r.resolvability is not None:
+            ET.SubElement(case, "system-out").text = r.resolvability.describe()
     ET.indent(suite)
     return ET.tostring(suite, encoding="utf-8", xml_declaration=True) + b"\n"

@@ -674,14 +674,16 @@ class Placement:
         D: ``exp(-gap / d)`` (d the parameter dimension: the ratio of the
         geometric-mean eigenvalues, averaged over passages); A: ``bound /
         value`` (ratio of the averaged traces of the inverse); E: ``value /
-        bound``.  None where it is undefined (no dimension, E bound <= 0).
+        bound``.  None where it is undefined (no dimension, E bound <= 0, another criterion).
         """
         gap = max(self.certified_gap, 0.0)
         if self.criterion == "D":
             return float(np.exp(-gap / self.dimension)) if self.dimension else None
         if self.criterion == "A":
             return float(min(1.0, self.upper_bound / self.value)) if self.value < 0 else None
-        return float(min(1.0, self.value / self.upper_bound)) if self.upper_bound > 0 and self.value > 0 else None
+        if self.criterion == "E":
+            return float(min(1.0, self.value / self.upper_bound)) if self.upper_bound > 0 and self.value > 0 else None
+        return None
 
 
 def solve_relaxation(problem, criterion="D", solver="auto", cuts=None, first_order_above=800):
