@@ -5,6 +5,7 @@ from itertools import combinations
 
 import numpy as np
 import pytest
+from candidate_grids import s1p2_grid
 
 from shipsense import load_scenario
 from shipsense.cli import main
@@ -18,10 +19,7 @@ from shipsense.trackers.tracker.settings import resolve_settings
 
 @pytest.fixture(scope="module")
 def small():
-    sc = load_scenario("S1-P2")
-    cands = pl.grid_candidates([(-20, -20), (20, -20), (20, 20), (-20, 20)], 20.0, -15.0)   # 3 x 3
-    model = candidate_model(sc, cands)
-    thetas = model.to_internal(model.state_from_truth(sample_passages(sc, 4, seed=3)))
+    sc, cands, model, thetas = s1p2_grid(20.0, 20.0)   # 3 x 3
     prior = model.to_internal(np.array([30.0, 30.0, 2.0, 2.0, 1.0, 50.0]))
     return sc, cands, model, thetas, pl.build_problem(model, thetas, sc.steps, 3, prior)
 

@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from candidate_grids import s1p2_grid
 
 from shipsense.design.fisher import passage_fim
 from shipsense.design.resolvability import (
@@ -154,14 +155,7 @@ def test_scenario_figure_is_reproducible_and_on_the_grid():
 # -- design -------------------------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def grid():
-    from shipsense import load_scenario
-    from shipsense.design import placement as pl
-
-    sc = load_scenario("S1-P2")
-    cands = pl.grid_candidates([(-30, -30), (30, -30), (30, 30), (-30, 30)], 20.0, -15.0)    # 4 x 4
-    model = candidate_model(sc, cands)
-    thetas = model.to_internal(model.state_from_truth(sample_passages(sc, 4, seed=3)))
-    return sc, cands, model, thetas
+    return s1p2_grid(30.0, 20.0)    # 4 x 4
 
 
 def test_set_values_are_the_resolvability_of_the_set_and_grow_with_sensors(grid):
