@@ -41,7 +41,7 @@ class TrafficConfig(ConfigModel):
     """
 
     count: ShipCount | tuple[ShipCount, ShipCount] = Field(
-        1, description="Number of ships, or [min, max] drawn uniformly per run (at most MAX_SHIPS).")
+        1, description="Number of ships in a run, or [min, max] drawn uniformly per run.")
     geometry: Geometry | list[Geometry] = Field(
         "prior", description="How the companions sail: prior | crossing | head_on | overtaking | following; one "
                              "for every companion, or a list with one per companion (ships 1, 2, ...).")
