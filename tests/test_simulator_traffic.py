@@ -53,6 +53,18 @@ def test_the_magnetometers_read_the_sum_and_the_accelerometer_the_nearer_ship():
                                    np.cos(2 * np.arctan2(dn[:, 1], dn[:, 0])), atol=1e-12)
 
 
+def test_the_seismic_chain_hears_the_nearer_ship():
+    sc = load_scenario("S2")
+    sc = sc.with_updates(seismic={**sc.seismic.model_dump(), "mode": "chain", "sensor_noise": 1e-6},
+                         traffic={"count": 2, "geometry": "head_on", "separation": 15.0})
+    sim = simulate(sc, runs=3, seed=2, random=True)
+    ax = sim.array.axial
+    d = sim.measurements[..., ax] - sim.clean[..., ax]      # the clean bearing: the nearer ship's (tested above)
+    assert np.abs((d + np.pi / 2) % np.pi - np.pi / 2).max() < 1e-5
+    alone = simulate(sc.with_updates(traffic=None), runs=3, seed=2, random=True)
+    assert np.abs(sim.measurements[..., ax] - alone.measurements[..., ax]).max() > 0.1   # ship 1 is heard
+
+
 def closest_approach(sim, run):
     """Time and distance of the closest approach of ships 0 and 1 (straight tracks), analytically."""
     a, b = sim.ships[run, 0, 0], sim.ships[run, 1, 0]
