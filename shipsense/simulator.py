@@ -131,7 +131,7 @@ class Simulation:
 
     @property
     def ships(self) -> np.ndarray:
-        """True states of every ship (runs, ships, steps, 9), ship 0 first (:attr:`truth`); NaN for a ship that
+        """True states of every ship (runs, ships, steps, 9), ship 0 first (``truth``); NaN for a ship that
         does not sail in a run."""
         if self.companions is None:
             return self.truth[:, None]

@@ -263,7 +263,7 @@ def gospa(estimates, truth, c=GOSPA_CUTOFF_M):
     the minimum over assignments :math:`\gamma` of estimates to ships with :math:`d(x_i, y_j) < c`
     (horizontal distance, m): the localisation error of the assigned pairs plus :math:`c^2/2` for every missed
     ship (true, unassigned) and every false one (estimated, unassigned), so an error in the number of ships
-    counts.  The optimal assignment is found by :func:`scipy.optimize.linear_sum_assignment` on the square
+    counts.  The optimal assignment is found by ``scipy.optimize.linear_sum_assignment`` on the square
     cost matrix of :math:`\min(d, c)^2` between ships and estimates padded with :math:`c^2/2` (a ship or an
     estimate left over) and 0; a pair at :math:`d \ge c` is a missed and a false ship.
 
@@ -334,7 +334,7 @@ def cardinality_rate(estimates, truth, where=None):
 
 def label_assignment(estimates, truth, c=GOSPA_CUTOFF_M):
     r"""Which labelled track follows which ship over a passage: the track :math:`i` assigned to each ship
-    :math:`j` by the optimal assignment (:func:`scipy.optimize.linear_sum_assignment`) of the costs
+    :math:`j` by the optimal assignment (``scipy.optimize.linear_sum_assignment``) of the costs
 
     .. math::  C_{ji} = \sum_k \min(d_{jik}, c)^2 + \frac{c^2}{2}\, n_{jik},
 
