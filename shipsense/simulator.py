@@ -13,9 +13,18 @@ passage makes the scheduled turns and speed changes, random passages draw theirs
 body-fixed share of the magnetic moment turns with the hull.  Without the table the passages are straight,
 as they always were.
 
+Traffic (the scenario's ``[traffic]`` table, :mod:`shipsense.config.traffic`): a run can hold several ships.
+Ship 0 is the passage above; its companions are drawn from ``[prior]`` or placed by a named encounter with it
+(:mod:`shipsense.physics.traffic`), each with its own source, and every sensor reads the sum of their noiseless
+readings (the nearest ship's bearing on bearing channels), with the noise added once.  Random manoeuvres
+(``[manoeuvres.random]``) are drawn for every ship; the nominal passage's scheduled manoeuvres belong to ship 0
+only (a named encounter is placed on ship 0's straight track, and a manoeuvre of either ship moves their
+closest approach).  The seismic chain hears the nearest ship; the raw envelope chain is for one ship.
+
 Reproducibility: each random ingredient (prior, noise, outliers, dropouts,
-chains, manoeuvres) has its own stream spawned from ``seed`` (the manoeuvres' last, so that adding them
-moved no earlier draw), and every draw has the runs
+chains, manoeuvres, traffic) has its own stream spawned from ``seed`` (the manoeuvres' and then the
+traffic's last, so that adding them moved no earlier draw: ship 0's passage, the noise and everything else
+are the same with and without companions), and every draw has the runs
 axis first, so run ``i`` of a batch does not depend on how many runs the batch
 has (except the heavy-tailed seismic option, which is reproducible but not
 prefix-stable).
@@ -32,17 +41,23 @@ import numpy as np
 
 from shipsense.config import Scenario, load_scenario
 from shipsense.config.manoeuvres import nominal_manoeuvres
+from shipsense.config.traffic import span
 from shipsense.physics.array import SensorArray
 from shipsense.physics.envelope import envelope_chain, magnitude_envelope_chain, raw_channels
 from shipsense.physics.manoeuvre import LABELS, SPEED_CHANGE, TURN, Manoeuvres, manoeuvring_motion, turned_moment
 from shipsense.physics.motion import cv_positions
 from shipsense.physics.noise import dropout_mask
 from shipsense.physics.seismic import eigen_bearing, simulate_vibration, wrap_axial
+from shipsense.physics.traffic import GEOMETRIES, companion_tracks, superposed_readings
 
 STATE_LABELS = ("x", "y", "vx", "vy", "z", "mx", "my", "mz", "p")
 """Columns of :attr:`Simulation.truth`: position, velocity, source height, magnetic moment, electric moment."""
 
-_STREAMS = ("prior", "prior_dir", "noise", "outlier", "dropout", "envelope", "seismic", "seismic_tail", "manoeuvre")
+_STREAMS = ("prior", "prior_dir", "noise", "outlier", "dropout", "envelope", "seismic", "seismic_tail", "manoeuvre",
+            "traffic")
+_TRAFFIC_STREAMS = ("count", "geometry", "prior", "prior_dir", "source", "source_dir", "manoeuvre")
+TRUTH_CSV_HEADER = ("run", "ship", "step", "time", *STATE_LABELS)
+"""Columns of the truth CSV (:meth:`Simulation.save_truth_csv`): one row per run, ship and sample."""
 
 
 @dataclass(frozen=True)
@@ -72,6 +87,11 @@ class Simulation:
         :data:`~shipsense.physics.manoeuvre.LABELS` (straight, turn, speed change).
     manoeuvres : Manoeuvres
         Every run's manoeuvre schedule (no manoeuvre: an empty one).
+    companions : ndarray, shape (runs, ships - 1, steps, 9), optional
+        True states of ships 1, 2, ... (the ``[traffic]`` table; None with one ship); a run's ships beyond
+        its ``ship_count`` do not sail (their rows are drawn but read nothing).
+    ship_count : ndarray of int, shape (runs,), optional
+        Number of ships in each run (None: one).
     """
 
     scenario: Scenario
@@ -85,6 +105,8 @@ class Simulation:
     speed: np.ndarray
     manoeuvre: np.ndarray
     manoeuvres: Manoeuvres
+    companions: np.ndarray | None = None
+    ship_count: np.ndarray | None = None
 
     @property
     def channels(self):
@@ -100,13 +122,42 @@ class Simulation:
         """True source positions (runs, steps, 3)."""
         return self.truth[..., [0, 1, 4]]
 
+    @property
+    def ships_present(self) -> np.ndarray:
+        """Which ships sail in each run, bool (runs, ships); ship 0 always."""
+        if self.companions is None:
+            return np.ones((self.runs, 1), dtype=bool)
+        return np.arange(1 + self.companions.shape[1])[None, :] < self.ship_count[:, None]
+
+    @property
+    def ships(self) -> np.ndarray:
+        """True states of every ship (runs, ships, steps, 9), ship 0 first (``truth``); NaN for a ship that
+        does not sail in a run."""
+        if self.companions is None:
+            return self.truth[:, None]
+        every = np.concatenate([self.truth[:, None], self.companions], axis=1)
+        return np.where(self.ships_present[:, :, None, None], every, np.nan)
+
+    def save_truth_csv(self, path):
+        """Write the truth as CSV: ``run, ship, step, time`` and the state (:data:`STATE_LABELS`, SI), one row
+        per run, sailing ship and sample (:data:`TRUTH_CSV_HEADER`); ship 0 is the scenario's own passage."""
+        ships, present = self.ships, self.ships_present
+        with open(path, "w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(TRUTH_CSV_HEADER)
+            for r in range(self.runs):
+                for s in np.flatnonzero(present[r]):
+                    for k in range(self.times.size):
+                        w.writerow([r, s, k, f"{self.times[k]:.6g}", *map(repr, ships[r, s, k].tolist())])
+
     def save_npz(self, path):
         """Write arrays and channel labels to a NumPy ``.npz`` file.
 
         Besides the measurements and the truth: ``heading``, ``speed`` and ``manoeuvre`` (per sample, with
         ``manoeuvre_labels``), and the manoeuvre schedule as JSON (``manoeuvre_schedule``: one list of
         records per run, :meth:`~shipsense.physics.manoeuvre.Manoeuvres.to_records`, with
-        ``body_fixed_share``).
+        ``body_fixed_share``).  With several ships (``[traffic]``): ``ships`` (:attr:`ships`) and
+        ``ship_count``.
         """
         schedule = {"body_fixed_share": self.manoeuvres.body_fixed_share, "runs": self.manoeuvres.to_records()}
         np.savez_compressed(
@@ -116,6 +167,7 @@ class Simulation:
             sensor_positions=self.array.positions, scenario_toml_name=np.array(self.scenario.name),
             heading=self.heading, speed=self.speed, manoeuvre=self.manoeuvre, manoeuvre_labels=np.array(LABELS),
             manoeuvre_schedule=np.array(json.dumps(schedule)),
+            **({} if self.companions is None else {"ships": self.ships, "ship_count": self.ship_count}),
         )
 
     def save_csv(self, path):
@@ -247,9 +299,11 @@ def keel_dipole(velocity, p):
 
 def simulation_bytes(sc: Scenario, runs: int) -> float:
     """Memory a :func:`simulate` of ``runs`` runs allocates, roughly (bytes): truth, clean field, noise,
-    measurements and mask, float64, per run and step (the commands refuse work above a limit before any of
-    it is allocated)."""
-    return float(runs) * sc.steps * (5 * sc.array().n_channels + len(STATE_LABELS)) * 8.0
+    measurements and mask, float64, per run and step, and each companion ship's truth and field (the commands
+    refuse work above a limit before any of it is allocated)."""
+    m, n = sc.array().n_channels, len(STATE_LABELS)
+    others = 0 if sc.traffic is None else sc.traffic.max_ships - 1
+    return float(runs) * sc.steps * (5 * m + n + others * (2 * m + n)) * 8.0
 
 
 def simulate(scenario, runs: int | None = None, seed: int | None = None, *, random: bool = False) -> Simulation:
@@ -289,19 +343,19 @@ def simulate(scenario, runs: int | None = None, seed: int | None = None, *, rand
     x0 = _passages(sc, runs, random, streams)
     manoeuvres = passage_manoeuvres(sc, x0, random, streams)
 
-    if manoeuvres.any:
-        truth, course, label = manoeuvring_truth(x0, manoeuvres, times)
-        heading = np.arctan2(np.sin(course), np.cos(course))
-    else:
-        truth = np.repeat(x0[:, None, :], sc.steps, axis=1)
-        truth[..., 0:2] = cv_positions(x0[:, 0:2], x0[:, 2:4], times)
-        heading = np.broadcast_to(np.arctan2(x0[:, None, 3], x0[:, None, 2]), (runs, sc.steps)).copy()
-        label = np.zeros((runs, sc.steps), dtype=np.int8)
+    truth, heading, label = _ship_truth(x0, manoeuvres, times)
     speed = np.hypot(truth[..., 2], truth[..., 3])
     sources = truth[..., [0, 1, 4]]
     moments = truth[..., 5:8]
     dipoles = keel_dipole(truth[..., 2:4], truth[..., 8])
     clean = array.measure(sources, moments, dipoles)
+    companions = count = None
+    heard = np.broadcast_to(sources[..., None, :], sources.shape[:-1] + (array.group("accelerometer").size, 3))
+    if sc.traffic is not None and sc.traffic.max_ships > 1:
+        tstreams = {name: np.random.default_rng(s)
+                    for name, s in zip(_TRAFFIC_STREAMS, seeds[_STREAMS.index("traffic")].spawn(len(_TRAFFIC_STREAMS)))}
+        companions, count = _companions(sc, x0, random, tstreams, times)
+        clean, heard = _superpose(array, truth, clean, companions, count)
 
     m = array.n_channels
     std = sc.channel_std
@@ -315,7 +369,7 @@ def simulate(scenario, runs: int | None = None, seed: int | None = None, *, rand
     axial = array.axial
     if axial.any():
         if sc.seismic.mode == "chain":
-            meas[..., axial] = _seismic_chain(sc, array, sources, streams)
+            meas[..., axial] = _seismic_chain(sc, array, heard, streams)
         elif sc.seismic.bias_deg:
             meas[..., axial] += np.deg2rad(sc.seismic.bias_deg)
         meas[..., axial] = wrap_axial(meas[..., axial])
@@ -326,7 +380,89 @@ def simulate(scenario, runs: int | None = None, seed: int | None = None, *, rand
 
     mask = dropout_mask(streams["dropout"], shape, sc.noise.dropout)
     meas = np.where(mask, meas, np.nan)
-    return Simulation(sc, array, times, truth, clean, meas, mask, heading, speed, label, manoeuvres)
+    return Simulation(sc, array, times, truth, clean, meas, mask, heading, speed, label, manoeuvres, companions,
+                      count)
+
+
+def _ship_truth(x0, manoeuvres: Manoeuvres, times):
+    """True states (runs, K, 9), heading and manoeuvre labels (runs, K) of passages starting at ``x0`` (runs,
+    9): straight, or manoeuvring by the schedule."""
+    runs, steps = x0.shape[0], np.shape(times)[-1]
+    if manoeuvres.any:
+        truth, course, label = manoeuvring_truth(x0, manoeuvres, times)
+        heading = np.arctan2(np.sin(course), np.cos(course))
+    else:
+        truth = np.repeat(x0[:, None, :], steps, axis=1)
+        truth[..., 0:2] = cv_positions(x0[:, 0:2], x0[:, 2:4], times)
+        heading = np.broadcast_to(np.arctan2(x0[:, None, 3], x0[:, None, 2]), (runs, steps)).copy()
+        label = np.zeros((runs, steps), dtype=np.int8)
+    return truth, heading, label
+
+
+def _uniform(u, lo_hi):
+    """``lo + (hi - lo) u`` of a ``(lo, hi)`` pair (broadcast against ``u``)."""
+    lo, hi = np.asarray(lo_hi, dtype=float)[..., 0], np.asarray(lo_hi, dtype=float)[..., 1]
+    return lo + (hi - lo) * u
+
+
+def _companions(sc: Scenario, x0, random: bool, tstreams, times):
+    """True states (runs, C, K, 9) of ship 0's companions and the ship count (runs,) of every run, drawn from
+    the traffic's own streams ``tstreams`` (runs axis first: prefix-stable)."""
+    cfg = sc.traffic
+    runs, C = x0.shape[0], cfg.max_ships - 1
+    lo, hi = span(cfg.count)
+    count = np.minimum(lo + np.floor((hi - lo + 1) * tstreams["count"].random(runs)).astype(int), hi)
+    geometry = np.array([GEOMETRIES.index(g) for g in cfg.geometries])
+    u = tstreams["geometry"].random((runs, C, 5))
+    separation = _uniform(u[..., 0], span(cfg.separation))
+    offset = _uniform(u[..., 1], span(cfg.time_offset))
+    angle = np.deg2rad(_uniform(u[..., 2], span(cfg.crossing_angle_deg)))
+    ratio = _uniform(u[..., 3], [cfg.ratio_span(g) for g in cfg.geometries])
+    side = np.where(u[..., 4] < 0.5, 1.0, -1.0)
+    xc = np.repeat(x0[:, None, :], C, axis=1)
+    named = geometry > 0
+    if named.any():
+        centre = np.array([s.position[:2] for s in sc.sensors]).mean(axis=0)
+        xc[..., 0:2], xc[..., 2:4] = companion_tracks(x0[:, None, :], centre, geometry, separation, offset, angle,
+                                                      ratio, side)
+        if random:   # a source of its own, drawn from the prior as ship 0's is
+            pr = sc.prior
+            us = tstreams["source"].random((runs, C, 2))
+            if pr.moment is not None:
+                mag = np.exp(np.log(pr.moment[0]) + np.log(pr.moment[1] / pr.moment[0]) * us[..., 0])
+                d = tstreams["source_dir"].standard_normal((runs, C, 3))
+                xc[..., 5:8] = mag[..., None] * d / np.linalg.norm(d, axis=-1, keepdims=True)
+            if pr.p is not None:
+                xc[..., 8] = np.exp(np.log(pr.p[0]) + np.log(pr.p[1] / pr.p[0]) * us[..., 1])
+    if not named.all():
+        drawn = _passages(sc, runs * C, True, tstreams).reshape(runs, C, -1)
+        drawn[..., 0:2] -= drawn[..., 2:4] * offset[..., None]       # starting its passage time_offset later
+        xc = np.where(named[None, :, None], xc, drawn)
+    flat = xc.reshape(runs * C, -1)
+    mcfg = sc.manoeuvres
+    if random and mcfg is not None and mcfg.random is not None:
+        manoeuvres = _random_manoeuvres(sc, flat, tstreams)
+    else:
+        manoeuvres = Manoeuvres.none(runs * C, 0.0 if mcfg is None else mcfg.body_fixed_share)
+    truth = _ship_truth(flat, manoeuvres, times)[0]
+    return truth.reshape((runs, C) + truth.shape[1:]), count
+
+
+def _superpose(array: SensorArray, truth, clean, companions, count):
+    """The readings of every sailing ship together (:func:`~shipsense.physics.traffic.superposed_readings`),
+    (runs, K, m), and the source each accelerometer hears, the nearest sailing ship's (runs, K, S_acc, 3)."""
+    ships = np.concatenate([truth[:, None], companions], axis=1)
+    src = ships[..., [0, 1, 4]]
+    readings = np.concatenate([clean[:, None], array.measure(
+        src[:, 1:], ships[:, 1:, :, 5:8], keel_dipole(ships[:, 1:, :, 2:4], ships[:, 1:, :, 8]))], axis=1)
+    present = np.arange(ships.shape[1])[None, :] < count[:, None]
+    acc = array.group("accelerometer")
+    dist = np.linalg.norm(src[..., None, :] - array.positions[acc], axis=-1)        # (runs, S, K, S_acc)
+    dist = np.where(present[:, :, None, None], dist, np.inf)
+    nearest = np.argmin(dist, axis=1)                                               # (runs, K, S_acc)
+    heard = np.take_along_axis(src[:, :, :, None, :], nearest[:, None, :, :, None], axis=1)[:, 0]
+    channel_dist = dist[..., np.searchsorted(acc, array.channel_sensor[array.axial])]
+    return superposed_readings(readings, present, array.axial, channel_dist), heard
 
 
 RAW_CHUNK_BYTES = 4 * 2**20
@@ -378,13 +514,14 @@ def _envelope_chain(sc: Scenario, array: SensorArray, x0, manoeuvres: Manoeuvres
     return np.concatenate(cols), np.concatenate(envelopes)
 
 
-def _seismic_chain(sc: Scenario, array: SensorArray, sources, streams):
-    """Eigen-bearings from simulated triaxial windows, (runs, steps, S_acc)."""
+def _seismic_chain(sc: Scenario, array: SensorArray, heard, streams):
+    """Eigen-bearings from simulated triaxial windows, (runs, steps, S_acc), of the source each accelerometer
+    hears, ``heard`` (runs, steps, S_acc, 3)."""
     cfg = sc.seismic
     idx = array.group("accelerometer")
     n = max(int(round(cfg.sample_rate_hz * sc.period)), 3)
     L = simulate_vibration(
-        streams["seismic"], array.positions[idx], sources[..., None, :], n, amplitude=cfg.amplitude,
+        streams["seismic"], array.positions[idx], heard, n, amplitude=cfg.amplitude,
         range_ref=cfg.range_ref, range_exponent=cfg.range_exponent, noise_std=cfg.sensor_noise,
         multipath_gain=cfg.multipath_gain, multipath_bias_deg=cfg.multipath_bias_deg, noise_dof=cfg.noise_dof,
         tail_rng=streams["seismic_tail"])

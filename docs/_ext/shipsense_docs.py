@@ -74,6 +74,8 @@ UNITS = {
     ("RandomManoeuvreConfig", "turn_share"): "- (fraction)",
     ("MotionConfig", "model"): "-", ("MotionConfig", "hull_share"): "- (fraction)",
     ("MotionConfig", "manoeuvre_prior"): "- (probability)", ("MotionConfig", "threshold"): "- (probability)",
+    ("TrafficConfig", "count"): "ships", ("TrafficConfig", "geometry"): "-",
+    ("TrafficConfig", "speed_ratio"): "- (ratio)",
 }
 
 SUFFIXES = {"_deg": "degrees", "_hz": "Hz", "_s": "s", "_m": "m"}
@@ -85,7 +87,7 @@ TOML_TABLE = {"Scenario": "top level", "SensorConfig": "[[sensors]]", "MediumCon
               "ProcessNoiseConfig": "[tracker.process_noise]", "BankConfig": "[tracker.bank]",
               "ManoeuvreConfig": "[manoeuvres]", "TurnConfig": "[[manoeuvres.turns]]",
               "SpeedChangeConfig": "[[manoeuvres.speed_changes]]", "RandomManoeuvreConfig": "[manoeuvres.random]",
-              "MotionConfig": "[tracker.motion]"}
+              "MotionConfig": "[tracker.motion]", "TrafficConfig": "[traffic]"}
 
 
 def _strip_annotated(tp):

@@ -60,6 +60,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="write measurements to FILE.npz, or as a recording: a tidy FILE.csv, FILE.nc (NetCDF/HDF5) or "
                         "FILE.mseed (miniSEED, one run)")
     m.add_argument("--plot", default=None, help="write a picture of the array, passages and traces to FILE.png")
+    m.add_argument("--truth", default=None, metavar="FILE.csv",
+                   help="write the true states to FILE.csv: run, ship, step, time and the state (SI), one row per "
+                        "run, ship and sample (ship 0: the scenario's passage; more with a [traffic] table)")
     m.set_defaults(func=cmd_simulate)
 
     t = sub.add_parser("track", parents=[limits], help="track a simulated passage, or a recorded one (--data)")

@@ -43,18 +43,23 @@ def cmd_simulate(args) -> int:
                            "or .nc for several runs)")
     if args.plot is not None and Path(args.plot).suffix != ".png":
         raise BadInput(f"--plot must end in .png, got {args.plot!r}")
+    if args.truth is not None and Path(args.truth).suffix.lower() != ".csv":
+        raise BadInput(f"--truth must end in .csv, got {args.truth!r}")
+    if args.truth is not None and args.out is not None and Path(args.truth).resolve() == Path(args.out).resolve():
+        raise BadInput(f"--truth and --out name the same file {args.truth!r}")
     if args.random and sc.prior is None:
         raise BadInput(f"scenario {sc.name!r} has no [prior] section; --random needs one")
     within_budget(args, budget.simulation(sc, args.runs or sc.runs))
-    for flag, path in (("--out", args.out), ("--plot", args.plot)):
+    for flag, path in (("--out", args.out), ("--plot", args.plot), ("--truth", args.truth)):
         if path is not None:
             writable(flag, path)
-    bar = progress_bar(3, f"simulate {sc.name}")
+    bar = progress_bar(4, f"simulate {sc.name}")
     sim = simulate(sc, runs=args.runs, seed=args.seed, random=args.random)
     bar.update(1)
-    # both files or neither: each is written to a temporary name and renamed once both are written
+    # every file or none: each is written to a temporary name and renamed once all are written
     with (atomic_path(args.out) if args.out else nullcontext()) as out_tmp, \
-            (atomic_path(args.plot) if args.plot else nullcontext()) as plot_tmp:
+            (atomic_path(args.plot) if args.plot else nullcontext()) as plot_tmp, \
+            (atomic_path(args.truth) if args.truth else nullcontext()) as truth_tmp:
         if args.out:
             bar.set_description(f"write {args.out}")
             if Path(args.out).suffix.lower() == ".npz":
@@ -70,9 +75,13 @@ def cmd_simulate(args) -> int:
             bar.set_description(f"plot {args.plot}")
             plot_simulation(sim, plot_tmp)
         bar.update(1)
+        if args.truth:
+            bar.set_description(f"write {args.truth}")
+            sim.save_truth_csv(truth_tmp)
+        bar.update(1)
     bar.close()
     _print_summary(sim)
-    for what, path in (("measurements", args.out), ("plot", args.plot)):
+    for what, path in (("measurements", args.out), ("plot", args.plot), ("truth", args.truth)):
         if path:
             print(f"wrote {what}: {path}")
     return EXIT_OK
@@ -84,6 +93,9 @@ def _print_summary(sim):
     pos = sim.positions[0]
     print(f"scenario {sim.scenario.name}: {sim.runs} run(s) x {sim.times.size} steps of {sim.scenario.period:g} s, "
           f"{arr.n_channels} channels from {len(arr.ids)} sensors")
+    if sim.ship_count is not None:
+        print(f"  ships in run 0: {int(sim.ship_count[0])} (closest approach below: ship 0's; peaks: all ships' "
+              "readings together)")
     std = sim.scenario.channel_std
     print(f"  {'sensor':<10} {'type':<13} {'kind':<9} {'closest [m]':>11} {'peak':>14} {'peak SNR':>9}")
     display = {"T": (1e9, "nT"), "V/m": (1e6, "uV/m"), "rad": (180 / np.pi, "deg")}

@@ -9,8 +9,9 @@ Units are SI throughout (m, s, T, V/m, A·m², A·m, S/m, rad) except where a fi
 ``_hz``.
 
 :mod:`~shipsense.config.fields` (the value types and their messages), :mod:`~shipsense.config.tracker` (the
-``[tracker]`` table), :mod:`~shipsense.config.scenario` (the scenario and its TOML form) and
-:mod:`~shipsense.config.load` (shipped names and files).
+``[tracker]`` table), :mod:`~shipsense.config.traffic` (the ``[traffic]`` table: several ships),
+:mod:`~shipsense.config.scenario` (the scenario and its TOML form) and :mod:`~shipsense.config.load` (shipped
+names and files).
 """
 
 from shipsense.config.fields import ScenarioError, format_error
@@ -39,9 +40,10 @@ from shipsense.config.tracker import (
     TrackerConfig,
     TrackerOptions,
 )
+from shipsense.config.traffic import MAX_SHIPS, TrafficConfig
 
-__all__ = ["FILTERS", "MIN_SENSOR_SPACING", "MIN_SOURCE_DISTANCE", "BankConfig", "EarthConfig", "EnvelopeChainConfig",
-           "ManoeuvreConfig", "MediumConfig", "MotionConfig", "NoiseConfig", "PassageConfig", "PriorConfig",
-           "ProcessNoiseConfig", "RandomManoeuvreConfig", "Scenario", "ScenarioError", "SeismicConfig", "SensorConfig",
-           "SpeedChangeConfig", "TrackerConfig", "TrackerOptions", "TurnConfig", "format_error", "load_scenario",
-           "shipped_scenarios", "to_toml", "validate_scenario"]
+__all__ = ["FILTERS", "MAX_SHIPS", "MIN_SENSOR_SPACING", "MIN_SOURCE_DISTANCE", "BankConfig", "EarthConfig",
+           "EnvelopeChainConfig", "ManoeuvreConfig", "MediumConfig", "MotionConfig", "NoiseConfig", "PassageConfig",
+           "PriorConfig", "ProcessNoiseConfig", "RandomManoeuvreConfig", "Scenario", "ScenarioError", "SeismicConfig",
+           "SensorConfig", "SpeedChangeConfig", "TrackerConfig", "TrackerOptions", "TrafficConfig", "TurnConfig",
+           "format_error", "load_scenario", "shipped_scenarios", "to_toml", "validate_scenario"]

@@ -106,8 +106,8 @@ def format_error(err: ValidationError, source: str) -> str:
     for e in err.errors():
         loc = ""
         for part in e["loc"]:
-            if isinstance(part, str) and ("[" in part or part in ("list", "tuple")):
-                continue   # a union branch's name, not a field
+            if isinstance(part, str) and ("[" in part or "-" in part or part in ("list", "tuple")):
+                continue   # a union branch's name (constrained-int, function-after[...]), not a field
             loc += f"[{part}]" if isinstance(part, int) else (f".{part}" if loc else str(part))
         msg = e["msg"]
         msg = msg[len("Value error, "):] if msg.startswith("Value error, ") else msg

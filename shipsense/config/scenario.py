@@ -1,5 +1,6 @@
-"""A scenario: the array of sensors, the medium, the nominal passage and its prior, the noise, the signal chains
-and the tracker (the ``[tracker]`` table, :mod:`shipsense.config.tracker`), and its TOML form."""
+"""A scenario: the array of sensors, the medium, the nominal passage and its prior, the traffic (the
+``[traffic]`` table, :mod:`shipsense.config.traffic`), the noise, the signal chains and the tracker (the
+``[tracker]`` table, :mod:`shipsense.config.tracker`), and its TOML form."""
 
 from __future__ import annotations
 
@@ -34,6 +35,7 @@ from shipsense.config.fields import (
 )
 from shipsense.config.manoeuvres import ManoeuvreConfig, check_manoeuvres
 from shipsense.config.tracker import TrackerConfig
+from shipsense.config.traffic import TrafficConfig, check_traffic
 from shipsense.physics.array import CHANNELS, KINDS, SensorArray
 from shipsense.physics.electric import CONDUCTIVITY_RATIO, Medium
 from shipsense.physics.magnetic import earth_field_direction
@@ -208,7 +210,7 @@ class SeismicConfig(ConfigModel):
 
 
 class Scenario(ConfigModel):
-    """A complete scenario: array, medium, passage, noise, chains, tracker."""
+    """A complete scenario: array, medium, passage, traffic, noise, chains, tracker."""
 
     name: str = "scenario"
     description: str = ""
@@ -222,6 +224,7 @@ class Scenario(ConfigModel):
     passage: PassageConfig
     prior: PriorConfig | None = None
     manoeuvres: ManoeuvreConfig | None = None
+    traffic: TrafficConfig | None = None
     noise: NoiseConfig = NoiseConfig()
     envelope_chain: EnvelopeChainConfig = EnvelopeChainConfig()
     seismic: SeismicConfig = SeismicConfig()
@@ -286,6 +289,8 @@ class Scenario(ConfigModel):
                 raise ValueError("prior.p: electrode sensors need a dipole moment range [min, max]")
         if self.manoeuvres is not None:
             check_manoeuvres(self, MIN_SOURCE_DISTANCE)
+        if self.traffic is not None:
+            check_traffic(self, MIN_SOURCE_DISTANCE)
         if self.tracker is not None:
             pn = self.tracker.process_noise
             n = self.n_params

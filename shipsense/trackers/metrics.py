@@ -1,11 +1,16 @@
 """Tracking metrics: position error, RMSE, convergence (and the rule that judges it over the passages whose data
-allow it), NEES and 95 % ellipse coverage, and the position bound the errors are compared with.
+allow it), NEES and 95 % ellipse coverage, and the position bound the errors are compared with; for several ships
+at once, GOSPA (:func:`gospa`), the share of samples with the right number of ships (:func:`cardinality_rate`),
+and each ship's RMSE and coverage by its labelled track (:func:`label_assignment`, :func:`ship_rmse`,
+:func:`ship_coverage`).
 
 Conventions: estimates and truth are (runs, steps, >= 2) with (x, y) first, in metres;
 "error" is the horizontal position error.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -210,3 +215,195 @@ def position_crlb_trace(bounds):
 def selection_accuracy(selected, hypothesis_trmse):
     """Fraction of runs whose selected hypothesis (R,) has the lowest TRMSE (R, H)."""
     return float(np.mean(np.asarray(selected) == np.argmin(hypothesis_trmse, axis=-1)))
+
+
+# -- several ships ------------------------------------------------------------------------------------------------
+
+GOSPA_CUTOFF_M = 20.0
+"""Default cut-off ``c`` of :func:`gospa`, m: a position error beyond it counts as a missed and a false ship."""
+
+
+@dataclass(frozen=True)
+class Gospa:
+    """The GOSPA metric of estimated against true ship sets (:func:`gospa`), each array of the batch shape.
+
+    Attributes
+    ----------
+    total : ndarray
+        :math:`d_p^{(c, 2)}`, m.
+    localisation, missed, false : ndarray
+        Its parts, m²: the summed squared position errors of the assigned pairs, and :math:`c^2 / 2` for each
+        missed or false ship; they add up to ``total**2``.
+    assignment : ndarray of int, shape (..., J)
+        The estimate assigned to each true ship (-1: missed).
+    """
+
+    total: np.ndarray
+    localisation: np.ndarray
+    missed: np.ndarray
+    false: np.ndarray
+    assignment: np.ndarray
+
+
+def present(states):
+    """Which rows of ``states`` (..., n, >= 2; x, y first) hold a ship: finite x and y; shape (..., n)."""
+    s = np.asarray(states, dtype=float)
+    return np.isfinite(s[..., 0]) & np.isfinite(s[..., 1])
+
+
+def gospa(estimates, truth, c=GOSPA_CUTOFF_M):
+    r"""Generalised optimal sub-pattern assignment metric (GOSPA) of estimated against true ships, at every
+    sample of a batch, with :math:`p = 2` and :math:`\alpha = 2`.
+
+    For the estimated positions :math:`X = \{x_1 .. x_{|X|}\}` and the true ones :math:`Y`,
+
+    .. math::  d_p^{(c, 2)}(X, Y) = \Big[\min_{\gamma} \sum_{(i, j) \in \gamma} d(x_i, y_j)^2
+               + \frac{c^2}{2} \big(|X| + |Y| - 2 |\gamma|\big)\Big]^{1/2},
+
+    the minimum over assignments :math:`\gamma` of estimates to ships with :math:`d(x_i, y_j) < c`
+    (horizontal distance, m): the localisation error of the assigned pairs plus :math:`c^2/2` for every missed
+    ship (true, unassigned) and every false one (estimated, unassigned), so an error in the number of ships
+    counts.  The optimal assignment is found by ``scipy.optimize.linear_sum_assignment`` on the square
+    cost matrix of :math:`\min(d, c)^2` between ships and estimates padded with :math:`c^2/2` (a ship or an
+    estimate left over) and 0; a pair at :math:`d \ge c` is a missed and a false ship.
+
+    Parameters
+    ----------
+    estimates : array_like, shape (..., I, >= 2)
+        Estimated ships, x and y first (m); a row with a NaN x or y is no ship (fewer estimates at a sample).
+    truth : array_like, shape (..., J, >= 2)
+        True ships, likewise (:attr:`shipsense.simulator.Simulation.ships` with the ships axis last but one).
+    c : float
+        Cut-off, m (default :data:`GOSPA_CUTOFF_M`, 20 m).
+
+    Returns
+    -------
+    Gospa
+        The metric and its parts per sample of the batch shape ``...``, and the assignment.
+
+    References
+    ----------
+    A. S. Rahmathullah, Á. F. García-Fernández and L. Svensson, "Generalized optimal sub-pattern assignment
+    metric", 20th International Conference on Information Fusion (FUSION), 2017.
+    """
+    from scipy.optimize import linear_sum_assignment
+
+    est, tru = np.asarray(estimates, dtype=float), np.asarray(truth, dtype=float)
+    batch = np.broadcast_shapes(est.shape[:-2], tru.shape[:-2])
+    I, J = est.shape[-2], tru.shape[-2]
+    est = np.broadcast_to(est[..., :2], batch + (I, 2)).reshape(-1, I, 2)
+    tru = np.broadcast_to(tru[..., :2], batch + (J, 2)).reshape(-1, J, 2)
+    has_e, has_t = present(est), present(tru)
+    d2 = np.sum((tru[:, :, None, :] - est[:, None, :, :]) ** 2, axis=-1)               # (B, J, I)
+    near = has_t[:, :, None] & has_e[:, None, :] & (d2 < c * c)
+    n = max(I, J)
+    half = 0.5 * c * c
+    # square costs: ships (rows) against estimates (columns), a real pair min(d, c)^2, a real row or column
+    # against padding c^2/2, padding against padding 0
+    cost = np.zeros((d2.shape[0], n, n))
+    row = np.zeros((d2.shape[0], n), dtype=bool)
+    col = np.zeros((d2.shape[0], n), dtype=bool)
+    row[:, :J], col[:, :I] = has_t, has_e
+    cost[:, :J, :I] = np.where(near, d2, c * c)
+    cost = np.where(row[:, :, None] & col[:, None, :], cost, half * (row[:, :, None] ^ col[:, None, :]))
+    assignment = np.full((d2.shape[0], J), -1)
+    both = np.flatnonzero(has_t.any(axis=1) & has_e.any(axis=1))
+    for b in both:                                        # the few ships per sample: one small problem each
+        rows, cols = linear_sum_assignment(cost[b])
+        keep = (rows < J) & (cols < I)
+        assignment[b, rows[keep]] = cols[keep]
+    gathered = np.take_along_axis(near, np.maximum(assignment, 0)[:, :, None], axis=2)[..., 0] & (assignment >= 0)
+    assignment = np.where(gathered, assignment, -1)
+    loc = np.sum(np.where(gathered, np.take_along_axis(d2, np.maximum(assignment, 0)[:, :, None], axis=2)[..., 0],
+                          0.0), axis=1)
+    pairs = gathered.sum(axis=1)
+    missed = half * (has_t.sum(axis=1) - pairs)
+    false = half * (has_e.sum(axis=1) - pairs)
+    return Gospa(np.sqrt(loc + missed + false).reshape(batch), loc.reshape(batch), missed.reshape(batch),
+                 false.reshape(batch), assignment.reshape(batch + (J,)))
+
+
+def cardinality_rate(estimates, truth, where=None):
+    """The share (0 to 1) of the samples ``where`` (a mask of the batch shape; None: all) at which the number
+    of estimated ships (rows of ``estimates`` (..., I, >= 2) with finite x, y: :func:`present`) equals the
+    number of true ones (``truth`` (..., J, >= 2)); NaN if ``where`` selects none."""
+    right = present(estimates).sum(axis=-1) == present(truth).sum(axis=-1)
+    where = np.ones_like(right) if where is None else np.broadcast_to(where, right.shape)
+    return float(np.sum(right & where) / np.sum(where)) if np.any(where) else float("nan")
+
+
+def label_assignment(estimates, truth, c=GOSPA_CUTOFF_M):
+    r"""Which labelled track follows which ship over a passage: the track :math:`i` assigned to each ship
+    :math:`j` by the optimal assignment (``scipy.optimize.linear_sum_assignment``) of the costs
+
+    .. math::  C_{ji} = \sum_k \min(d_{jik}, c)^2 + \frac{c^2}{2}\, n_{jik},
+
+    summed over the samples :math:`k` at which both exist (the truncated squared distance, m²) and those at
+    which only one does (:math:`n_{jik}`: a missed or false ship there).
+
+    Parameters
+    ----------
+    estimates : array_like, shape (..., K, I, >= 2)
+        Track ``i``'s estimate at sample ``k`` (x, y first, m; NaN where the track does not exist).
+    truth : array_like, shape (..., K, J, >= 2)
+        Ship ``j``'s true state (NaN where it does not sail).
+    c : float
+        Cut-off, m.
+
+    Returns
+    -------
+    ndarray of int, shape (..., J)
+        The track of each ship (-1: more ships than tracks).
+    """
+    from scipy.optimize import linear_sum_assignment
+
+    est, tru = np.asarray(estimates, dtype=float), np.asarray(truth, dtype=float)
+    batch = np.broadcast_shapes(est.shape[:-3], tru.shape[:-3])
+    K, I, J = tru.shape[-3], est.shape[-2], tru.shape[-2]
+    est = np.broadcast_to(est[..., :2], batch + (K, I, 2)).reshape(-1, K, I, 2)
+    tru = np.broadcast_to(tru[..., :2], batch + (K, J, 2)).reshape(-1, K, J, 2)
+    has_e, has_t = present(est)[:, :, None, :], present(tru)[:, :, :, None]         # (B, K, 1, I), (B, K, J, 1)
+    d2 = np.sum((tru[:, :, :, None, :] - est[:, :, None, :, :]) ** 2, axis=-1)       # (B, K, J, I)
+    cost = np.where(has_t & has_e, np.minimum(np.nan_to_num(d2, nan=c * c), c * c), 0.5 * c * c * (has_t ^ has_e))
+    cost = cost.sum(axis=1)
+    out = np.full((cost.shape[0], J), -1)
+    for b in range(cost.shape[0]):
+        rows, cols = linear_sum_assignment(cost[b])
+        out[b, rows] = cols
+    return out.reshape(batch + (J,))
+
+
+def _assigned(values, assignment):
+    """The assigned track's rows of ``values`` (..., K, I, ...) for each ship: (..., K, J, ...), NaN where a
+    ship has no track (``assignment`` (..., J), -1)."""
+    v = np.asarray(values, dtype=float)
+    a = np.asarray(assignment)
+    extra = v.ndim - a.ndim - 1                               # trailing axes after I
+    idx = np.maximum(a, 0)[..., None, :].reshape(a.shape[:-1] + (1, a.shape[-1]) + (1,) * extra)
+    out = np.take_along_axis(v, idx, axis=a.ndim)
+    return np.where((a >= 0).reshape(a.shape[:-1] + (1, a.shape[-1]) + (1,) * extra), out, np.nan)
+
+
+def ship_rmse(estimates, truth, assignment, where=None):
+    """Each ship's root mean square horizontal position error (m) against its track (``assignment`` (..., J),
+    :func:`label_assignment`) over the samples at which both exist (and ``where``, a mask (..., K, J) or
+    broadcastable; None: all); ``estimates`` (..., K, I, >= 2), ``truth`` (..., K, J, >= 2).  Shape (..., J);
+    NaN for a ship with no such sample.  Compare it with the square root of the position trace of the
+    ship's block of the joint-state PCRLB (:func:`position_crlb_trace`)."""
+    est = _assigned(estimates, assignment)
+    err2 = position_error(est, truth) ** 2
+    ok = np.isfinite(err2) if where is None else np.isfinite(err2) & np.asarray(where, dtype=bool)
+    with np.errstate(invalid="ignore"):
+        return np.sqrt(np.sum(np.where(ok, err2, 0.0), axis=-2) / np.sum(ok, axis=-2))
+
+
+def ship_coverage(estimates, covariances, truth, assignment, where=None, limit=CHI2_2DOF_95):
+    """Each ship's 95 % ellipse coverage (0 to 1; :func:`coverage` of :func:`position_nees`) by its track
+    (``assignment`` (..., J)) over the samples at which the ship sails (and ``where``, a mask (..., K, J);
+    None: all); a sample at which its track does not exist counts as not covered.  ``estimates`` (..., K, I,
+    >= 2), ``covariances`` (..., K, I, >= 2, >= 2) (m², x, y first), ``truth`` (..., K, J, >= 2).  Shape (...,
+    J); NaN for a ship with no such sample."""
+    q = position_nees(_assigned(estimates, assignment), _assigned(covariances, assignment), truth)
+    sails = present(truth) if where is None else present(truth) & np.asarray(where, dtype=bool)
+    with np.errstate(invalid="ignore"):
+        return coverage(q, sails, axis=-2)
