@@ -270,8 +270,8 @@ class Rollout:
             _, _, _, info = twin.step(actions)
             actions = twin.greedy_actions()
         value = twin.returns.copy()
-        if self.tail == "hold":             # the last error term held to the passage's end
-            value += (core.K - 1 - k - steps) * info["error_term"]
+        if self.tail == "hold":             # the last error term held to the passage's end, as it will count
+            value += core.error_weights[k + steps + 1:].sum() * -np.log1p(info["error"] / core.error_scale)
         return value.reshape(A, F).mean(axis=1)
 
 
@@ -293,48 +293,84 @@ def sensor_information(core, e):
     return out
 
 
-def linearised_rewards(info0, J, Ainv, subsets, schedules, energy_cost, error_scale):
+class ScheduleCosts:
+    """What a schedule's linearised return counts besides the error (a Passage core's reward): the error
+    term's weight per step ``weights`` (T,) (default 1), ``wake_cost`` per sensor read that was not read at the
+    step before (``last``, (S,) bool, the sensors read before the first step), and ``budget``, the reads left
+    (a schedule that reads more is infeasible: return ``-inf``)."""
+
+    def __init__(self, T, S, weights=None, wake_cost=0.0, last=None, budget=np.inf):
+        self.weights = np.ones(T) if weights is None else np.asarray(weights, dtype=float)
+        self.wake_cost = float(wake_cost)
+        self.last = np.ones(S, dtype=bool) if last is None else np.asarray(last, dtype=bool)
+        self.budget = float(budget)
+
+    @classmethod
+    def of(cls, core, e):
+        """Environment ``e``'s costs from its next step to its passage's end (a Passage core)."""
+        k = int(core.k[e])
+        return cls(core.K - 1 - k, core.S, core.error_weights[k + 1:], core.wake_cost, core.last_read[e],
+                   core.budget - core.reads[e])
+
+
+def linearised_rewards(info0, J, Ainv, subsets, schedules, energy_cost, error_scale, costs=None):
     """The linearised return (the module docstring) of each of ``schedules`` (B, T) (action indices), from the
     initial information ``info0`` (n, n), sensors' information ``J`` (T, S, n, n), ``Ainv`` the transition's
-    inverse.  Returns (B,)."""
+    inverse, ``costs`` a :class:`ScheduleCosts` (default: none but ``energy_cost`` per read).  Returns (B,)."""
     schedules = np.asarray(schedules)
     B, T = schedules.shape
+    costs = costs or ScheduleCosts(T, subsets.shape[1])
     Y = np.broadcast_to(info0, (B,) + info0.shape).copy()
+    last = np.broadcast_to(costs.last, (B, subsets.shape[1]))
+    used = np.zeros(B)
     total = np.zeros(B)
     for t in range(T):
-        Y, r = _advance(Y, J[t], Ainv, subsets, schedules[:, t], energy_cost, error_scale)
+        Y, r, last, used = _advance(Y, J[t], Ainv, subsets, schedules[:, t], energy_cost, error_scale, costs, t,
+                                    last, used)
         total += r
     return total
 
 
-def _advance(Y, Jt, Ainv, subsets, actions, energy_cost, error_scale):
-    """One step of the information recursion for informations ``Y`` (B, n, n) under ``actions`` (B,): the new
-    informations and the step's linearised rewards."""
-    Y = Ainv.T @ Y @ Ainv + np.einsum("bs,sij->bij", subsets[actions].astype(float), Jt)
+def _advance(Y, Jt, Ainv, subsets, actions, energy_cost, error_scale, costs, t, last, used):
+    """One step ``t`` of the information recursion for informations ``Y`` (B, n, n) under ``actions`` (B,), the
+    sensors ``last`` (B, S) read at the step before, ``used`` (B,) reads so far: the new informations, the
+    step's linearised rewards (``-inf`` over the budget), the reads and the reads so far."""
+    read = subsets[actions]
+    Y = Ainv.T @ Y @ Ainv + np.einsum("bs,sij->bij", read.astype(float), Jt)
     Y = 0.5 * (Y + np.swapaxes(Y, 1, 2))
     P = np.linalg.inv(Y)
     err = np.sqrt(np.clip(P[:, 0, 0] + P[:, 1, 1], 0.0, None))
-    return Y, -np.log1p(err / error_scale) - energy_cost * subsets[actions].sum(axis=1)
+    count = read.sum(axis=1)
+    r = -costs.weights[t] * np.log1p(err / error_scale) - energy_cost * count
+    if costs.wake_cost:
+        r = r - costs.wake_cost * (read & ~last).sum(axis=1)
+    used = used + count
+    if np.isfinite(costs.budget):
+        r = np.where(used > costs.budget, -np.inf, r)
+    return Y, r, read, used
 
 
-def plan_schedule(info0, J, Ainv, subsets, energy_cost, error_scale, beam=256, sweeps=3):
+def plan_schedule(info0, J, Ainv, subsets, energy_cost, error_scale, beam=256, sweeps=3, costs=None):
     """The schedule (T,) (action indices) of the largest linearised return, and that return: beam search (the
     ``beam`` partial schedules of the largest return so far kept at each step; every schedule while
     ``A^t <= beam``, so exact for short passages), then up to ``sweeps`` sweeps of coordinate ascent (each
     step's action changed alone, kept where the whole return grows).  The returned value is never below the
-    beam's best nor, with ``A^T <= beam``, below any schedule's."""
+    beam's best nor, with ``A^T <= beam``, below any schedule's.  ``costs``: :func:`linearised_rewards`'."""
     A, T = len(subsets), J.shape[0]
     n = info0.shape[0]
+    costs = costs or ScheduleCosts(T, subsets.shape[1])
     Y = info0[None].copy()
+    last, used = costs.last[None].copy(), np.zeros(1)
     score = np.zeros(1)
     paths = np.zeros((1, 0), dtype=np.int64)
     for t in range(T):
         b = Y.shape[0]
         acts = np.tile(np.arange(A), b)
-        Yn, r = _advance(np.repeat(Y, A, axis=0), J[t], Ainv, subsets, acts, energy_cost, error_scale)
+        Yn, r, ln, un = _advance(np.repeat(Y, A, axis=0), J[t], Ainv, subsets, acts, energy_cost, error_scale,
+                                 costs, t, np.repeat(last, A, axis=0), np.repeat(used, A))
         s = np.repeat(score, A) + r
         keep = np.argsort(-s, kind="stable")[:beam]
-        Y, score = Yn[keep], s[keep]
+        Y, score, last, used = Yn[keep], s[keep], ln[keep], un[keep]
         paths = np.concatenate([np.repeat(paths, A, axis=0)[keep], acts[keep, None]], axis=1)
     best = paths[0].copy()
     value = float(score[0])
@@ -343,7 +379,7 @@ def plan_schedule(info0, J, Ainv, subsets, energy_cost, error_scale, beam=256, s
         for t in range(T):
             trial = np.repeat(best[None], A, axis=0)
             trial[:, t] = np.arange(A)
-            v = linearised_rewards(info0.reshape(n, n), J, Ainv, subsets, trial, energy_cost, error_scale)
+            v = linearised_rewards(info0.reshape(n, n), J, Ainv, subsets, trial, energy_cost, error_scale, costs)
             a = int(np.argmax(v))
             if v[a] > value + 1e-12:
                 best, value, improved = trial[a], float(v[a]), True
@@ -375,7 +411,8 @@ class Hindsight:
         if k == start or self.schedule is None:
             info0, J, Ainv = self.problem(0)
             self.schedule, self.value = plan_schedule(info0, J, Ainv, core.subsets, core.energy_cost,
-                                                      core.error_scale, beam=self.beam)
+                                                      core.error_scale, beam=self.beam,
+                                                      costs=ScheduleCosts.of(core, 0))
         return int(self.schedule[k - start])
 
     def describe(self):
@@ -383,5 +420,5 @@ class Hindsight:
 
 
 __all__ = ["FIT_EPISODES", "FIT_SEED", "PLANNERS", "THRESHOLDS", "GreedyThreshold", "Hindsight", "Rollout",
-           "belief_futures", "episode_seed", "fit_threshold", "linearised_rewards", "offers", "plan_schedule",
-           "planner", "run_batch", "sensor_information", "threshold_actions"]
+           "ScheduleCosts", "belief_futures", "episode_seed", "fit_threshold", "linearised_rewards", "offers",
+           "plan_schedule", "planner", "run_batch", "sensor_information", "threshold_actions"]
