@@ -2,8 +2,8 @@ r"""Planning baselines of the Passage environments: ``greedy-threshold``, ``roll
 reference (``shipsense evaluate --policy NAME``).
 
 They run on any environment whose core is a :class:`~shipsense.envs.passage_core.PassageV1Core` (the single
-environments of ``shipsense/Passage-v1`` and its variants), and need nothing of it but its spaces, its
-observer and its reward: a later Passage version with the same spaces takes them as they are.
+environments of ``shipsense/Passage-v1``, ``shipsense/Passage-v2`` and their variants), and need nothing of it
+but its spaces, its observer and its reward's parts (its error weights, wake-up cost and budget).
 
 ``greedy-threshold``
     The greedy baseline's subset (the ``k`` sensors with the largest predicted drop :math:`g` of the
@@ -18,12 +18,15 @@ observer and its reward: a later Passage version with the same spaces takes them
     One step of policy improvement over greedy by Monte Carlo rollouts (Bertsekas' rollout algorithm).  At
     every decision, for each action :math:`a` and each of :math:`F` futures :math:`f`,
 
-    .. math::  Q(a) = \frac{1}{F} \sum_f \Big[\sum_{j=1}^{H} r_j(a, f) + (T - H)\, r^e_H(a, f)\Big],
+    .. math::  Q(a) = \frac{1}{F} \sum_f \Big[\sum_{j=1}^{H} r_j(a, f)
+               - \Big(\sum_{t > k + H} w_t\Big) \ln\big(1 + e_H(a, f) / e_s\big)\Big],
 
     the return of :math:`H` steps that read :math:`a` first and then follow greedy, with the environment's
-    own reward :math:`r = r^e - c\,\text{reads}`, :math:`r^e = -\ln(1 + e / e_s)` (:math:`e` the observer's
-    error against the future's truth), and the last step's error term held for the :math:`T - H` steps left
-    in the passage after the horizon (:data:`TAILS`: a read goes on paying off after it).  A future is drawn
+    own reward :math:`r_t = -w_t \ln(1 + e_t / e_s) - \text{energy}_t` (:math:`e` the observer's error
+    against the future's truth, :math:`w_t` the core's error weights, ``error_weights``: 1 at every step in
+    Passage-v1; the energy the reads' and, in Passage-v2, the wake-ups'), and the last step's error held for
+    the samples left in the passage after the horizon, as they will weigh it (:data:`TAILS`: a read goes on
+    paying off after it; in Passage-v1, :math:`T - H` times the last error term).  A future is drawn
     **from the observer's belief**, never from the environment's passage: the ship's state
     :math:`x_0 \sim \mathcal N(\hat x, P)` from the observer's selected estimate and its
     covariance, carried by the observer's motion model (``x_{j+1} = A x_j``), its samples
@@ -38,8 +41,12 @@ observer and its reward: a later Passage version with the same spaces takes them
     The offline reference no fair policy should pass: at the start of each episode it reads the environment's
     true passage and chooses the whole schedule :math:`a_{1..T}` maximising the **linearised** return
 
-    .. math::  \sum_{t=1}^{T} -\ln\!\Big(1 + \sqrt{\operatorname{tr} P^{pp}_t} / e_s\Big) - c\,|a_t|, \qquad
+    .. math::  \sum_{t=1}^{T} -w_t \ln\!\Big(1 + \sqrt{\operatorname{tr} P^{pp}_t} / e_s\Big) - c\,|a_t|
+               - c_w\,|a_t \setminus a_{t-1}|, \qquad
                P_t^{-1} = A^{-T} P_{t-1}^{-1} A^{-1} + \sum_{s \in a_t} J_{s,t},
+
+    subject to :math:`\sum_t |a_t|` within the reads left (:class:`ScheduleCosts`: the core's error
+    weights :math:`w_t`, wake-up cost :math:`c_w` and budget; none but :math:`c` in Passage-v1),
 
     from the observer's covariance :math:`P_0` at the start of control, with :math:`J_{s,t}` the Fisher
     information of sensor :math:`s`'s samples at :math:`t` (:mod:`shipsense.design.fisher`'s
