@@ -267,7 +267,7 @@ class PassageV1Core(PassagePrefetch):
 
     # -- the reward's parts (a later version's core changes them) --------------------------------------------
     wake_cost = 0.0
-    """Energy of waking a sensor not read at the previous step, on top of :attr:`energy_cost` (none in v1)."""
+    """Energy of waking a sensor not read at the previous step, on top of ``energy_cost`` (none in v1)."""
     budget = np.inf
     """Reads per passage (unlimited in v1)."""
 
