@@ -169,7 +169,7 @@ def passage_spaces(core):
         spaces.Discrete(len(core.subsets))
 
 
-class BaselinePolicy:
+class _Policy:
     """A baseline policy: ``policy(obs) -> action`` (reads the environment's internal state; ``obs`` unused)."""
 
     def __init__(self, core, name, seed, single):
@@ -186,8 +186,7 @@ class BaselinePolicy:
         return f"<{self.name} baseline of a Passage environment>"
 
 
-def check_baseline(name):
-    """Refuse a baseline name not in :data:`BASELINES` (one ``ValueError``)."""
+def _check_baseline(name):
     if name not in BASELINES:
         raise ValueError(f"unknown baseline {name!r}; offered: {', '.join(BASELINES)}")
 
@@ -252,8 +251,8 @@ class PassageV1Env(RebuiltOnUnpickle, ClosesItsFigure, gym.Env):
     def baseline(self, name, seed=None):
         """The baseline policy ``name`` (one of :attr:`BASELINES`): ``policy(obs) -> action``; ``seed`` seeds
         ``random``'s own generator (the environment's is left alone)."""
-        check_baseline(name)
-        return BaselinePolicy(self.core, name, seed, single=True)
+        _check_baseline(name)
+        return _Policy(self.core, name, seed, single=True)
 
     def render(self):
         if self.render_mode == "rgb_array":
@@ -302,10 +301,10 @@ class PassageV1VectorEnv(CoreVectorEnv):
 
     def baseline(self, name, seed=None):
         """The batched baseline policy ``name``: ``policy(obs) -> actions`` (num_envs,)."""
-        check_baseline(name)
-        return BaselinePolicy(self.core, name, seed, single=False)
+        _check_baseline(name)
+        return _Policy(self.core, name, seed, single=False)
 
 
-__all__ = ["BASELINES", "CHI2_2_95", "BaselinePolicy", "PassageV1Core", "PassageV1Env", "PassageV1VectorEnv",
-           "action_of", "check_baseline", "observation_potential", "passage_spaces", "subsets"]
+__all__ = ["BASELINES", "CHI2_2_95", "PassageV1Core", "PassageV1Env", "PassageV1VectorEnv", "action_of",
+           "observation_potential", "passage_spaces", "subsets"]
 

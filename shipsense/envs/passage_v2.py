@@ -106,14 +106,7 @@ import numpy as np
 from shipsense.arguments import number
 from shipsense.envs.core_env import CoreVectorEnv
 from shipsense.envs.passage_core import PassageV1Core
-from shipsense.envs.passage_v1 import (
-    BASELINES,
-    BaselinePolicy,
-    PassageV1Env,
-    check_baseline,
-    observation_potential,
-    passage_spaces,
-)
+from shipsense.envs.passage_v1 import PassageV1Env, PassageV1VectorEnv, passage_spaces
 
 
 class PassageV2Core(PassageV1Core):
@@ -231,31 +224,19 @@ class PassageV2Env(PassageV1Env):
                             render_mode=render_mode)
 
 
-class PassageV2VectorEnv(CoreVectorEnv):
+class PassageV2VectorEnv(PassageV1VectorEnv):
     """Native vector version of ``shipsense/Passage-v2``: one :class:`PassageV2Core` (one batched tracker) for all
     sub-environments, as :class:`~shipsense.envs.passage_v1.PassageV1VectorEnv` (next-step autoreset; sub-environment
     ``i`` reset with an integer ``seed`` behaves exactly like a single :class:`PassageV2Env` reset with
-    ``seed + i``)."""
-
-    BASELINES = BASELINES
-    potential = staticmethod(observation_potential)
-    """The shaping potential of training (:func:`~shipsense.envs.passage_v1.observation_potential`)."""
+    ``seed + i``; the same baselines and shaping potential)."""
 
     def __init__(self, num_envs=1, scenario="S2", overrides=None, k=1, energy_cost=0.01, wake_cost=0.1,
                  budget=20, checkpoints=4, error_scale=1.0, render_mode=None):
         self.check_render_mode(render_mode)
         core = PassageV2Core(num_envs, scenario, overrides, k, energy_cost, wake_cost, budget, checkpoints,
                              error_scale)
-        super().__init__(core, passage_spaces(core), render_mode)
+        CoreVectorEnv.__init__(self, core, passage_spaces(core), render_mode)
         self.subsets = core.subsets
-
-    def close_extras(self, **kwargs):
-        self.core.drop_pending()
-
-    def baseline(self, name, seed=None):
-        """The batched baseline policy ``name``: ``policy(obs) -> actions`` (num_envs,)."""
-        check_baseline(name)
-        return BaselinePolicy(self.core, name, seed, single=False)
 
 
 __all__ = ["PassageV2Core", "PassageV2Env", "PassageV2VectorEnv"]
