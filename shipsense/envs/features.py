@@ -119,7 +119,10 @@ def predicted_beliefs(envs, est, cov, x_scale, A, X, P):
     :class:`~shipsense.envs.passage_core.PassageV1Core`): ``X[r] = A
     (est[e] / s)`` (r, n) and ``P[r] = A (cov[e] / (s s^T)) A^T`` (r, n, n), ``s`` the model's ``x_scale``
     (SI per internal unit) -- numpy's ``to_internal(est) @ A.T`` and ``A @ cov_to_internal(cov) @ A.T``
-    without their temporaries."""
+    without their temporaries.  Not the trackers' time update
+    (:func:`~shipsense.trackers.filters.time_update.predict_kernel`, the same products): that one mirrors its
+    lower triangle into the upper, this one sums both, so their upper entries differ at rounding and the
+    environment's episodes would change."""
     n = x_scale.size
     xi, Pi, tmp = np.empty(n), np.empty((n, n)), np.empty((n, n))
     for r in range(envs.size):

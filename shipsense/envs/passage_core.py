@@ -257,14 +257,29 @@ class PassageV1Core(PassagePrefetch):
         error, nees = np.zeros(self.E), np.zeros(self.E)
         error[who], nees[who] = self._measure(who)
         self._predict_gains(who)
-        error_term = -np.log1p(error / self.error_scale)
-        energy_term = -self.energy_cost * reads
+        error_term, energy_term = self.reward_terms(error, reads, who)
         rewards = error_term + energy_term
         accumulate_steps(who, rewards, reads, self.returns, self.reads)
         info = {"error": error, "nees": nees, "inside95": nees <= CHI2_2_95, "reads": reads,
                 "error_term": error_term, "energy_term": energy_term, "status": self.last.status.copy(),
                 "truth": self.truth[self._rows, self.k, :2].copy(), "estimate": self.last.estimate[:, :2].copy()}
         return rewards, self.k >= self.K - 1, np.zeros(self.E, dtype=bool), info
+
+    # -- the reward's parts (a later version's core changes them) --------------------------------------------
+    wake_cost = 0.0
+    """Energy of waking a sensor not read at the previous step, on top of ``energy_cost`` (none in v1)."""
+    budget = np.inf
+    """Reads per passage (unlimited in v1)."""
+
+    @property
+    def error_weights(self):
+        """The weight (K,) of each sample's error term in the reward (every sample's 1 in v1)."""
+        return np.ones(self.K)
+
+    def reward_terms(self, error, reads, who):
+        """The error and energy terms (E,) of a step's reward from the position errors ``error`` (m) and the
+        reads ``reads`` (E,) of environments ``who`` (v1: ``-ln(1 + e / e_s)`` and ``-c reads``)."""
+        return -np.log1p(error / self.error_scale), -self.energy_cost * reads
 
     def episode_metrics(self, envs):
         """The episodes' metrics of ``envs`` (at their last sample): dict of (len(envs),) arrays."""

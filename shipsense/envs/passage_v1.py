@@ -160,7 +160,8 @@ def observation_potential(obs):
     return -0.5 * (6.0 * np.log(10.0) * (obs[..., 4] + obs[..., 5]) + np.log1p(-rho2))
 
 
-def _spaces(core):
+def passage_spaces(core):
+    """The observation and action spaces of a Passage core's environments."""
     low = -np.ones(core.obs_dim, dtype=np.float32)
     low[7:9] = 0.0
     low[9:] = 0.0
@@ -182,7 +183,7 @@ class _Policy:
         return int(a[0]) if self.single else a
 
     def __repr__(self):
-        return f"<{self.name} baseline of Passage-v1>"
+        return f"<{self.name} baseline of a Passage environment>"
 
 
 def _check_baseline(name):
@@ -200,7 +201,7 @@ class PassageV1Env(RebuiltOnUnpickle, ClosesItsFigure, gym.Env):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
         self.core = PassageV1Core(1, scenario, overrides, k, energy_cost, error_scale)
-        self.observation_space, self.action_space = _spaces(self.core)
+        self.observation_space, self.action_space = passage_spaces(self.core)
         self.subsets = self.core.subsets
         self.render_mode = render_mode
         self._started = False
@@ -292,7 +293,7 @@ class PassageV1VectorEnv(CoreVectorEnv):
                  render_mode=None):
         self.check_render_mode(render_mode)
         core = PassageV1Core(num_envs, scenario, overrides, k, energy_cost, error_scale)
-        super().__init__(core, _spaces(core), render_mode)
+        super().__init__(core, passage_spaces(core), render_mode)
         self.subsets = core.subsets
 
     def close_extras(self, **kwargs):
@@ -305,5 +306,5 @@ class PassageV1VectorEnv(CoreVectorEnv):
 
 
 __all__ = ["BASELINES", "CHI2_2_95", "PassageV1Core", "PassageV1Env", "PassageV1VectorEnv", "action_of",
-           "observation_potential", "subsets"]
+           "observation_potential", "passage_spaces", "subsets"]
 

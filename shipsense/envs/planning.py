@@ -2,8 +2,8 @@ r"""Planning baselines of the Passage environments: ``greedy-threshold``, ``roll
 reference (``shipsense evaluate --policy NAME``).
 
 They run on any environment whose core is a :class:`~shipsense.envs.passage_core.PassageV1Core` (the single
-environments of ``shipsense/Passage-v1`` and its variants), and need nothing of it but its spaces, its
-observer and its reward: a later Passage version with the same spaces takes them as they are.
+environments of ``shipsense/Passage-v1``, ``shipsense/Passage-v2`` and their variants), and need nothing of it
+but its spaces, its observer and its reward's parts (its error weights, wake-up cost and budget).
 
 ``greedy-threshold``
     The greedy baseline's subset (the ``k`` sensors with the largest predicted drop :math:`g` of the
@@ -18,12 +18,15 @@ observer and its reward: a later Passage version with the same spaces takes them
     One step of policy improvement over greedy by Monte Carlo rollouts (Bertsekas' rollout algorithm).  At
     every decision, for each action :math:`a` and each of :math:`F` futures :math:`f`,
 
-    .. math::  Q(a) = \frac{1}{F} \sum_f \Big[\sum_{j=1}^{H} r_j(a, f) + (T - H)\, r^e_H(a, f)\Big],
+    .. math::  Q(a) = \frac{1}{F} \sum_f \Big[\sum_{j=1}^{H} r_j(a, f)
+               - \Big(\sum_{t > k + H} w_t\Big) \ln\big(1 + e_H(a, f) / e_s\big)\Big],
 
     the return of :math:`H` steps that read :math:`a` first and then follow greedy, with the environment's
-    own reward :math:`r = r^e - c\,\text{reads}`, :math:`r^e = -\ln(1 + e / e_s)` (:math:`e` the observer's
-    error against the future's truth), and the last step's error term held for the :math:`T - H` steps left
-    in the passage after the horizon (:data:`TAILS`: a read goes on paying off after it).  A future is drawn
+    own reward :math:`r_t = -w_t \ln(1 + e_t / e_s) - \text{energy}_t` (:math:`e` the observer's error
+    against the future's truth, :math:`w_t` the core's error weights, ``error_weights``: 1 at every step in
+    Passage-v1; the energy the reads' and, in Passage-v2, the wake-ups'), and the last step's error held for
+    the samples left in the passage after the horizon, as they will weigh it (:data:`TAILS`: a read goes on
+    paying off after it; in Passage-v1, :math:`T - H` times the last error term).  A future is drawn
     **from the observer's belief**, never from the environment's passage: the ship's state
     :math:`x_0 \sim \mathcal N(\hat x, P)` from the observer's selected estimate and its
     covariance, carried by the observer's motion model (``x_{j+1} = A x_j``), its samples
@@ -38,8 +41,12 @@ observer and its reward: a later Passage version with the same spaces takes them
     The offline reference no fair policy should pass: at the start of each episode it reads the environment's
     true passage and chooses the whole schedule :math:`a_{1..T}` maximising the **linearised** return
 
-    .. math::  \sum_{t=1}^{T} -\ln\!\Big(1 + \sqrt{\operatorname{tr} P^{pp}_t} / e_s\Big) - c\,|a_t|, \qquad
+    .. math::  \sum_{t=1}^{T} -w_t \ln\!\Big(1 + \sqrt{\operatorname{tr} P^{pp}_t} / e_s\Big) - c\,|a_t|
+               - c_w\,|a_t \setminus a_{t-1}|, \qquad
                P_t^{-1} = A^{-T} P_{t-1}^{-1} A^{-1} + \sum_{s \in a_t} J_{s,t},
+
+    subject to :math:`\sum_t |a_t|` within the reads left (:class:`ScheduleCosts`: the core's error
+    weights :math:`w_t`, wake-up cost :math:`c_w` and budget; none but :math:`c` in Passage-v1),
 
     from the observer's covariance :math:`P_0` at the start of control, with :math:`J_{s,t}` the Fisher
     information of sensor :math:`s`'s samples at :math:`t` (:mod:`shipsense.design.fisher`'s
@@ -270,8 +277,8 @@ class Rollout:
             _, _, _, info = twin.step(actions)
             actions = twin.greedy_actions()
         value = twin.returns.copy()
-        if self.tail == "hold":             # the last error term held to the passage's end
-            value += (core.K - 1 - k - steps) * info["error_term"]
+        if self.tail == "hold":             # the last error term held to the passage's end, as it will count
+            value += core.error_weights[k + steps + 1:].sum() * -np.log1p(info["error"] / core.error_scale)
         return value.reshape(A, F).mean(axis=1)
 
 
@@ -293,48 +300,84 @@ def sensor_information(core, e):
     return out
 
 
-def linearised_rewards(info0, J, Ainv, subsets, schedules, energy_cost, error_scale):
+class ScheduleCosts:
+    """What a schedule's linearised return counts besides the error (a Passage core's reward): the error
+    term's weight per step ``weights`` (T,) (default 1), ``wake_cost`` per sensor read that was not read at the
+    step before (``last``, (S,) bool, the sensors read before the first step), and ``budget``, the reads left
+    (a schedule that reads more is infeasible: return ``-inf``)."""
+
+    def __init__(self, T, S, weights=None, wake_cost=0.0, last=None, budget=np.inf):
+        self.weights = np.ones(T) if weights is None else np.asarray(weights, dtype=float)
+        self.wake_cost = float(wake_cost)
+        self.last = np.ones(S, dtype=bool) if last is None else np.asarray(last, dtype=bool)
+        self.budget = float(budget)
+
+    @classmethod
+    def of(cls, core, e):
+        """Environment ``e``'s costs from its next step to its passage's end (a Passage core)."""
+        k = int(core.k[e])
+        return cls(core.K - 1 - k, core.S, core.error_weights[k + 1:], core.wake_cost, core.last_read[e],
+                   core.budget - core.reads[e])
+
+
+def linearised_rewards(info0, J, Ainv, subsets, schedules, energy_cost, error_scale, costs=None):
     """The linearised return (the module docstring) of each of ``schedules`` (B, T) (action indices), from the
     initial information ``info0`` (n, n), sensors' information ``J`` (T, S, n, n), ``Ainv`` the transition's
-    inverse.  Returns (B,)."""
+    inverse, ``costs`` a :class:`ScheduleCosts` (default: none but ``energy_cost`` per read).  Returns (B,)."""
     schedules = np.asarray(schedules)
     B, T = schedules.shape
+    costs = costs or ScheduleCosts(T, subsets.shape[1])
     Y = np.broadcast_to(info0, (B,) + info0.shape).copy()
+    last = np.broadcast_to(costs.last, (B, subsets.shape[1]))
+    used = np.zeros(B)
     total = np.zeros(B)
     for t in range(T):
-        Y, r = _advance(Y, J[t], Ainv, subsets, schedules[:, t], energy_cost, error_scale)
+        Y, r, last, used = _advance(Y, J[t], Ainv, subsets, schedules[:, t], energy_cost, error_scale, costs, t,
+                                    last, used)
         total += r
     return total
 
 
-def _advance(Y, Jt, Ainv, subsets, actions, energy_cost, error_scale):
-    """One step of the information recursion for informations ``Y`` (B, n, n) under ``actions`` (B,): the new
-    informations and the step's linearised rewards."""
-    Y = Ainv.T @ Y @ Ainv + np.einsum("bs,sij->bij", subsets[actions].astype(float), Jt)
+def _advance(Y, Jt, Ainv, subsets, actions, energy_cost, error_scale, costs, t, last, used):
+    """One step ``t`` of the information recursion for informations ``Y`` (B, n, n) under ``actions`` (B,), the
+    sensors ``last`` (B, S) read at the step before, ``used`` (B,) reads so far: the new informations, the
+    step's linearised rewards (``-inf`` over the budget), the reads and the reads so far."""
+    read = subsets[actions]
+    Y = Ainv.T @ Y @ Ainv + np.einsum("bs,sij->bij", read.astype(float), Jt)
     Y = 0.5 * (Y + np.swapaxes(Y, 1, 2))
     P = np.linalg.inv(Y)
     err = np.sqrt(np.clip(P[:, 0, 0] + P[:, 1, 1], 0.0, None))
-    return Y, -np.log1p(err / error_scale) - energy_cost * subsets[actions].sum(axis=1)
+    count = read.sum(axis=1)
+    r = -costs.weights[t] * np.log1p(err / error_scale) - energy_cost * count
+    if costs.wake_cost:
+        r = r - costs.wake_cost * (read & ~last).sum(axis=1)
+    used = used + count
+    if np.isfinite(costs.budget):
+        r = np.where(used > costs.budget, -np.inf, r)
+    return Y, r, read, used
 
 
-def plan_schedule(info0, J, Ainv, subsets, energy_cost, error_scale, beam=256, sweeps=3):
+def plan_schedule(info0, J, Ainv, subsets, energy_cost, error_scale, beam=256, sweeps=3, costs=None):
     """The schedule (T,) (action indices) of the largest linearised return, and that return: beam search (the
     ``beam`` partial schedules of the largest return so far kept at each step; every schedule while
     ``A^t <= beam``, so exact for short passages), then up to ``sweeps`` sweeps of coordinate ascent (each
     step's action changed alone, kept where the whole return grows).  The returned value is never below the
-    beam's best nor, with ``A^T <= beam``, below any schedule's."""
+    beam's best nor, with ``A^T <= beam``, below any schedule's.  ``costs``: :func:`linearised_rewards`'."""
     A, T = len(subsets), J.shape[0]
     n = info0.shape[0]
+    costs = costs or ScheduleCosts(T, subsets.shape[1])
     Y = info0[None].copy()
+    last, used = costs.last[None].copy(), np.zeros(1)
     score = np.zeros(1)
     paths = np.zeros((1, 0), dtype=np.int64)
     for t in range(T):
         b = Y.shape[0]
         acts = np.tile(np.arange(A), b)
-        Yn, r = _advance(np.repeat(Y, A, axis=0), J[t], Ainv, subsets, acts, energy_cost, error_scale)
+        Yn, r, ln, un = _advance(np.repeat(Y, A, axis=0), J[t], Ainv, subsets, acts, energy_cost, error_scale,
+                                 costs, t, np.repeat(last, A, axis=0), np.repeat(used, A))
         s = np.repeat(score, A) + r
         keep = np.argsort(-s, kind="stable")[:beam]
-        Y, score = Yn[keep], s[keep]
+        Y, score, last, used = Yn[keep], s[keep], ln[keep], un[keep]
         paths = np.concatenate([np.repeat(paths, A, axis=0)[keep], acts[keep, None]], axis=1)
     best = paths[0].copy()
     value = float(score[0])
@@ -343,7 +386,7 @@ def plan_schedule(info0, J, Ainv, subsets, energy_cost, error_scale, beam=256, s
         for t in range(T):
             trial = np.repeat(best[None], A, axis=0)
             trial[:, t] = np.arange(A)
-            v = linearised_rewards(info0.reshape(n, n), J, Ainv, subsets, trial, energy_cost, error_scale)
+            v = linearised_rewards(info0.reshape(n, n), J, Ainv, subsets, trial, energy_cost, error_scale, costs)
             a = int(np.argmax(v))
             if v[a] > value + 1e-12:
                 best, value, improved = trial[a], float(v[a]), True
@@ -375,7 +418,8 @@ class Hindsight:
         if k == start or self.schedule is None:
             info0, J, Ainv = self.problem(0)
             self.schedule, self.value = plan_schedule(info0, J, Ainv, core.subsets, core.energy_cost,
-                                                      core.error_scale, beam=self.beam)
+                                                      core.error_scale, beam=self.beam,
+                                                      costs=ScheduleCosts.of(core, 0))
         return int(self.schedule[k - start])
 
     def describe(self):
@@ -383,5 +427,5 @@ class Hindsight:
 
 
 __all__ = ["FIT_EPISODES", "FIT_SEED", "PLANNERS", "THRESHOLDS", "GreedyThreshold", "Hindsight", "Rollout",
-           "belief_futures", "episode_seed", "fit_threshold", "linearised_rewards", "offers", "plan_schedule",
-           "planner", "run_batch", "sensor_information", "threshold_actions"]
+           "ScheduleCosts", "belief_futures", "episode_seed", "fit_threshold", "linearised_rewards", "offers",
+           "plan_schedule", "planner", "run_batch", "sensor_information", "threshold_actions"]

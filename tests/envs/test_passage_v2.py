@@ -1,0 +1,196 @@
+"""Passage-v2: Passage-v1's core with wake-up costs, a read budget and checkpoint weights -- gymnasium's and
+SB3's checkers, reproducibility, the reward's parts against their definitions, the native vector version
+against single environments, and the planners on it (the hindsight plan exact under the new costs)."""
+
+import itertools
+import warnings
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import shipsense  # noqa: F401  (registers the environments)
+from shipsense.envs import PASSAGE_V1_ID, PASSAGE_V1_VARIANTS, PASSAGE_V2_ID, PASSAGE_V2_VARIANTS, planning
+from shipsense.envs.passage_v2 import PassageV2Env, PassageV2VectorEnv
+
+KW = {"scenario": "S2", "overrides": {"steps": 50}}   # S2: the run-in ends near sample 30, ~20 agent steps
+
+
+def _rollout(env, seed, policy_seed=0):
+    obs, _ = env.reset(seed=seed)
+    rng = np.random.default_rng(policy_seed)
+    out = [(obs, None, None, None)]
+    while True:
+        obs, r, term, trunc, info = env.step(int(rng.integers(env.action_space.n)))
+        out.append((obs, r, term, info))
+        if term or trunc:
+            return out
+
+
+def test_registered_with_thresholds_vector_entry_points_and_v1_unchanged():
+    for vid, kwargs in PASSAGE_V2_VARIANTS.items():
+        spec = gym.registry[vid]
+        assert spec.entry_point.endswith("PassageV2Env") and spec.vector_entry_point.endswith("PassageV2VectorEnv")
+        assert spec.kwargs == kwargs
+    assert gym.registry[PASSAGE_V2_ID].reward_threshold is not None
+    assert gym.registry[PASSAGE_V1_ID].entry_point.endswith("PassageV1Env")
+    assert gym.registry[PASSAGE_V2_ID].kwargs["overrides"] == PASSAGE_V1_VARIANTS[PASSAGE_V1_ID]["overrides"]
+    envs = gym.make_vec(PASSAGE_V2_ID, num_envs=2, vectorization_mode="vector_entry_point", overrides=KW["overrides"])
+    assert isinstance(envs.unwrapped, PassageV2VectorEnv)
+
+
+def test_gymnasium_checker_passes_without_warnings():
+    from gymnasium.utils.env_checker import check_env
+
+    env = gym.make(PASSAGE_V2_ID, render_mode="rgb_array", overrides=KW["overrides"]).unwrapped
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        check_env(env, skip_render_check=False)
+    assert not [str(w.message) for w in caught if "shipsense" in str(w.filename) or "gymnasium" in str(w.filename)]
+
+
+def test_stable_baselines_checker_passes():
+    sb3 = pytest.importorskip("stable_baselines3.common.env_checker")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        sb3.check_env(PassageV2Env(budget=5, **KW), warn=True)
+    assert not [w for w in caught if "shipsense" in str(w.filename) or "env_checker" in str(w.filename)], \
+        [str(w.message) for w in caught]
+
+
+def test_same_seed_same_rollout_and_another_seed_another():
+    a = _rollout(PassageV2Env(budget=8, **KW), seed=7)
+    b = _rollout(PassageV2Env(budget=8, **KW), seed=7)
+    assert len(a) == len(b)
+    for (oa, ra, ta, _), (ob, rb, tb, _) in zip(a, b):
+        np.testing.assert_array_equal(oa, ob)
+        assert ra == rb and ta == tb
+    c = _rollout(PassageV2Env(budget=8, **KW), seed=8)
+    assert not np.array_equal(a[0][0], c[0][0])
+
+
+def test_rewards_are_the_checkpoint_weighted_error_minus_reads_and_wake_ups():
+    c, cw = 0.02, 0.3
+    env = PassageV2Env(energy_cost=c, wake_cost=cw, checkpoints=3, budget=None, **KW)
+    core = env.core
+    weights = core.error_weights
+    marks = np.flatnonzero(weights)
+    assert marks.size == 3 and marks[-1] == core.K - 1 and np.all(weights[marks] == core.K / 3)
+    obs, _ = env.reset(seed=2)
+    S = core.S
+    assert obs[9 + 2 * S] == 1.0                             # no budget: all of it left
+    awake = np.ones(S, dtype=bool)                           # (the run-in read every sensor)
+    rng = np.random.default_rng(0)
+    seen = set()
+    while True:
+        a = int(rng.integers(env.action_space.n))
+        read = env.subsets[a]
+        k_next = int(core.k[0]) + 1
+        obs, r, term, _, info = env.step(a)
+        wakes = int((read & ~awake).sum())
+        assert info["wakes"] == wakes
+        assert info["energy_term"] == pytest.approx(-(c * read.sum() + cw * wakes), abs=1e-12)
+        assert info["error_term"] == pytest.approx(-weights[k_next] * np.log1p(info["error"]), abs=1e-12)
+        assert r == pytest.approx(info["error_term"] + info["energy_term"], abs=1e-12)
+        ahead = marks[marks >= k_next][0] - k_next
+        assert obs[10 + 2 * S] == pytest.approx(ahead / (core.K - 1), abs=1e-6)
+        seen.add((wakes > 0, weights[k_next] > 0))
+        awake = read
+        if term:
+            break
+    assert (True, False) in seen and (False, False) in seen and any(mark for _, mark in seen)
+    m = info["episode_metrics"]
+    assert m["energy"] == pytest.approx(c * m["reads_per_step"] * m["steps"] + cw * m["wakes"])
+    assert m["return"] == pytest.approx(core.returns[0])
+
+
+def test_a_read_beyond_the_budget_reads_nothing_and_costs_nothing():
+    env = PassageV2Env(budget=3, **KW)
+    obs, _ = env.reset(seed=4)
+    S = env.core.S
+    for left in (3, 2, 1):
+        assert obs[9 + 2 * S] == pytest.approx(left / 3) and env.core.budget_left()[0] == left
+        obs, _, _, _, info = env.step(1)
+        assert info["reads"] == 1 and info["budget_left"] == left - 1
+    for _ in range(3):
+        obs, _, term, _, info = env.step(2)
+        assert info["reads"] == 0 and info["energy_term"] == 0.0 and info["wakes"] == 0
+        assert np.all(env.core.since[0] > 0)                  # nothing was read
+    assert obs[9 + 2 * S] == 0.0
+
+
+def test_vector_env_equals_single_envs_across_autoreset():
+    n = 2
+    kw = dict(budget=6, wake_cost=0.1, **KW)
+    venv = PassageV2VectorEnv(num_envs=n, **kw)
+    singles = [PassageV2Env(**kw) for _ in range(n)]
+    vo, _ = venv.reset(seed=[21, 5])
+    so = [s.reset(seed=sd)[0] for s, sd in zip(singles, (21, 5))]
+    np.testing.assert_allclose(vo, np.array(so), rtol=0, atol=1e-6)
+    rng = np.random.default_rng(0)
+    pending, ended = [False] * n, 0
+    for _ in range(60):
+        acts = rng.integers(0, venv.single_action_space.n, n)
+        vo, vr, vt, _, vinfo = venv.step(acts)
+        for i, s in enumerate(singles):
+            if pending[i]:                                   # next-step autoreset
+                obs, _ = s.reset()
+                r, t = 0.0, False
+                pending[i] = False
+            else:
+                obs, r, t, _, info = s.step(int(acts[i]))
+                assert info["wakes"] == vinfo["wakes"][i] and info["budget_left"] == vinfo["budget_left"][i]
+                pending[i] = t
+                if t:
+                    ended += 1
+                    for key, v in info["episode_metrics"].items():
+                        assert vinfo["episode_metrics"][key][i] == pytest.approx(v, rel=1e-9, abs=1e-6)
+            np.testing.assert_allclose(vo[i], obs, rtol=0, atol=1e-6)
+            assert vr[i] == pytest.approx(r, rel=0, abs=1e-6) and vt[i] == t
+    assert ended >= n
+
+
+@pytest.mark.parametrize("kwargs, name", [({"wake_cost": -1}, "wake_cost"), ({"budget": 2.5}, "budget"),
+                                          ({"checkpoints": -1}, "checkpoints"), ({"budget": -3}, "budget")])
+def test_bad_kwargs_raise_one_value_error_naming_the_argument(kwargs, name):
+    with pytest.raises(ValueError, match=name):
+        PassageV2Env(**KW, **kwargs)
+
+
+def test_hindsight_is_exact_under_wake_ups_budget_and_checkpoints():
+    """The planner's costs are the environment's: on a short problem the beam holding every schedule finds the
+    brute-force optimum of the linearised return, which never reads beyond the budget."""
+    env = PassageV2Env(wake_cost=0.1, budget=2, checkpoints=2, **KW)
+    env.reset(seed=2)
+    core = env.core
+    info0, J, Ainv = planning.Hindsight(core).problem(0)
+    T = 5
+    costs = planning.ScheduleCosts.of(core, 0)
+    costs = planning.ScheduleCosts(T, core.S, np.array([0.0, 0.0, 3.0, 0.0, 5.0]), costs.wake_cost, costs.last,
+                                   costs.budget)
+    A = len(core.subsets)
+    every = np.array(list(itertools.product(range(A), repeat=T)))
+    values = planning.linearised_rewards(info0, J[:T], Ainv, core.subsets, every, core.energy_cost,
+                                         core.error_scale, costs)
+    feasible = core.subsets[every].sum(axis=(1, 2)) <= 2
+    assert np.all(np.isneginf(values[~feasible])) and np.all(np.isfinite(values[feasible]))
+    plan, value = planning.plan_schedule(info0, J[:T], Ainv, core.subsets, core.energy_cost, core.error_scale,
+                                         beam=A ** T, costs=costs)
+    assert value == pytest.approx(values.max(), abs=1e-9) and core.subsets[plan].sum() <= 2
+    # a wake-up costs exactly wake_cost: reading sensor 0 twice in a row against reading it with a gap
+    twice, gap = np.array([[1, 1, 0, 0, 0]]), np.array([[1, 0, 1, 0, 0]])
+    free = planning.ScheduleCosts(T, core.S, costs.weights, 0.0, costs.last, costs.budget)
+    d_cost = [planning.linearised_rewards(info0, J[:T], Ainv, core.subsets, s, core.energy_cost, core.error_scale,
+                                          c)[0] for s in (twice, gap) for c in (costs, free)]
+    assert d_cost[1] - d_cost[0] == pytest.approx(0.0 if costs.last[0] else 0.1, abs=1e-12)
+    assert d_cost[3] - d_cost[2] == pytest.approx(0.1 if costs.last[0] else 0.2, abs=1e-12)
+
+
+@pytest.mark.parametrize("name, options", [("greedy-threshold", {"threshold": 0.02}),
+                                           ("rollout", {"horizon": 2, "samples": 2}), ("hindsight", {"beam": 8})])
+def test_the_planners_run_on_v2(name, options):
+    from shipsense.envs.evaluation import evaluate
+
+    r = evaluate(PASSAGE_V2_ID, name, 1, 2_000_000, env_kwargs={"overrides": {**KW["overrides"]}, "budget": 10},
+                 policy_kwargs=options)
+    assert np.isfinite(r["return"]["mean"]) and r["metrics"]["reads_per_step"]["mean"] * r["length"] <= 10
