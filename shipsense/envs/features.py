@@ -10,6 +10,7 @@ import numpy as np
 from numba import njit
 
 from shipsense import numba_cache
+from shipsense.trackers.linalg import matmul_into
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -136,18 +137,8 @@ def predicted_beliefs(envs, est, cov, x_scale, A, X, P):
             for b in range(n):
                 acc += xi[b] * A[a, b]
             X[r, a] = acc
-        for a in range(n):
-            for b in range(n):
-                acc = 0.0
-                for c in range(n):
-                    acc += A[a, c] * Pi[c, b]
-                tmp[a, b] = acc
-        for a in range(n):
-            for b in range(n):
-                acc = 0.0
-                for c in range(n):
-                    acc += tmp[a, c] * A[b, c]
-                P[r, a, b] = acc
+        matmul_into(A, Pi, tmp, n, n, n)
+        matmul_into(tmp, A.T, P[r], n, n, n)
 
 
 numba_cache.key_on_sources(globals())   # the caches follow the files these kernels are compiled from

@@ -42,6 +42,18 @@ def solve_many_in_place(M, X, n, c):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
+def matmul_into(A, B, out, rows, inner, cols):
+    """``out[:rows, :cols] <- A[:rows, :inner] @ B[:inner, :cols]``, each entry summed in index order (the
+    numbers of the loop written out; ``B`` may be a transposed view)."""
+    for a in range(rows):
+        for j in range(cols):
+            t = 0.0
+            for i in range(inner):
+                t += A[a, i] * B[i, j]
+            out[a, j] = t
+
+
+@njit(cache=True, error_model="numpy", inline="always")
 def solve_in_place(M, x, n):
     """``x <- M^-1 x`` for the leading ``n x n`` block by Gaussian elimination with partial pivoting (``M``
     overwritten), as LAPACK's ``gesv``: :func:`solve_many_in_place` of one column (``x`` contiguous)."""

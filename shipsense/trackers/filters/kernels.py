@@ -27,7 +27,15 @@ from numba import njit
 from shipsense import numba_cache
 from shipsense.models.measurement import loop_jit, measure, measure_jacobian, wrap_angle
 from shipsense.trackers.filters.core import LOG_2PI
-from shipsense.trackers.linalg import backward_into, cho_solve_into, cholesky_into, forward_into, tria_into, whitened
+from shipsense.trackers.linalg import (
+    backward_into,
+    cho_solve_into,
+    cholesky_into,
+    forward_into,
+    matmul_into,
+    tria_into,
+    whitened,
+)
 
 # -- small dense linear algebra, one element at a time ----------------------------------------------------------
 
@@ -149,12 +157,7 @@ def _difference_stats(x, L, present, spec, h, pt, Y, yhat, Y1, Y2, Pxy, B):
             Y1[i, j] = (dp - dm) * c1 * keep
             Y2[i, j] = c2 * (dp + dm) * keep
         yhat[j] = Y[0, j] + t / (2.0 * h * h)
-    for a in range(n):
-        for j in range(m):
-            t = 0.0
-            for i in range(n):
-                t += L[a, i] * Y1[i, j]
-            Pxy[a, j] = t
+    matmul_into(L, Y1, Pxy, n, n, m)
 
 
 UKF, CDKF, HUBER, EKF, PUEKF, SRCDKF = range(6)
