@@ -198,16 +198,23 @@ class PassageV1Env(RebuiltOnUnpickle, ClosesItsFigure, gym.Env):
     potential = staticmethod(observation_potential)
 
     def __init__(self, scenario="S2", overrides=None, k=1, energy_cost=0.01, error_scale=1.0, render_mode=None):
+        self.adopt_core(lambda: PassageV1Core(1, scenario, overrides, k, energy_cost, error_scale), render_mode,
+                        dict(scenario=scenario, overrides=overrides, k=k, energy_cost=energy_cost,
+                             error_scale=error_scale))
+
+    def adopt_core(self, make_core, render_mode, kwargs):
+        """Set this environment up on the core ``make_core()`` (of one environment) with its spaces, after
+        checking ``render_mode``; ``kwargs``: the constructor's other arguments (what a pickle of the environment
+        rebuilds it from)."""
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
-        self.core = PassageV1Core(1, scenario, overrides, k, energy_cost, error_scale)
+        self.core = make_core()
         self.observation_space, self.action_space = passage_spaces(self.core)
         self.subsets = self.core.subsets
         self.render_mode = render_mode
         self._started = False
         self._fig = None
-        self._kwargs = dict(scenario=scenario, overrides=overrides, k=k, energy_cost=energy_cost,
-                            error_scale=error_scale, render_mode=render_mode)
+        self._kwargs = {**kwargs, "render_mode": render_mode}
 
     def reset(self, *, seed=None, options=None):
         super().reset(seed=seed)

@@ -210,18 +210,10 @@ class PassageV2Env(PassageV1Env):
 
     def __init__(self, scenario="S2", overrides=None, k=1, energy_cost=0.01, wake_cost=0.1, budget=20,
                  checkpoints=4, error_scale=1.0, render_mode=None):
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
-        self.core = PassageV2Core(1, scenario, overrides, k, energy_cost, wake_cost, budget, checkpoints,
-                                  error_scale)
-        self.observation_space, self.action_space = passage_spaces(self.core)
-        self.subsets = self.core.subsets
-        self.render_mode = render_mode
-        self._started = False
-        self._fig = None
-        self._kwargs = dict(scenario=scenario, overrides=overrides, k=k, energy_cost=energy_cost,
-                            wake_cost=wake_cost, budget=budget, checkpoints=checkpoints, error_scale=error_scale,
-                            render_mode=render_mode)
+        self.adopt_core(lambda: PassageV2Core(1, scenario, overrides, k, energy_cost, wake_cost, budget, checkpoints,
+                                              error_scale), render_mode,
+                        dict(scenario=scenario, overrides=overrides, k=k, energy_cost=energy_cost, wake_cost=wake_cost,
+                             budget=budget, checkpoints=checkpoints, error_scale=error_scale))
 
 
 class PassageV2VectorEnv(PassageV1VectorEnv):

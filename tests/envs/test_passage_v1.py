@@ -6,6 +6,7 @@ from math import comb
 import gymnasium as gym
 import numpy as np
 import pytest
+from episodes import assert_seed_fixes_the_episode, random_rollout
 from reference import odd_observer_outputs
 
 import shipsense  # noqa: F401  (registers the environments)
@@ -15,17 +16,6 @@ from shipsense.envs.prefetch import PASSAGE_BLOCK
 
 EASY = "shipsense/PassageEasy-v1"
 KW = {"scenario": "S2", "overrides": {"steps": 50}}   # S2: the run-in ends near sample 30, ~20 agent steps
-
-
-def _rollout(env, seed, policy_seed=0):
-    obs, _ = env.reset(seed=seed)
-    rng = np.random.default_rng(policy_seed)
-    out = [(obs, None, None, None)]
-    while True:
-        obs, r, term, trunc, info = env.step(int(rng.integers(env.action_space.n)))
-        out.append((obs, r, term, info))
-        if term or trunc:
-            return out
 
 
 def test_variants_registered_with_vector_entry_points_and_v0_retired():
@@ -127,21 +117,12 @@ def test_reward_is_uncapped_so_a_diverged_observer_pays_for_it():
 
 
 def test_same_seed_same_rollout_and_another_seed_another():
-    a = _rollout(PassageV1Env(**KW), seed=7)
-    b = _rollout(PassageV1Env(**KW), seed=7)
-    assert len(a) == len(b)
-    for (oa, ra, ta, ia), (ob, rb, tb, ib) in zip(a, b):
-        np.testing.assert_array_equal(oa, ob)
-        assert ra == rb and ta == tb
-        if ia is not None:
-            assert ia.keys() == ib.keys()
-    c = _rollout(PassageV1Env(**KW), seed=8)
-    assert not np.array_equal(a[0][0], c[0][0])
+    assert_seed_fixes_the_episode(lambda: PassageV1Env(**KW))
 
 
 def test_episode_metrics_are_the_episode_and_observations_stay_in_the_space():
     env = PassageV1Env(**KW)
-    roll = _rollout(env, seed=2)
+    roll = random_rollout(env, seed=2)
     assert all(env.observation_space.contains(o) for o, *_ in roll)
     infos = [i for *_, i in roll[1:]]
     m = infos[-1]["episode_metrics"]
