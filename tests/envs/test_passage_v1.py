@@ -1,12 +1,17 @@
 """Passage-v1 and its native vector env: checkers, budget, uncapped reward, seeds, vector = single, greedy."""
 
-import warnings
 from math import comb
 
 import gymnasium as gym
 import numpy as np
 import pytest
-from episodes import assert_seed_fixes_the_episode, random_rollout
+from env_checks import (
+    assert_gymnasium_checker_passes,
+    assert_sb3_checker_passes,
+    assert_seed_fixes_the_episode,
+    assert_vector_equals_singles,
+    random_rollout,
+)
 from reference import odd_observer_outputs
 
 import shipsense  # noqa: F401  (registers the environments)
@@ -60,22 +65,11 @@ def test_resets_with_missing_first_samples_never_crash():
 
 
 def test_gymnasium_checker_passes_without_warnings():
-    from gymnasium.utils.env_checker import check_env
-
-    env = gym.make(EASY, render_mode="rgb_array", overrides={"steps": 50}).unwrapped
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        check_env(env, skip_render_check=False)
-    assert not [str(w.message) for w in caught if "shipsense" in str(w.filename) or "gymnasium" in str(w.filename)]
+    assert_gymnasium_checker_passes(gym.make(EASY, render_mode="rgb_array", overrides={"steps": 50}).unwrapped)
 
 
 def test_stable_baselines_checker_passes():
-    sb3 = pytest.importorskip("stable_baselines3.common.env_checker")
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        sb3.check_env(PassageV1Env(**KW), warn=True)
-    assert not [w for w in caught if "shipsense" in str(w.filename) or "env_checker" in str(w.filename)], \
-        [str(w.message) for w in caught]
+    assert_sb3_checker_passes(PassageV1Env(**KW))
 
 
 @pytest.mark.parametrize("k", [1, 2, 3])
@@ -135,37 +129,17 @@ def test_episode_metrics_are_the_episode_and_observations_stay_in_the_space():
 
 
 def test_vector_env_equals_single_envs_across_autoreset_with_masks():
-    n = 2
-    venv = PassageV1VectorEnv(num_envs=n, **KW)
-    singles = [PassageV1Env(**KW) for _ in range(n)]
-    vo, _ = venv.reset(seed=[21, 5])                         # a list of seeds: one per sub-environment
-    so = [s.reset(seed=sd)[0] for s, sd in zip(singles, (21, 5))]
-    np.testing.assert_allclose(vo, np.array(so), rtol=0, atol=1e-6)
-    rng = np.random.default_rng(0)
-    pending, ended = [False] * n, 0
-    for _ in range(60):
-        acts = rng.integers(0, venv.single_action_space.n, n)
-        vo, vr, vt, vtr, vinfo = venv.step(acts)
-        for i, s in enumerate(singles):
-            if pending[i]:                                   # next-step autoreset
-                obs, _ = s.reset()
-                r, t = 0.0, False
-                pending[i] = False
-                assert not vinfo["_error"][i]
-            else:
-                obs, r, t, _, info = s.step(int(acts[i]))
-                assert vinfo["_error"][i] and info["error"] == pytest.approx(vinfo["error"][i], rel=0, abs=1e-6)
-                pending[i] = t
-                if t:
-                    ended += 1
-                    assert vinfo["_episode_metrics"][i]
-                    for key, v in info["episode_metrics"].items():
-                        assert vinfo["episode_metrics"][key][i] == pytest.approx(v, rel=1e-9, abs=1e-6)
-                        assert vinfo["episode_metrics"]["_" + key][i]
-            np.testing.assert_allclose(vo[i], obs, rtol=0, atol=1e-6)
-            assert vr[i] == pytest.approx(r, rel=0, abs=1e-6) and vt[i] == t
-        assert not vtr.any()
-    assert ended >= n
+    def masked(i, info, vinfo):                          # a key's mask is set where its sub-environment has it
+        if info is None:
+            assert not vinfo["_error"][i]
+            return
+        assert vinfo["_error"][i] and info["error"] == pytest.approx(vinfo["error"][i], rel=0, abs=1e-6)
+        if "episode_metrics" in info:
+            assert vinfo["_episode_metrics"][i]
+            assert all(vinfo["episode_metrics"]["_" + key][i] for key in info["episode_metrics"])
+
+    assert_vector_equals_singles(PassageV1VectorEnv(num_envs=2, **KW), [PassageV1Env(**KW) for _ in range(2)],
+                                 (21, 5), check=masked)
 
 
 def test_sb3_adapter_on_the_native_vector_env_equals_single_envs_through_its_partial_reset():

@@ -3,12 +3,16 @@ SB3's checkers, reproducibility, the reward's parts against their definitions, t
 against single environments, and the planners on it (the hindsight plan exact under the new costs)."""
 
 import itertools
-import warnings
 
 import gymnasium as gym
 import numpy as np
 import pytest
-from episodes import assert_seed_fixes_the_episode
+from env_checks import (
+    assert_gymnasium_checker_passes,
+    assert_sb3_checker_passes,
+    assert_seed_fixes_the_episode,
+    assert_vector_equals_singles,
+)
 
 import shipsense  # noqa: F401  (registers the environments)
 from shipsense.envs import PASSAGE_V1_ID, PASSAGE_V1_VARIANTS, PASSAGE_V2_ID, PASSAGE_V2_VARIANTS, planning
@@ -30,22 +34,12 @@ def test_registered_with_thresholds_vector_entry_points_and_v1_unchanged():
 
 
 def test_gymnasium_checker_passes_without_warnings():
-    from gymnasium.utils.env_checker import check_env
-
-    env = gym.make(PASSAGE_V2_ID, render_mode="rgb_array", overrides=KW["overrides"]).unwrapped
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        check_env(env, skip_render_check=False)
-    assert not [str(w.message) for w in caught if "shipsense" in str(w.filename) or "gymnasium" in str(w.filename)]
+    env = gym.make(PASSAGE_V2_ID, render_mode="rgb_array", overrides=KW["overrides"])
+    assert_gymnasium_checker_passes(env.unwrapped)
 
 
 def test_stable_baselines_checker_passes():
-    sb3 = pytest.importorskip("stable_baselines3.common.env_checker")
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        sb3.check_env(PassageV2Env(budget=5, **KW), warn=True)
-    assert not [w for w in caught if "shipsense" in str(w.filename) or "env_checker" in str(w.filename)], \
-        [str(w.message) for w in caught]
+    assert_sb3_checker_passes(PassageV2Env(budget=5, **KW))
 
 
 def test_same_seed_same_rollout_and_another_seed_another():
@@ -103,34 +97,13 @@ def test_a_read_beyond_the_budget_reads_nothing_and_costs_nothing():
 
 
 def test_vector_env_equals_single_envs_across_autoreset():
-    n = 2
     kw = dict(budget=6, wake_cost=0.1, **KW)
-    venv = PassageV2VectorEnv(num_envs=n, **kw)
-    singles = [PassageV2Env(**kw) for _ in range(n)]
-    vo, _ = venv.reset(seed=[21, 5])
-    so = [s.reset(seed=sd)[0] for s, sd in zip(singles, (21, 5))]
-    np.testing.assert_allclose(vo, np.array(so), rtol=0, atol=1e-6)
-    rng = np.random.default_rng(0)
-    pending, ended = [False] * n, 0
-    for _ in range(60):
-        acts = rng.integers(0, venv.single_action_space.n, n)
-        vo, vr, vt, _, vinfo = venv.step(acts)
-        for i, s in enumerate(singles):
-            if pending[i]:                                   # next-step autoreset
-                obs, _ = s.reset()
-                r, t = 0.0, False
-                pending[i] = False
-            else:
-                obs, r, t, _, info = s.step(int(acts[i]))
-                assert info["wakes"] == vinfo["wakes"][i] and info["budget_left"] == vinfo["budget_left"][i]
-                pending[i] = t
-                if t:
-                    ended += 1
-                    for key, v in info["episode_metrics"].items():
-                        assert vinfo["episode_metrics"][key][i] == pytest.approx(v, rel=1e-9, abs=1e-6)
-            np.testing.assert_allclose(vo[i], obs, rtol=0, atol=1e-6)
-            assert vr[i] == pytest.approx(r, rel=0, abs=1e-6) and vt[i] == t
-    assert ended >= n
+
+    def same_budget(i, info, vinfo):
+        assert info is None or info["wakes"] == vinfo["wakes"][i] and info["budget_left"] == vinfo["budget_left"][i]
+
+    assert_vector_equals_singles(PassageV2VectorEnv(num_envs=2, **kw), [PassageV2Env(**kw) for _ in range(2)],
+                                 (21, 5), check=same_budget)
 
 
 @pytest.mark.parametrize("kwargs, name", [({"wake_cost": -1}, "wake_cost"), ({"budget": 2.5}, "budget"),
