@@ -54,11 +54,13 @@ class ShipsSettings:
             "max_ships": lambda v: isinstance(v, int) and v in (1, 2),
             "window_s": lambda v: 0 < v <= 1e4, "every_s": lambda v: 0 < v <= 1e4,
             "penalty": lambda v: 0 <= v <= 1e3, "min_separation_m": lambda v: 0 <= v <= 1e4,
-            "inflate": lambda v: 1 <= v <= 1e6, "refit_sd_m": lambda v: 0 < v <= 1e6, "death_sd_m": lambda v: 0 < v <= 1e6,
+            "inflate": lambda v: 1 <= v <= 1e6, "refit_sd_m": lambda v: 0 < v <= 1e6,
+            "death_sd_m": lambda v: 0 < v <= 1e6,
             "death_samples": lambda v: isinstance(v, int) and 1 <= v <= 10 ** 6,
         }
         bounds = {"max_ships": "1 or 2", "window_s": "in (0, 1e4] s", "every_s": "in (0, 1e4] s",
-                  "penalty": "in [0, 1000]", "min_separation_m": "in [0, 1e4] m", "inflate": "in [1, 1e6]", "refit_sd_m": "in (0, 1e6] m",
+                  "penalty": "in [0, 1000]", "min_separation_m": "in [0, 1e4] m", "inflate": "in [1, 1e6]",
+                  "refit_sd_m": "in (0, 1e6] m",
                   "death_sd_m": "in (0, 1e6] m", "death_samples": "an integer in [1, 1e6]"}
         for f in fields(self):
             v = getattr(self, f.name)

@@ -4,44 +4,49 @@ r"""A tracker that counts and labels up to two ships: the one-ship tracker, birt
 
 1. **Ship 1**: the project's one-ship :class:`~shipsense.trackers.Tracker` over every sample (its detection,
    global initialiser, bank and restarts, unchanged); while a passage has one ship, track 1 is its output.
-2. **Births** (every ``every_s`` seconds while a passage has one ship, once ship 1 has been tracked for a
-   window): ship 1's line is taken back over the last ``window_s`` seconds from its current estimate (constant
-   velocity), and the residual of that one-ship model, :math:`r_k = y_k - h(\hat x_{1,k})` (bearing channels
-   left out), is searched for a second source by the project's global initialiser
-   (:func:`~shipsense.trackers.init.window_fits.window_fits`: grid search with the moment eliminated,
-   Levenberg-Marquardt refinement).  Both models are then filtered over the window with the same filter unit
-   (UKF): the one-ship model from ship 1's estimate, and the two-ship joint model
-   (:class:`~shipsense.trackers.ships.joint_model.JointModel`: :math:`y = h(x_1) + h(x_2) + v`) from ship 1's
-   estimate and the second source's fit -- ship 1 is refined jointly with ship 2.  The second ship is born
-   when the windowed predictive log-likelihoods :math:`\ell_S = \sum_k \ln N(\varepsilon_k; 0, S_k)` say so
-   with a BIC penalty for the second ship's :math:`n_1` state components:
+2. **Births** (every ``every_s`` seconds while a passage has one ship and ship 1 is tracked): ship 1's line is
+   taken back over the last ``window_s`` seconds from its current estimate (constant velocity); the project's
+   global initialiser searches the residual of that one-ship model, :math:`r_k = y_k - h(\hat x_{1,k})`, for
+   a second source, and every pair is refined jointly on the window with the summed model
+   :math:`y = h(x_1) + h(x_2) + v` (:mod:`~shipsense.trackers.ships.window`,
+   :class:`~shipsense.trackers.ships.joint_model.JointModel`).  The one-ship model's best fit of the same
+   window is the comparison: with the fits' chi-squares :math:`\chi^2_S` (maximised window log-likelihoods
+   :math:`\ell_S = -\chi^2_S / 2` up to a common constant) the second ship is born when
 
    .. math::  \ell_2 - \ell_1 > \tfrac12\, \lambda\, n_1 \ln N ,
 
-   with ``N`` the measurements in the window and :math:`\lambda` the ``penalty`` setting (1: BIC), and the
-   second source is at least ``min_separation_m`` from ship 1 (else it is ship 1's own model error).
-3. **Two ships**: from the birth on, the joint filter (the filter unit's numpy steps on the joint model,
-   batched over the passages that have two ships) carries both; track 1 and track 2 are the two blocks of
-   its state, so the labels persist by construction.
-4. **Deaths**: a ship whose information contribution -- the position standard deviation
-   :math:`\sqrt{\mathrm{tr}(I_s^{-1})/2}` of one sample of its own field, :math:`I_s = H_{s,xy}^T R^{-1}
-   H_{s,xy}` -- has stayed above ``death_sd_m`` for ``death_samples`` samples, after having been below it,
-   has left the array's reach and is no longer reported (it stays in the joint state, its small field still
-   predicted).  A dead track is not reborn; a passage has at most one birth.
+   the BIC penalty of the second ship's :math:`n_1` state components, ``N`` the measurements in the window
+   and :math:`\lambda` the ``penalty`` setting (1: BIC), and the two fitted ships are at least
+   ``min_separation_m`` apart (else the "second ship" is ship 1's own model error).  The likelihoods are the
+   window's batch fits (the filters' predictive likelihoods over the window, which the spec suggests, are not
+   used: the fits already carry the window's evidence and need no starting covariance).
+3. **Two ships**: from the birth on, the joint filter (the UKF's numpy steps on the joint model, batched over
+   the passages that have two ships) carries both from the joint fit (its covariance: the inverse of the fit's
+   information plus the passage prior's, times ``inflate``).  Every ``every_s`` seconds, while both ships'
+   own fields locate them (``refit_sd_m``), the joint state is refitted on the last window (starts: the
+   current ships, the one-ship tracker's estimate, and the global searches on their residuals) and the model
+   order tested again: when one ship explains the window (the test of the birth fails), track 2 dies and
+   track 1 is the one-ship tracker's again.  Track 1 and track 2 are the two blocks of the joint state, and a
+   refit's ships are matched to the current tracks (the nearer pairing at the window's middle), so the labels
+   persist.
+4. **Deaths** by reach: a ship whose information contribution -- the position standard deviation
+   :math:`\sqrt{\mathrm{tr}(I_s^{-1})/2}` that one sample of its own field gives, :math:`I_s = H_{s,xy}^T
+   R^{-1} H_{s,xy}` at its estimate -- has stayed above ``death_sd_m`` for ``death_samples`` samples, after
+   having been below it, has left the array's reach and is no longer reported (in the joint state it stays,
+   its small field still predicted).  A dead track is not reborn, and a passage has at most one birth.
 
 Seismic bearings: in the joint model each bearing channel reads the ship nearest to its node (the louder one;
-the simulator's rule); they are left out of the residual searched for the second ship.
+the simulator's rule); they are left out of the residuals searched for a second ship.
 
-What it does not do: more than two ships; a second birth after a death; a ship 2 that arrives after ship 1
-has left (it is not looked for once ship 1 is dead); manoeuvre models per ship; irregular sampling in the joint
-filter (it steps with the scenario's period).  Everything is causal: the output at sample ``k`` uses samples
-``<= k``.
+Not done: more than two ships; a second birth after a death; a ship 2 that arrives after ship 1 has left;
+manoeuvre models per ship; irregular sampling in the joint filter (it steps with the scenario's period); a
+compiled joint step (the joint filter runs the numpy UKF).  Everything is causal: the output at sample ``k``
+uses samples ``<= k``.
 """
 
 from __future__ import annotations
 
 import numpy as np
-
 from scipy.linalg import block_diag
 
 from shipsense.models.transitions import shared_powers
@@ -168,9 +173,9 @@ class ShipsTracker:
     def refit(self, y, mean, k, x1_alone=None):
         """Joint refits of passages with two ships at ``mean`` (C, 2n) SI at sample ``k``, on the last window of
         their measurements ``y`` (C, K, m) SI, labels kept, and the model order tested again.  Returns
-        ``(keep, mean, cov)``; ``x1_alone`` (C, n) SI, optional, the one-ship tracker's estimate at ``k``, is
-        tried as a ship-1 start too (as are both current ships): whether two ships still beat one (the birth test's penalty and separation), the
-        state (C, 2n) and covariance (C, 2n, 2n) SI at ``k``."""
+        ``(keep, mean, cov)``: whether two ships still beat one (the birth test's penalty and separation), the
+        state (C, 2n) and covariance (C, 2n, 2n) SI at ``k``.  ``x1_alone`` (C, n) SI, optional: the one-ship
+        tracker's estimate at ``k``, tried as a ship-1 start too (as are both current ships)."""
         o, n = self.settings, self.base.n
         yw = self._window(y, k)
         x1, x2 = self._back(mean[:, :n]), self._back(mean[:, n:])
