@@ -99,7 +99,7 @@ class ShipsTracker:
         self.base = model_from_scenario(sc, sensors=sensors, process_noise=self.one.settings.process_noise)
         self.joint = JointModel(self.base, 2)
         self.joint_fit = JointModel(self.one.model, 2)     # (without process noise: the window fits' lines)
-        self.unit = get_filter("ukf")
+        self.unit = get_filter("ukf", kappa=-float(self.base.n))    # the one-ship spread (JointModel)
         T = sc.period
         self.window = max(4, int(round(self.settings.window_s / T)))
         self.every = max(1, int(round(self.settings.every_s / T)))
