@@ -2,17 +2,18 @@
 
     PYTHONPATH=. python experiments/several_ships.py --passages 30
 
-Two magnetometers (S2's M1, M2): ``S2-crossing`` random passages (ship 0 from S2's prior, a second ship crossing it
-at 30 m at its closest approach to the array centre) and ``S2`` random one-ship passages, the same seeds for the
-several-ship tracker (:class:`shipsense.trackers.ships.ShipsTracker`) and the one-ship tracker.  A true ship counts
-as present at a sample when its own one-ship position CRLB standard deviation there
-(:func:`shipsense.sweep.evaluate.crlb_position`, larger axis) is at most 5 m.  Over the second half of every
-passage: the share of samples with the right number of present ships (:func:`shipsense.trackers.metrics.cardinality_rate`),
-GOSPA (c = 20 m, p = alpha = 2) and its parts, each ship's RMSE against its track (labels by
-:func:`~shipsense.trackers.metrics.label_assignment` over the passage) and against the square root of the mean
-position trace of that ship's block of the joint-state CRLB, each ship's 95 % coverage; on one-ship passages the
-false-second-ship rate and track 1's RMSE over the one-ship tracker's.  Cost: seconds per passage of both trackers
-(this machine, this run; a ratio, not a benchmark).
+Two magnetometers (S2's M1, M2): ``S2-crossing`` random passages (ship 0 from S2's prior, a second ship
+crossing it at 30 m at its closest approach to the array centre) and ``S2`` random one-ship passages, the
+same seeds for the several-ship tracker (:class:`shipsense.trackers.ships.ShipsTracker`) and the one-ship
+tracker.  A true ship counts as present at a sample when its own one-ship position CRLB standard deviation
+there (:func:`shipsense.sweep.evaluate.crlb_position`, larger axis) is at most 5 m.  Over the second half of
+every passage: the share of samples with the right number of present ships
+(:func:`shipsense.trackers.metrics.cardinality_rate`), GOSPA (c = 20 m, p = alpha = 2) and its parts, each
+ship's RMSE against its track (labels by :func:`~shipsense.trackers.metrics.label_assignment` over the
+passage) and against the square root of the mean position trace of that ship's block of the joint-state
+CRLB, each ship's 95 % coverage; on one-ship passages the false-second-ship rate and track 1's RMSE over the
+one-ship tracker's.  Cost: seconds per passage of both trackers (this machine, this run; a ratio, not a
+benchmark).
 """
 
 from __future__ import annotations

@@ -35,6 +35,9 @@ class ShipsSettings:
     death_sd_m : float
         A ship has left the array's reach when the position standard deviation that one sample of its own
         field gives (its information contribution, :math:`\\sqrt{\\mathrm{tr}(I_s^{-1}) / 2}`) exceeds this, m.
+        Loose by default: a ship located to a few metres by the samples it has left behind still counts as
+        present, and only one whose own field no longer tells where it is, at the edge of the array's reach,
+        ends.
     death_samples : int
         Consecutive samples out of reach, after having been within it, before a ship dies.
     """
@@ -46,7 +49,7 @@ class ShipsSettings:
     min_separation_m: float = 10.0
     inflate: float = 2.0
     refit_sd_m: float = 5.0
-    death_sd_m: float = 50.0
+    death_sd_m: float = 200.0
     death_samples: int = 6
 
     def __post_init__(self):

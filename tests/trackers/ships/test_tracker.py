@@ -36,7 +36,7 @@ def test_a_crossing_gives_two_tracks_whose_labels_do_not_swap(crossing):
 
 def test_a_one_ship_passage_gives_no_second_track():
     sim = shipsense.simulate("S2", runs=6, seed=11, random=True)
-    tr = ShipsTracker("S2", passages=6, sensors=["M1", "M2"])
+    tr = ShipsTracker("S2", passages=6, sensors=["M1", "M2"], settings=ShipsSettings(death_sd_m=20.0))
     r = tr.track(sim.times, sim.measurements[..., :6])
     assert r.present[..., 1].mean() <= 0.05
     # the one ship is tracked at the end where its own field still locates it, and has died where it does not
@@ -44,7 +44,9 @@ def test_a_one_ship_passage_gives_no_second_track():
     near = (reach[:, -10:] <= 10.0).all(axis=1)
     assert near.any() and r.present[near, -10:, 0].all()
     far = reach[np.arange(6), np.maximum(r.died[:, 0], 0)] > 0.5 * tr.settings.death_sd_m
-    assert (far | (r.died[:, 0] < 0)).all()
+    assert (r.died[:, 0] >= 0).any() and (far | (r.died[:, 0] < 0)).all()
+    ended = r.died[:, 0] >= 0
+    assert not r.present[ended, -1, 0].any()                        # an ended track is not reported
 
 
 def test_with_one_ship_at_most_the_tracker_is_the_one_ship_trackers_output(crossing):
