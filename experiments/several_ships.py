@@ -1,6 +1,6 @@
 """Several ships: the several-ship tracker on two ships crossing and on one-ship passages.
 
-    PYTHONPATH=. python experiments/several_ships.py --passages 30
+    PYTHONPATH=. python experiments/several_ships.py --passages 40 --separations 10 20 60
 
 Two magnetometers (S2's M1, M2): ``S2-crossing`` random passages (ship 0 from S2's prior, a second ship
 crossing it at 30 m at its closest approach to the array centre) and ``S2`` random one-ship passages, the
@@ -59,8 +59,10 @@ def joint_bound_sd(sc, model, ships):
     return np.stack([np.sqrt(b[..., j * n, j * n] + b[..., j * n + 1, j * n + 1]) for j in range(2)], axis=-1)
 
 
-def run(name, passages, seed):
+def run(name, passages, seed, separation=None):
     sc = load_scenario(name)
+    if separation is not None:          # the crossing's closest approach, m
+        sc = sc.model_copy(update={"traffic": sc.traffic.model_copy(update={"separation": float(separation)})})
     model = model_from_scenario(sc, sensors=SENSORS)
     sim = shipsense.simulate(sc, runs=passages, seed=seed, random=True)
     y = sim.measurements[..., :6]
@@ -103,6 +105,8 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--passages", type=int, default=30)
     ap.add_argument("--seed", type=int, default=2026)
+    ap.add_argument("--separations", type=float, nargs="*", default=[],
+                    help="also run S2-crossing with these closest approaches of the two ships (m)")
     args = ap.parse_args()
     np.set_printoptions(precision=3, suppress=True)
     for name in ("S2-crossing", "S2"):
@@ -110,6 +114,10 @@ def main():
         print(f"{name} (two magnetometers, {res.pop('passages')} random passages, second half):")
         for k, v in res.items():
             print(f"  {k}: {v}")
+    for d in args.separations:
+        res = run("S2-crossing", args.passages, args.seed, separation=d)
+        print(f"S2-crossing at {d:g} m: cardinality {res['card']:.3f}, GOSPA {res['gospa_m']:.2f} m, median RMSE "
+              f"{res['rmse_median_m']} m, coverage {res['coverage']}")
 
 
 if __name__ == "__main__":
