@@ -21,7 +21,8 @@ r"""A tracker that counts and labels up to two ships: the one-ship tracker, birt
    window's batch fits (the filters' predictive likelihoods over the window, which the spec suggests, are not
    used: the fits already carry the window's evidence and need no starting covariance).
 3. **Two ships**: from the birth on, the joint filter (the UKF's numpy steps on the joint model, batched over
-   the passages that have two ships) carries both from the joint fit (its covariance: the inverse of the fit's
+   the passages that have two ships, with :math:`\kappa = n_1 - n` so that its sigma points spread each ship
+   as the one-ship UKF does) carries both from the joint fit (its covariance: the inverse of the fit's
    information plus the passage prior's, times ``inflate``).  Every ``every_s`` seconds, while both ships'
    own fields locate them (``refit_sd_m``), the joint state is refitted on the last window (starts: the
    current ships, the one-ship tracker's estimate, and the global searches on their residuals) and the model
