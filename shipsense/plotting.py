@@ -177,6 +177,53 @@ def plot_track(summary, times, path, truth=None, title=None, ellipses=8):
     return path
 
 
+def plot_ships(summary, path, title=None, ellipses=6):
+    """The tracks of a :class:`~shipsense.cli.ships.ShipsSummary` to a PNG: the array, the true ships (if known,
+    dashed), every track in its own colour with 2-sigma ellipses, and the number of ships over time."""
+    r = summary.result
+    est, cov, T = r.estimates[0], r.covs[0], r.times[0]
+    fig, ax = plt.subplots(1, 2, figsize=(13, 6), width_ratios=[1.3, 1])
+    fig.subplots_adjust(left=0.07, right=0.98, bottom=0.09, top=0.92, wspace=0.2)
+    a = ax[0]
+    colours = ("tab:blue", "tab:orange", "tab:green")
+    pts = [summary.tracker.base.array.positions[:, :2]]
+    if summary.truth is not None:
+        for j, tr in enumerate(summary.truth):
+            a.plot(tr[:, 0], tr[:, 1], "--", color="0.4", lw=1.2, label="truth" if j == 0 else None)
+            pts.append(tr[np.isfinite(tr[:, 0]), :2])
+    for s in range(est.shape[1]):
+        on = np.flatnonzero(r.present[0, :, s])
+        if on.size == 0:
+            continue
+        c = colours[s % len(colours)]
+        a.plot(est[on, s, 0], est[on, s, 1], "-", color=c, lw=1.6, label=f"ship {s + 1}")
+        for i in on[np.linspace(0, on.size - 1, min(ellipses, on.size)).astype(int)]:
+            _ellipse(a, est[i, s, :2], cov[i, s, :2, :2], c)
+        pts.append(est[on, s, :2])
+    draw_array(a, summary.tracker.base.array)
+    span = np.concatenate(pts)
+    lo, hi = span.min(axis=0), span.max(axis=0)
+    pad = 0.1 * max(hi - lo) + 20
+    a.set_xlim(lo[0] - pad, hi[0] + pad)
+    a.set_ylim(lo[1] - pad, hi[1] + pad)
+    a.set_aspect("equal", adjustable="box")
+    a.set_xlabel("x east [m]")
+    a.set_ylabel("y north [m]")
+    a.legend(loc="best", fontsize=8)
+    a.set_title(title or "tracks (2-sigma ellipses)")
+    b = ax[1]
+    b.step(T, r.ship_count[0], where="post", color="k", label="tracked")
+    if summary.truth is not None:
+        b.step(T, np.isfinite(summary.truth[:, :, 0]).sum(axis=0), where="post", color="0.6", ls="--",
+               label="true")
+    b.set_xlabel("time [s]")
+    b.set_ylabel("ships")
+    b.set_yticks(range(0, est.shape[1] + 1))
+    b.legend(loc="best", fontsize=8)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 def plot_design(candidates, weights, chosen, truth, path, title=""):
     """Candidates coloured by relaxation weight, the chosen sensors, and the design passages."""
     fig, ax = plt.subplots(figsize=(7.5, 6.5), layout="constrained")

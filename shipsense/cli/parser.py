@@ -80,6 +80,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="tracker: the project's tracker (default); bank: the source studies' bank")
     t.add_argument("--filter", default=None,
                    help="filter unit (default: ukf for the tracker, huber_ukf when robust; the bank: the scenario's)")
+    t.add_argument("--ships", choices=["1", "2", "auto"], default="1",
+                   help="the most ships tracked at once: 1, the one-ship tracker (default); 2 or auto (the same "
+                        "today): the several-ship tracker, an option that counts and labels up to two ships "
+                        "(estimates.csv gets a ship column)")
     t.add_argument("--out", default="shipsense-track", help="output directory (default: %(default)s)")
     t.add_argument("--seed", type=SEED, default=None, help="seed of the simulated passage")
     t.add_argument("--random", action="store_true", help="simulate a random passage from the [prior]")

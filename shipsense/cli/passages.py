@@ -174,6 +174,8 @@ def cmd_track(args) -> int:
     used_seed = sc.seed if args.seed is None else args.seed
     source = f"simulated {'random' if args.random else 'nominal'} passage of {sc.name} (seed {used_seed})"
     first_use("track", args.filter)
+    if args.ships != "1":
+        return _track_ships(args, sc, out, sim, source)
     with staged_directory(out) as stage:   # the tables and the plot, or nothing
         try:
             summary = track_to_files(sc, times, y, stage, truth=truth, method=args.method, unit=args.filter,
@@ -189,4 +191,28 @@ def cmd_track(args) -> int:
         print(line)
     print(f"wrote {out / 'estimates.csv'}, {out / 'selection_log.csv'}"
           + ("" if args.no_plot else f" and {out / 'track.png'}"))
+    return EXIT_OK
+
+
+def _track_ships(args, sc, out, sim, source) -> int:
+    """``track --ships 2|auto`` of a simulated passage: the several-ship tracker (:mod:`shipsense.cli.ships`)."""
+    from shipsense.atomic import staged_directory
+    from shipsense.cli.ships import describe_ships, max_ships, track_ships_to_files
+
+    if args.method != "tracker" or args.filter is not None:
+        raise BadInput("--ships 2|auto runs the several-ship tracker: --method bank and --filter do not apply")
+    truth = sim.ships[0] if sim.companions is not None else sim.truth[:1]
+    with staged_directory(out) as stage:
+        try:
+            summary = track_ships_to_files(sc, sim.times, sim.measurements[0], stage, ships=max_ships(args.ships),
+                                           truth=truth, progress=not QUIET["on"])
+        except ValueError as err:
+            raise BadInput(str(err)) from None
+        if not args.no_plot:
+            from shipsense.plotting import plot_ships
+
+            plot_ships(summary, stage / "track.png", title=f"{sc.name}: several ships (2-sigma ellipses)")
+    for line in describe_ships(summary, source):
+        print(line)
+    print(f"wrote {out / 'estimates.csv'}" + ("" if args.no_plot else f" and {out / 'track.png'}"))
     return EXIT_OK

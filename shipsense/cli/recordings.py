@@ -122,6 +122,9 @@ def track_recordings(args, sc) -> int:
     gap_limit = float(resolve_settings(sc).gap_limit_s)
     passage_gap = args.passage_gap if args.passage_gap is not None else PASSAGE_GAP_LIMITS * gap_limit
     first_use("track", args.filter)
+    ships = getattr(args, "ships", "1") != "1"
+    if ships and (args.method != "tracker" or args.filter is not None):
+        raise BadInput("--ships 2|auto runs the several-ship tracker: --method bank and --filter do not apply")
     rows, described = [], []
     with staged_directory(out) as stage:   # every recording's tables and plots, or nothing
         for (f, times, y), target in zip(recordings, targets):
@@ -134,6 +137,11 @@ def track_recordings(args, sc) -> int:
                 folder = target / f"passage-{n}" if len(parts) > 1 else target
                 (stage / folder.relative_to(out)).mkdir(parents=True, exist_ok=True)
                 t, yp = times[part], y[part]
+                what = (f"recording {f}{f' passage {n}' if len(parts) > 1 else ''} ({len(t)} samples, "
+                        f"{100 * np.isnan(yp).mean():.1f} % of values missing)")
+                if ships:
+                    described.append(track_ships(sc, t, yp, stage / folder.relative_to(out), args, what, f.name))
+                    continue
                 try:
                     summary = track_to_files(sc, t, yp, stage / folder.relative_to(out), method=args.method,
                                              unit=args.filter, progress=not QUIET["on"])
@@ -145,14 +153,18 @@ def track_recordings(args, sc) -> int:
                     plot_track(summary, t, stage / folder.relative_to(out) / "track.png",
                                title=f"{sc.name}: {f.name}{f', passage {n}' if len(parts) > 1 else ''}")
                 rows.append(_row(f, n, t, yp, summary, folder))
-                what = (f"recording {f}{f' passage {n}' if len(parts) > 1 else ''} ({len(t)} samples, "
-                        f"{100 * np.isnan(yp).mean():.1f} % of values missing)")
                 described.append(describe(summary, what))
         if len(rows) > 1:
             with open(stage / "summary.csv", "w", newline="") as fh:
                 w = csv.DictWriter(fh, fieldnames=SUMMARY)
                 w.writeheader()
                 w.writerows(rows)
+    if ships:
+        for lines in described:
+            print("\n".join(lines))
+        print(f"wrote {len(described)} tracked passage(s) into {out} (estimates.csv"
+              f"{'' if args.no_plot else ', track.png'} in each folder)")
+        return EXIT_OK
     if len(rows) == 1:
         for line in described[0]:
             print(line)
@@ -163,3 +175,20 @@ def track_recordings(args, sc) -> int:
         print(f"wrote {len(rows)} tracked passages of {len(files)} recording(s) into {out} (estimates.csv, "
               f"selection_log.csv{'' if args.no_plot else ', track.png'} in each folder) and {out / 'summary.csv'}")
     return EXIT_OK
+
+
+def track_ships(sc, t, y, folder, args, what, name):
+    """One passage of a recording through the several-ship tracker (``--ships 2|auto``,
+    :mod:`shipsense.cli.ships`) into ``folder``: the lines to print."""
+    from shipsense.cli.common import QUIET
+    from shipsense.cli.ships import describe_ships, max_ships, track_ships_to_files
+
+    try:
+        summary = track_ships_to_files(sc, t, y, folder, ships=max_ships(args.ships), progress=not QUIET["on"])
+    except ValueError as err:
+        raise BadInput(str(err)) from None
+    if not args.no_plot:
+        from shipsense.plotting import plot_ships
+
+        plot_ships(summary, folder / "track.png", title=f"{sc.name}: {name}, several ships")
+    return describe_ships(summary, what)
