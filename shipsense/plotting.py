@@ -29,6 +29,19 @@ def show_image(path, dpi=110):
     return fig
 
 
+def frame_map(ax, points, margin):
+    """Frame the map ``ax`` (east, north in m, equal aspect) around ``points`` (a list of (k, 2) arrays) with a
+    margin of ``margin`` of their extent plus 20 m."""
+    span = np.concatenate(points)
+    lo, hi = span.min(axis=0), span.max(axis=0)
+    pad = margin * max(hi - lo) + 20
+    ax.set_xlim(lo[0] - pad, hi[0] + pad)
+    ax.set_ylim(lo[1] - pad, hi[1] + pad)
+    ax.set_aspect("equal", adjustable="box")
+    ax.set_xlabel("x east [m]")
+    ax.set_ylabel("y north [m]")
+
+
 def draw_array(ax, array, label=True):
     """Sensors of a :class:`~shipsense.physics.array.SensorArray` on a map (x east, y north)."""
     for t, (marker, color) in _MARKERS.items():
@@ -130,15 +143,8 @@ def plot_track(summary, times, path, truth=None, title=None, ellipses=8):
     for i in shown[np.linspace(0, shown.size - 1, min(ellipses, shown.size)).astype(int)] if shown.size else []:
         _ellipse(a, est[i, :2], cov[i], colours.get(int(status[i]), "tab:blue"))
     draw_array(a, summary.tracker.model.array)
-    span = np.concatenate([est[tracked, :2], summary.tracker.model.array.positions[:, :2]]
-                          + ([truth[:, :2]] if truth is not None else []))
-    lo, hi = span.min(axis=0), span.max(axis=0)
-    pad = 0.15 * max(hi - lo) + 20
-    a.set_xlim(lo[0] - pad, hi[0] + pad)
-    a.set_ylim(lo[1] - pad, hi[1] + pad)
-    a.set_aspect("equal", adjustable="box")
-    a.set_xlabel("x east [m]")
-    a.set_ylabel("y north [m]")
+    frame_map(a, [est[tracked, :2], summary.tracker.model.array.positions[:, :2]]
+              + ([truth[:, :2]] if truth is not None else []), margin=0.15)
     a.grid(alpha=0.3)
     a.legend(fontsize=8, loc="lower left")
     a.set_title(title or "tracked passage (2-sigma ellipses)")
@@ -201,14 +207,7 @@ def plot_ships(summary, path, title=None, ellipses=6):
             _ellipse(a, est[i, s, :2], cov[i, s, :2, :2], c)
         pts.append(est[on, s, :2])
     draw_array(a, summary.tracker.base.array)
-    span = np.concatenate(pts)
-    lo, hi = span.min(axis=0), span.max(axis=0)
-    pad = 0.1 * max(hi - lo) + 20
-    a.set_xlim(lo[0] - pad, hi[0] + pad)
-    a.set_ylim(lo[1] - pad, hi[1] + pad)
-    a.set_aspect("equal", adjustable="box")
-    a.set_xlabel("x east [m]")
-    a.set_ylabel("y north [m]")
+    frame_map(a, pts, margin=0.1)
     a.legend(loc="best", fontsize=8)
     a.set_title(title or "tracks (2-sigma ellipses)")
     b = ax[1]
