@@ -18,7 +18,8 @@ import numpy as np
 from shipsense.models.transitions import transitions
 from shipsense.trackers.filters.core import symmetrize
 from shipsense.trackers.init.window_fits import depth_prior, window_fits
-from shipsense.trackers.tracker.passages import PENDING, RUNNING
+from shipsense.trackers.metrics import crlb_sd
+from shipsense.trackers.tracker.passages import PENDING, RUNNING, STARTING
 from shipsense.trackers.tracker.restarts import due, refit_window
 from shipsense.trackers.tracker.results import INCONSISTENT, INITIALISING, RESTARTED
 
@@ -84,18 +85,37 @@ def initialise(trk, starting, snr, out, defer=False):
     have = trk.state.n[seen] - trk.state.k0[seen] + 1
     # the window is complete, or the signal has passed its peak: a fit then spans the closest approach
     passed = (o.through_peak is not None) & (snr[seen] < (o.through_peak or 0.0) * trk.state.peak[seen])
-    ready = seen[(have >= trk.window) | (passed & (have >= max(4, trk.window // 5)))]
+    forced = (have >= trk.window) | (passed & (have >= max(4, trk.window // 5)))
+    early = ~forced & early_attempt(trk, have)
+    ready = seen[forced | early]
     if ready.size == 0:
         return
+    trk.state.early[ready] = early[forced | early]
     if defer:
         trk.state.phase[ready] = PENDING
         return
     fit_windows(trk, ready, out)
 
 
+def early_attempt(trk, have):
+    """Whether passages ``have`` (...) samples after their detection, their windows not yet complete, try an
+    early start (:func:`fit_windows`, :func:`accepted`): from :data:`EARLY_MIN` samples on, every
+    ``window // EARLY_ATTEMPTS`` samples (at least every sample): at most about :data:`EARLY_ATTEMPTS` attempts
+    per window, so its cost is bounded."""
+    every = max(1, trk.window // EARLY_ATTEMPTS)
+    return (have >= EARLY_MIN) & (have < trk.window) & ((have - EARLY_MIN) % every == 0)
+
+
+EARLY_MIN = 4
+"""Samples since the detection at a passage's first early start attempt (:func:`early_attempt`)."""
+EARLY_ATTEMPTS = 15
+"""Early start attempts per initialisation window, at most about (:func:`early_attempt`)."""
+
+
 def fit_windows(trk, ready, out):
-    """The global fits of the windows of passages ``ready`` (complete at their current sample) and their
-    banks' start, one batch per window length: a passage's fits are those it would have alone (a batch of
+    """The global fits of the windows of passages ``ready`` (complete, or an early attempt, at their current
+    sample) and the start of the banks of those whose fits are accepted (:func:`accepted`; the others stay
+    initialising), one batch per window length: a passage's fits are those it would have alone (a batch of
     windows of different lengths would pad the shorter ones, and their fits would move at rounding)."""
     o = trk.settings
     have = trk.state.n[ready] - trk.state.k0[ready] + 1
@@ -105,11 +125,73 @@ def fit_windows(trk, ready, out):
         t0 = time.perf_counter()
         fits = window_fits_of(trk, yw, taus)
         trk.seconds["initialiser"] += time.perf_counter() - t0
-        trk.state.win[group] = fits.theta
+        ok = ~trk.state.early[group] | accepted(trk, group, fits, yw, taus)
+        trk.state.win[group] = fits.theta              # (an early attempt's: the next attempt compares with it)
         trk.state.win_t0[group] = trk.state.t_hist[group, trk.state.k0[group] % trk.state.y_hist.shape[1]]
+        trk.state.phase[group[~ok]] = STARTING
+        if not ok.any():
+            continue
+        if not ok.all():
+            group, fits, taus = group[ok], fits.take(ok), taus[ok]
         trk.state.scan[group] = trk.state.n[group]
         trk.state.phase[group] = RUNNING
         start_banks(trk, group, fits, taus[:, -1], o.inflate, out)
+
+
+def accepted(trk, runs, fits, yw, taus):
+    r"""Whether the fits ``fits`` of the early attempts of passages ``runs`` (R,) on windows ``yw`` (R, W, m)
+    at times ``taus`` (R, W) start their banks (R,).
+
+    A short window's fits are accepted when they locate the ship and are stable as the window grows: the best
+    fit passes its goodness-of-fit test, the larger axis of its position standard deviation at this sample
+    (of the covariance its bank would start from, :func:`start_banks`) is under :data:`EARLY_SD_M`, the
+    previous attempt's best fit (``trk.state.win``, the same window start), carried to this sample, is one fit
+    with it (closer than ``distinct_m``), and it explains the window better than its mirror image by more
+    than ``ambiguity_nats`` (:func:`mirror_gap`).  A complete window, or one past the peak, always starts its
+    bank.
+
+    The test guards against the minima of a short window: a few samples far from the array fit a wrong
+    passage as well as the true one, with a curvature that alone would call it metres-accurate.
+    """
+    o, xs = trk.settings, trk.model.x_scale
+    A = transitions(trk.model, taus[:, -1])                                        # window start -> now
+    now = np.einsum("rij,rj->ri", A, fits.theta[:, 0])[:, :2] * xs[:2]
+    before = np.einsum("rij,rj->ri", A, trk.state.win[runs, 0])[:, :2] * xs[:2]   # NaN: no attempt yet
+    with np.errstate(invalid="ignore"):
+        agree = np.hypot(*(now - before).T) < o.distinct_m
+    cov = np.linalg.inv(fits.info[:, 0] / (o.inflate * trk.kappa) + trk.prior_info)
+    pos = (A @ cov @ np.swapaxes(A, -1, -2))[:, :2, :2] * np.outer(xs[:2], xs[:2])
+    ok = fits.fit_ok & agree & (crlb_sd(pos) < EARLY_SD_M)
+    if ok.any():
+        ok[ok] = mirror_gap(trk, fits.take(ok), yw[ok], taus[ok]) > 2.0 * o.ambiguity_nats
+    return ok
+
+
+def mirror_gap(trk, fits, yw, taus):
+    r"""The chi-square (Huber cost) (R,) by which the best of ``fits`` explains its window ``yw`` (R, W, m) at
+    times ``taus`` (R, W) better than the passage mirrored through the array's centre ``c``: a refit started
+    from :math:`(2c - \mathbf{x}, -\mathbf{v})` (the other components as fitted); infinite where that refit
+    returns to the best fit (closer than ``distinct_m``).
+
+    A static dipole's field is even in the source-to-sensor vector, so far from a small array a passage and its
+    mirror image across it give nearly the same samples (exactly, with one sensor and no depth offset) until
+    the closest approach: a short window's search may find the one and not the other.
+    """
+    o, xs = trk.settings, trk.model.x_scale
+    best = fits.theta[:, 0] * xs
+    centre = trk.model.array.positions[:, :2].mean(axis=0)
+    mirror = best.copy()
+    mirror[:, :2] = 2.0 * centre - best[:, :2]
+    mirror[:, 2:4] = -best[:, 2:4]
+    other = refit_window(trk.model, yw, (mirror / xs)[:, None], taus=taus, prior=depth_prior(trk.model, o.z_std),
+                         keep=1, gof=None, huber=trk.huber)
+    A = transitions(trk.model, taus[:, -1])
+    apart = np.hypot(*((np.einsum("rij,rj->ri", A, other.theta[:, 0] - fits.theta[:, 0])[:, :2]) * xs[:2]).T)
+    return np.where(apart < o.distinct_m, np.inf, other.chi2[:, 0] - fits.chi2[:, 0])
+
+
+EARLY_SD_M = 10.0
+"""An early start's largest position standard deviation, m (:func:`accepted`)."""
 
 
 def window_fits_of(trk, yw, taus):
