@@ -1,6 +1,6 @@
 """The starts of a tracker's banks: detection and the window fits that start a passage's bank
-(:func:`initialise`, :func:`fit_windows`), and the refits that restart it when due (:func:`restart`,
-:func:`refit`), each a batch over the passages concerned.
+(:func:`initialise`, :func:`fit_windows`; early, on a growing window, once its fits are :func:`accepted`),
+and the refits that restart it when due (:func:`restart`, :func:`refit`), each a batch over the passages concerned.
 
 Functions of a :class:`~shipsense.trackers.tracker.tracker.Tracker` ``trk``: they read its model, settings and
 initialiser options, and write its per-passage state (``trk.state``,
@@ -124,44 +124,40 @@ def fit_windows(trk, ready, out):
         yw, taus = samples_since(trk.state, group, trk.state.k0[group])
         t0 = time.perf_counter()
         fits = window_fits_of(trk, yw, taus)
+        ok = ~trk.state.early[group] | accepted(trk, fits, yw, taus)
         trk.seconds["initialiser"] += time.perf_counter() - t0
-        ok = ~trk.state.early[group] | accepted(trk, group, fits, yw, taus)
-        trk.state.win[group] = fits.theta              # (an early attempt's: the next attempt compares with it)
-        trk.state.win_t0[group] = trk.state.t_hist[group, trk.state.k0[group] % trk.state.y_hist.shape[1]]
         trk.state.phase[group[~ok]] = STARTING
         if not ok.any():
             continue
         if not ok.all():
             group, fits, taus = group[ok], fits.take(ok), taus[ok]
+        trk.state.win[group] = fits.theta
+        trk.state.win_t0[group] = trk.state.t_hist[group, trk.state.k0[group] % trk.state.y_hist.shape[1]]
         trk.state.scan[group] = trk.state.n[group]
         trk.state.phase[group] = RUNNING
         start_banks(trk, group, fits, taus[:, -1], o.inflate, out)
 
 
-def accepted(trk, runs, fits, yw, taus):
-    r"""Whether the fits ``fits`` of the early attempts of passages ``runs`` (R,) on windows ``yw`` (R, W, m)
-    at times ``taus`` (R, W) start their banks (R,).
+def accepted(trk, fits, yw, taus):
+    r"""Whether the fits ``fits`` of early attempts on windows ``yw`` (R, W, m) at times ``taus`` (R, W) start
+    their banks (R,).
 
-    A short window's fits are accepted when they locate the ship and are stable as the window grows: the best
+    A short window's fits are accepted when they locate the ship and tell it from its mirror image: the best
     fit passes its goodness-of-fit test, the larger axis of its position standard deviation at this sample
-    (of the covariance its bank would start from, :func:`start_banks`) is under :data:`EARLY_SD_M`, the
-    previous attempt's best fit (``trk.state.win``, the same window start), carried to this sample, is one fit
-    with it (closer than ``distinct_m``), and it explains the window better than its mirror image by more
-    than ``ambiguity_nats`` (:func:`mirror_gap`).  A complete window, or one past the peak, always starts its
-    bank.
+    (of the covariance its bank would start from, :func:`start_banks`, at most the passage prior's) is under
+    :data:`EARLY_SD_M`, and it explains the window better than the passage mirrored across the array by more
+    than ``2 ambiguity_nats`` of chi-square (:func:`mirror_gap`).  A complete window, or one past the peak,
+    always starts its bank.
 
-    The test guards against the minima of a short window: a few samples far from the array fit a wrong
-    passage as well as the true one, with a curvature that alone would call it metres-accurate.
+    The last test guards against a short window's other minimum: a few samples far from the array fit the
+    mirrored passage (tens to hundreds of metres off) about as well as the true one, and the search may
+    find the one alone, with a curvature that would call it metres-accurate.
     """
     o, xs = trk.settings, trk.model.x_scale
     A = transitions(trk.model, taus[:, -1])                                        # window start -> now
-    now = np.einsum("rij,rj->ri", A, fits.theta[:, 0])[:, :2] * xs[:2]
-    before = np.einsum("rij,rj->ri", A, trk.state.win[runs, 0])[:, :2] * xs[:2]   # NaN: no attempt yet
-    with np.errstate(invalid="ignore"):
-        agree = np.hypot(*(now - before).T) < o.distinct_m
     cov = np.linalg.inv(fits.info[:, 0] / (o.inflate * trk.kappa) + trk.prior_info)
     pos = (A @ cov @ np.swapaxes(A, -1, -2))[:, :2, :2] * np.outer(xs[:2], xs[:2])
-    ok = fits.fit_ok & agree & (crlb_sd(pos) < EARLY_SD_M)
+    ok = fits.fit_ok & (crlb_sd(pos) < EARLY_SD_M)        # (crlb_sd: the larger axis's standard deviation)
     if ok.any():
         ok[ok] = mirror_gap(trk, fits.take(ok), yw[ok], taus[ok]) > 2.0 * o.ambiguity_nats
     return ok

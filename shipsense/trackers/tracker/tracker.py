@@ -11,10 +11,19 @@ batch, the pipeline of this package one sample at a time:
    still gets a fit across the closest approach), then the global
    initialiser's fits of that window
    (:func:`~shipsense.trackers.init.window_fits.window_fits`: grid search with the
-   moment eliminated, Levenberg-Marquardt refinement, a chi-square test);
-   until then the reported belief is the prior's (the array centroid with the
-   passage prior's spread: honest, not informative); a bank starts from a
-   fit's information plus that prior's, so never wider than the prior;
+   moment eliminated, Levenberg-Marquardt refinement, a chi-square test).
+   Before the window is complete the initialiser already tries the samples
+   since the detection, every ``window // 15`` samples from the fourth
+   (:func:`~shipsense.trackers.tracker.bank_starts.early_attempt`), and starts
+   the bank from such an early fit once it passes its test, locates the ship
+   within 10 m (one standard deviation) and explains the samples better than
+   the passage mirrored across the array by ``2 ambiguity_nats``
+   (:func:`~shipsense.trackers.tracker.bank_starts.accepted`): the tracker
+   starts about when the data locate the ship rather than a whole window
+   later (``experiments/first_track.py``).  Until then the reported belief is
+   the prior's (the array centroid with the passage prior's spread: honest,
+   not informative); a bank starts from a fit's information plus that
+   prior's, so never wider than the prior;
 3. **tracking**: a bank of the distinct fits (filter unit ``ukf``, or the
    Huber UKF when ``robust``), without process noise -- the passages are
    straight and constant-velocity -- restarted from batch refits of its
