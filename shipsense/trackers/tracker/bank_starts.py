@@ -251,7 +251,8 @@ def start_banks(trk, runs, fits, tau, inflate, out):
 
 def restart(trk, runs, snr, out):
     """Refit the passages among ``runs`` whose bank is due (alarms, schedule, peak, collapse, a failed
-    consistency test: :func:`~shipsense.trackers.tracker.restarts.due`); with motion modes, not before a window
+    consistency test: :func:`~shipsense.trackers.tracker.restarts.due`; a selection that has just become
+    ambiguous, ``out.ambiguous``); with motion modes, not before a window
     of samples has come after the last manoeuvring one (a refit's line starts after the manoeuvre)."""
     if trk.modes is not None:
         since = trk.state.since[runs]
@@ -263,6 +264,12 @@ def restart(trk, runs, snr, out):
         s.scan, s.own, s.ref, s.cons_now, *restart_options(trk.settings), out.status, out.cov, INCONSISTENT,
         flags)
     due_, alarm, after_peak, rescan = flags.T
+    # a near tie far apart that has just arisen: the filters' running likelihoods may have drifted (near the
+    # closest approach, a wrong hypothesis's filter can out-predict the true one's for a few samples); a
+    # refit weighs the hypotheses by their exact fits to every sample since the window start
+    tie = out.ambiguous[runs] & ~s.tied[runs] & (s.n[runs] > s.start[runs])
+    s.tied[runs] = out.ambiguous[runs]
+    due_ |= tie
     if due_.any():
         sel = runs[due_]
         trk.state.scan[runs[rescan]] = trk.state.n[runs[rescan]]

@@ -29,7 +29,10 @@ batch, the pipeline of this package one sample at a time:
    straight and constant-velocity -- restarted from batch refits of its
    recent samples (:func:`~shipsense.trackers.tracker.restarts.refit_window`): every
    ``refit_every`` samples until the closest approach, once when the signal
-   has fallen to ``through_peak`` of its peak, when the selected hypothesis's
+   has fallen to ``through_peak`` of its peak, when the selection becomes
+   ambiguous (a near tie between hypotheses far apart has just arisen: the
+   filters' running likelihoods can drift near the closest approach, a refit
+   weighs the hypotheses by their fits to every sample), when the selected hypothesis's
    innovations say it has diverged, when its covariance collapses (see
    :mod:`~shipsense.trackers.tracker.restarts`), and when the windowed innovation
    consistency test fails (:mod:`~shipsense.trackers.tracker.consistency`: the
