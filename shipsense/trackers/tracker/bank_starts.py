@@ -265,11 +265,13 @@ def restart(trk, runs, snr, out):
         flags)
     due_, alarm, after_peak, rescan = flags.T
     # a near tie far apart that has just arisen: the filters' running likelihoods may have drifted (near the
-    # closest approach, a wrong hypothesis's filter can out-predict the true one's for a few samples); a
-    # refit weighs the hypotheses by their exact fits to every sample since the window start
+    # closest approach, a wrong hypothesis's filter can out-predict the true one's for a few samples), or
+    # neither hypothesis is the passage; a refit weighs the hypotheses by their exact fits to every sample
+    # since the window start, with the global initialiser's fits of those samples among its starts
     tie = out.ambiguous[runs] & ~s.tied[runs] & (s.n[runs] > s.start[runs])
     s.tied[runs] = out.ambiguous[runs]
     due_ |= tie
+    rescan |= tie
     if due_.any():
         sel = runs[due_]
         trk.state.scan[runs[rescan]] = trk.state.n[runs[rescan]]
