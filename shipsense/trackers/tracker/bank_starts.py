@@ -264,12 +264,7 @@ def restart(trk, runs, snr, out):
         s.scan, s.own, s.ref, s.cons_now, *restart_options(trk.settings), out.status, out.cov, INCONSISTENT,
         flags)
     due_, alarm, after_peak, rescan = flags.T
-    # a near tie far apart that has just arisen: the filters' running likelihoods may have drifted (near the
-    # closest approach, a wrong hypothesis's filter can out-predict the true one's for a few samples), or
-    # neither hypothesis is the passage; a refit weighs the hypotheses by their exact fits to every sample
-    # since the window start, with the global initialiser's fits of those samples among its starts
-    tie = out.ambiguous[runs] & ~s.tied[runs] & (s.n[runs] > s.start[runs])
-    s.tied[runs] = out.ambiguous[runs]
+    tie = newly_tied(trk, runs, out)
     due_ |= tie
     rescan |= tie
     if due_.any():
@@ -284,6 +279,20 @@ def restart(trk, runs, snr, out):
         # refit's covariance -- unless the fit failed its own test (then as any failed fit)
         ok = runs[failed_test & trk.state.trusted[runs]]
         out.status[ok], trk.state.cons_now[ok] = INCONSISTENT, True
+
+
+def newly_tied(trk, runs, out):
+    """Whether the selections of passages ``runs`` (R,) have just become ambiguous (``out.ambiguous``: a near
+    tie between hypotheses far apart, :func:`~shipsense.trackers.bank.selection.report`), not at a (re)start.
+
+    Such a passage is refitted (:func:`restart`), with the global initialiser's fits of its samples among the
+    starts: the filters' running likelihoods may have drifted (near the closest approach a wrong hypothesis's
+    filter can out-predict the true one's for a few samples), or no hypothesis is the passage; the refit
+    weighs the hypotheses by their fits to every sample since the window start."""
+    s = trk.state
+    tie = out.ambiguous[runs] & ~s.tied[runs] & (s.n[runs] > s.start[runs])
+    s.tied[runs] = out.ambiguous[runs]
+    return tie
 
 
 def refit(trk, runs, alarm, rescan, out):
