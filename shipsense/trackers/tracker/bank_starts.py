@@ -123,19 +123,46 @@ def fit_windows(trk, ready, out):
         group = ready[have == length]
         yw, taus = samples_since(trk.state, group, trk.state.k0[group])
         t0 = time.perf_counter()
-        fits = window_fits_of(trk, yw, taus)
-        ok = ~trk.state.early[group] | accepted(trk, fits, yw, taus)
+        early = trk.state.early[group]
+        again = early & np.isfinite(trk.state.win[group, 0, 0])         # an earlier attempt's fits to carry on
+        if again.all():
+            fits = continued_fits(trk, trk.state.win[group], yw, taus)
+        else:
+            fits = window_fits_of(trk, yw, taus)
+        ok = ~early | accepted(trk, fits, yw, taus)
         trk.seconds["initialiser"] += time.perf_counter() - t0
+        trk.state.win[group] = fits.theta              # (an early attempt's: the next attempt carries them on)
+        trk.state.win_t0[group] = trk.state.t_hist[group, trk.state.k0[group] % trk.state.y_hist.shape[1]]
         trk.state.phase[group[~ok]] = STARTING
         if not ok.any():
             continue
         if not ok.all():
             group, fits, taus = group[ok], fits.take(ok), taus[ok]
-        trk.state.win[group] = fits.theta
-        trk.state.win_t0[group] = trk.state.t_hist[group, trk.state.k0[group] % trk.state.y_hist.shape[1]]
         trk.state.scan[group] = trk.state.n[group]
         trk.state.phase[group] = RUNNING
         start_banks(trk, group, fits, taus[:, -1], o.inflate, out)
+
+
+def continued_fits(trk, theta, yw, taus):
+    """An early attempt after the first: the previous attempt's fits ``theta`` (R, keep_init, n, internal, at
+    the same window start) and their mirror images (:func:`mirrored`) refitted to the grown windows ``yw`` (R,
+    W, m) at times ``taus`` (R, W) (Levenberg-Marquardt only: the grid search ran at the first attempt, and
+    runs again at the complete window); the ``keep_init`` best distinct fits, as :class:`WindowFits`."""
+    o = trk.settings
+    starts = np.concatenate([theta, mirrored(trk, theta)], axis=1)
+    return refit_window(trk.model, yw, starts, taus=taus, prior=depth_prior(trk.model, o.z_std), keep=o.keep_init,
+                        distinct_m=o.distinct_m, gof=o.gof, huber=trk.huber)
+
+
+def mirrored(trk, theta):
+    r"""States ``theta`` (..., n, internal units) mirrored through the array's centre ``c``: position
+    :math:`2c - \mathbf{x}`, velocity :math:`-\mathbf{v}`, the other components as they are."""
+    xs = trk.model.x_scale
+    centre = trk.model.array.positions[:, :2].mean(axis=0)
+    out = np.array(theta, dtype=float)
+    out[..., :2] = (2.0 * centre - theta[..., :2] * xs[:2]) / xs[:2]
+    out[..., 2:4] = -theta[..., 2:4]
+    return out
 
 
 def accepted(trk, fits, yw, taus):
@@ -174,13 +201,8 @@ def mirror_gap(trk, fits, yw, taus):
     the closest approach: a short window's search may find the one and not the other.
     """
     o, xs = trk.settings, trk.model.x_scale
-    best = fits.theta[:, 0] * xs
-    centre = trk.model.array.positions[:, :2].mean(axis=0)
-    mirror = best.copy()
-    mirror[:, :2] = 2.0 * centre - best[:, :2]
-    mirror[:, 2:4] = -best[:, 2:4]
-    other = refit_window(trk.model, yw, (mirror / xs)[:, None], taus=taus, prior=depth_prior(trk.model, o.z_std),
-                         keep=1, gof=None, huber=trk.huber)
+    other = refit_window(trk.model, yw, mirrored(trk, fits.theta[:, :1]), taus=taus,
+                         prior=depth_prior(trk.model, o.z_std), keep=1, gof=None, huber=trk.huber)
     A = transitions(trk.model, taus[:, -1])
     apart = np.hypot(*((np.einsum("rij,rj->ri", A, other.theta[:, 0] - fits.theta[:, 0])[:, :2]) * xs[:2]).T)
     return np.where(apart < o.distinct_m, np.inf, other.chi2[:, 0] - fits.chi2[:, 0])
