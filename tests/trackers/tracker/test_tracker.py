@@ -295,9 +295,10 @@ def test_a_weak_window_fit_does_not_start_a_bank_wider_than_the_prior():
 
 def test_an_inconsistent_track_reports_no_more_than_the_prior_knows():
     """Wide-prior one-magnetometer passage 29: the early window fits are wrong (one magnetometer before the
-    closest approach), the refits fail their test for ~40 samples and the track is 20-150 m off while its
-    own covariance shrinks to metres.  The status says `inconsistent`; the covariance must say it too: the
-    truth stays inside the reported 99.9 % ellipse at every such sample."""
+    closest approach), the refits fail their test for several samples (15 before the ambiguity restart, 7
+    with it) and the track is 120-150 m off while its own covariance shrinks to metres.  The status says
+    `inconsistent`; the covariance must say it too: the truth stays inside the reported 99.9 % ellipse at
+    every such sample."""
     from shipsense.reproduce import wide
 
     sc, model, unit, y, truth, ends = wide.family_passages("one_magnetometer", 100, 0)
@@ -306,7 +307,7 @@ def test_an_inconsistent_track_reports_no_more_than_the_prior_knows():
     bad = res.status[0] == INCONSISTENT
     d = res.estimates[0, :, :2] - truth[29, :, :2]
     err = np.hypot(*d.T)
-    assert bad.sum() >= 10 and err[bad].max() > 20.0      # the case: a long stretch, far off
+    assert bad.sum() >= 5 and err[bad].max() > 20.0       # the case: a stretch far off
     q = np.einsum("ki,kij,kj->k", d, np.linalg.inv(res.position_cov[0]), d)
     assert q[bad].max() < 13.8, q[bad].max()
     assert err[ends[29] - 10: ends[29]].max() < 1.0       # and it recovers
