@@ -72,6 +72,7 @@ class PassageV1Core(PassagePrefetch):
             raise ValueError(f"scenario {sc.name!r} has no [prior]: Passage-v1 draws passages from it")
         self.scenario = sc
         tracker = Tracker(sc, passages=num_envs)
+        tracker.EARLY_STARTS = False   # Passage-v1 keeps its observer: a bank starts from the complete window
         self.model = tracker.model
         arr = self.model.array
         self.S = len(arr.ids)

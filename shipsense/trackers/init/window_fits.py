@@ -9,7 +9,7 @@ checked by a chi-square goodness-of-fit test (:func:`chi2_limit`);
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -96,6 +96,10 @@ class WindowFits:
     found: np.ndarray
     limit: np.ndarray
     expected: np.ndarray
+
+    def take(self, rows):
+        """The fits of passages ``rows`` (indices or a boolean mask over the R passages)."""
+        return WindowFits(*(getattr(self, f.name)[rows] for f in fields(self)))
 
     @property
     def fit_ok(self):

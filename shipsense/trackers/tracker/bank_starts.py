@@ -1,6 +1,6 @@
 """The starts of a tracker's banks: detection and the window fits that start a passage's bank
-(:func:`initialise`, :func:`fit_windows`), and the refits that restart it when due (:func:`restart`,
-:func:`refit`), each a batch over the passages concerned.
+(:func:`initialise`, :func:`fit_windows`; early, on a growing window, once its fits are :func:`accepted`),
+and the refits that restart it when due (:func:`restart`, :func:`refit`), each a batch over the passages concerned.
 
 Functions of a :class:`~shipsense.trackers.tracker.tracker.Tracker` ``trk``: they read its model, settings and
 initialiser options, and write its per-passage state (``trk.state``,
@@ -18,7 +18,8 @@ import numpy as np
 from shipsense.models.transitions import transitions
 from shipsense.trackers.filters.core import symmetrize
 from shipsense.trackers.init.window_fits import depth_prior, window_fits
-from shipsense.trackers.tracker.passages import PENDING, RUNNING
+from shipsense.trackers.metrics import crlb_sd
+from shipsense.trackers.tracker.passages import PENDING, RUNNING, STARTING
 from shipsense.trackers.tracker.restarts import due, refit_window
 from shipsense.trackers.tracker.results import INCONSISTENT, INITIALISING, RESTARTED
 
@@ -84,18 +85,37 @@ def initialise(trk, starting, snr, out, defer=False):
     have = trk.state.n[seen] - trk.state.k0[seen] + 1
     # the window is complete, or the signal has passed its peak: a fit then spans the closest approach
     passed = (o.through_peak is not None) & (snr[seen] < (o.through_peak or 0.0) * trk.state.peak[seen])
-    ready = seen[(have >= trk.window) | (passed & (have >= max(4, trk.window // 5)))]
+    forced = (have >= trk.window) | (passed & (have >= max(4, trk.window // 5)))
+    early = ~forced & early_attempt(trk, have)
+    ready = seen[forced | early]
     if ready.size == 0:
         return
+    trk.state.early[ready] = early[forced | early]
     if defer:
         trk.state.phase[ready] = PENDING
         return
     fit_windows(trk, ready, out)
 
 
+def early_attempt(trk, have):
+    """Whether passages ``have`` (...) samples after their detection, their windows not yet complete, try an
+    early start (:func:`fit_windows`, :func:`accepted`): from :data:`EARLY_MIN` samples on, every
+    ``window // EARLY_ATTEMPTS`` samples (at least every sample): at most about :data:`EARLY_ATTEMPTS` attempts
+    per window, so its cost is bounded.  Never when the tracker's ``EARLY_STARTS`` is False."""
+    every = max(1, trk.window // EARLY_ATTEMPTS)
+    return trk.EARLY_STARTS & (have >= EARLY_MIN) & (have < trk.window) & ((have - EARLY_MIN) % every == 0)
+
+
+EARLY_MIN = 4
+"""Samples since the detection at a passage's first early start attempt (:func:`early_attempt`)."""
+EARLY_ATTEMPTS = 15
+"""Early start attempts per initialisation window, at most about (:func:`early_attempt`)."""
+
+
 def fit_windows(trk, ready, out):
-    """The global fits of the windows of passages ``ready`` (complete at their current sample) and their
-    banks' start, one batch per window length: a passage's fits are those it would have alone (a batch of
+    """The global fits of the windows of passages ``ready`` (complete, or an early attempt, at their current
+    sample) and the start of the banks of those whose fits are accepted (:func:`accepted`; the others stay
+    initialising), one batch per window length: a passage's fits are those it would have alone (a batch of
     windows of different lengths would pad the shorter ones, and their fits would move at rounding)."""
     o = trk.settings
     have = trk.state.n[ready] - trk.state.k0[ready] + 1
@@ -103,13 +123,93 @@ def fit_windows(trk, ready, out):
         group = ready[have == length]
         yw, taus = samples_since(trk.state, group, trk.state.k0[group])
         t0 = time.perf_counter()
-        fits = window_fits_of(trk, yw, taus)
+        early = trk.state.early[group]
+        again = early & np.isfinite(trk.state.win[group, 0, 0])         # an earlier attempt's fits to carry on
+        if again.all():
+            fits = continued_fits(trk, trk.state.win[group], yw, taus)
+        else:
+            fits = window_fits_of(trk, yw, taus)
+        ok = ~early | accepted(trk, fits, yw, taus)
         trk.seconds["initialiser"] += time.perf_counter() - t0
-        trk.state.win[group] = fits.theta
+        trk.state.win[group] = fits.theta              # (an early attempt's: the next attempt carries them on)
         trk.state.win_t0[group] = trk.state.t_hist[group, trk.state.k0[group] % trk.state.y_hist.shape[1]]
+        trk.state.phase[group[~ok]] = STARTING
+        if not ok.any():
+            continue
+        if not ok.all():
+            group, fits, taus = group[ok], fits.take(ok), taus[ok]
         trk.state.scan[group] = trk.state.n[group]
         trk.state.phase[group] = RUNNING
         start_banks(trk, group, fits, taus[:, -1], o.inflate, out)
+
+
+def continued_fits(trk, theta, yw, taus):
+    """An early attempt after the first: the previous attempt's fits ``theta`` (R, keep_init, n, internal, at
+    the same window start) and their mirror images (:func:`mirrored`) refitted to the grown windows ``yw`` (R,
+    W, m) at times ``taus`` (R, W) (Levenberg-Marquardt only: the grid search ran at the first attempt, and
+    runs again at the complete window); the ``keep_init`` best distinct fits, as :class:`WindowFits`."""
+    o = trk.settings
+    starts = np.concatenate([theta, mirrored(trk, theta)], axis=1)
+    return refit_window(trk.model, yw, starts, taus=taus, prior=depth_prior(trk.model, o.z_std), keep=o.keep_init,
+                        distinct_m=o.distinct_m, gof=o.gof, huber=trk.huber)
+
+
+def mirrored(trk, theta):
+    r"""States ``theta`` (..., n, internal units) mirrored through the array's centre ``c``: position
+    :math:`2c - \mathbf{x}`, velocity :math:`-\mathbf{v}`, the other components as they are."""
+    xs = trk.model.x_scale
+    centre = trk.model.array.positions[:, :2].mean(axis=0)
+    out = np.array(theta, dtype=float)
+    out[..., :2] = (2.0 * centre - theta[..., :2] * xs[:2]) / xs[:2]
+    out[..., 2:4] = -theta[..., 2:4]
+    return out
+
+
+def accepted(trk, fits, yw, taus):
+    r"""Whether the fits ``fits`` of early attempts on windows ``yw`` (R, W, m) at times ``taus`` (R, W) start
+    their banks (R,).
+
+    A short window's fits are accepted when they locate the ship and tell it from its mirror image: the best
+    fit passes its goodness-of-fit test, the larger axis of its position standard deviation at this sample
+    (of the covariance its bank would start from, :func:`start_banks`, at most the passage prior's) is under
+    :data:`EARLY_SD_M`, and it explains the window better than the passage mirrored across the array by more
+    than ``2 ambiguity_nats`` of chi-square (:func:`mirror_gap`).  A complete window, or one past the peak,
+    always starts its bank.
+
+    The last test guards against a short window's other minimum: a few samples far from the array fit the
+    mirrored passage (tens to hundreds of metres off) about as well as the true one, and the search may
+    find the one alone, with a curvature that would call it metres-accurate.
+    """
+    o, xs = trk.settings, trk.model.x_scale
+    A = transitions(trk.model, taus[:, -1])                                        # window start -> now
+    cov = np.linalg.inv(fits.info[:, 0] / (o.inflate * trk.kappa) + trk.prior_info)
+    pos = (A @ cov @ np.swapaxes(A, -1, -2))[:, :2, :2] * np.outer(xs[:2], xs[:2])
+    ok = fits.fit_ok & (crlb_sd(pos) < EARLY_SD_M)        # (crlb_sd: the larger axis's standard deviation)
+    if ok.any():
+        ok[ok] = mirror_gap(trk, fits.take(ok), yw[ok], taus[ok]) > 2.0 * o.ambiguity_nats
+    return ok
+
+
+def mirror_gap(trk, fits, yw, taus):
+    r"""The chi-square (Huber cost) (R,) by which the best of ``fits`` explains its window ``yw`` (R, W, m) at
+    times ``taus`` (R, W) better than the passage mirrored through the array's centre ``c``: a refit started
+    from :math:`(2c - \mathbf{x}, -\mathbf{v})` (the other components as fitted); infinite where that refit
+    returns to the best fit (closer than ``distinct_m``).
+
+    A static dipole's field is even in the source-to-sensor vector, so far from a small array a passage and its
+    mirror image across it give nearly the same samples (exactly, with one sensor and no depth offset) until
+    the closest approach: a short window's search may find the one and not the other.
+    """
+    o, xs = trk.settings, trk.model.x_scale
+    other = refit_window(trk.model, yw, mirrored(trk, fits.theta[:, :1]), taus=taus,
+                         prior=depth_prior(trk.model, o.z_std), keep=1, gof=None, huber=trk.huber)
+    A = transitions(trk.model, taus[:, -1])
+    apart = np.hypot(*((np.einsum("rij,rj->ri", A, other.theta[:, 0] - fits.theta[:, 0])[:, :2]) * xs[:2]).T)
+    return np.where(apart < o.distinct_m, np.inf, other.chi2[:, 0] - fits.chi2[:, 0])
+
+
+EARLY_SD_M = 10.0
+"""An early start's largest position standard deviation, m (:func:`accepted`)."""
 
 
 def window_fits_of(trk, yw, taus):
@@ -173,7 +273,8 @@ def start_banks(trk, runs, fits, tau, inflate, out):
 
 def restart(trk, runs, snr, out):
     """Refit the passages among ``runs`` whose bank is due (alarms, schedule, peak, collapse, a failed
-    consistency test: :func:`~shipsense.trackers.tracker.restarts.due`); with motion modes, not before a window
+    consistency test: :func:`~shipsense.trackers.tracker.restarts.due`; a selection that has just become
+    ambiguous, ``out.ambiguous``); with motion modes, not before a window
     of samples has come after the last manoeuvring one (a refit's line starts after the manoeuvre)."""
     if trk.modes is not None:
         since = trk.state.since[runs]
@@ -185,6 +286,9 @@ def restart(trk, runs, snr, out):
         s.scan, s.own, s.ref, s.cons_now, *restart_options(trk.settings), out.status, out.cov, INCONSISTENT,
         flags)
     due_, alarm, after_peak, rescan = flags.T
+    tie = newly_tied(trk, runs, out)
+    due_ |= tie
+    rescan |= tie
     if due_.any():
         sel = runs[due_]
         trk.state.scan[runs[rescan]] = trk.state.n[runs[rescan]]
@@ -197,6 +301,20 @@ def restart(trk, runs, snr, out):
         # refit's covariance -- unless the fit failed its own test (then as any failed fit)
         ok = runs[failed_test & trk.state.trusted[runs]]
         out.status[ok], trk.state.cons_now[ok] = INCONSISTENT, True
+
+
+def newly_tied(trk, runs, out):
+    """Whether the selections of passages ``runs`` (R,) have just become ambiguous (``out.ambiguous``: a near
+    tie between hypotheses far apart, :func:`~shipsense.trackers.bank.selection.report`), not at a (re)start.
+
+    Such a passage is refitted (:func:`restart`), with the global initialiser's fits of its samples among the
+    starts: the filters' running likelihoods may have drifted (near the closest approach a wrong hypothesis's
+    filter can out-predict the true one's for a few samples), or no hypothesis is the passage; the refit
+    weighs the hypotheses by their fits to every sample since the window start."""
+    s = trk.state
+    tie = out.ambiguous[runs] & ~s.tied[runs] & (s.n[runs] > s.start[runs])
+    s.tied[runs] = out.ambiguous[runs]
+    return tie
 
 
 def refit(trk, runs, alarm, rescan, out):

@@ -51,6 +51,8 @@ class PassageArrays:
     cons_fails: np.ndarray   # (P,) samples the test failed on
     cons_now: np.ndarray     # (P,) it failed on this one
     since: np.ndarray        # (P,) last sample reported manoeuvring (-1: none): refits start after it
+    early: np.ndarray        # (P,) its window fits (due or pending) are an early attempt, accepted on their test
+    tied: np.ndarray         # (P,) the last sample's selection was ambiguous (a near tie far apart)
 
     @staticmethod
     def layout(m, n, settings, hist):
@@ -66,7 +68,7 @@ class PassageArrays:
             "y_hist": ((hist, m), float, np.nan), "t_hist": ((hist,), float, np.nan), "own": ((), float, np.nan),
             "cons": ((settings.consistency_window or 1, 2, m), float, 0.0), "cons_n": ((), int, 0),
             "cons_tests": ((), int, 0), "cons_fails": ((), int, 0), "cons_now": ((), bool, False),
-            "since": ((), int, -1),
+            "since": ((), int, -1), "early": ((), bool, False), "tied": ((), bool, False),
         }
 
     @classmethod

@@ -11,16 +11,28 @@ batch, the pipeline of this package one sample at a time:
    still gets a fit across the closest approach), then the global
    initialiser's fits of that window
    (:func:`~shipsense.trackers.init.window_fits.window_fits`: grid search with the
-   moment eliminated, Levenberg-Marquardt refinement, a chi-square test);
-   until then the reported belief is the prior's (the array centroid with the
-   passage prior's spread: honest, not informative); a bank starts from a
-   fit's information plus that prior's, so never wider than the prior;
+   moment eliminated, Levenberg-Marquardt refinement, a chi-square test).
+   Before the window is complete the initialiser already tries the samples
+   since the detection, every ``window // 15`` samples from the fourth
+   (:func:`~shipsense.trackers.tracker.bank_starts.early_attempt`), and starts
+   the bank from such an early fit once it passes its test, locates the ship
+   within 10 m (one standard deviation) and explains the samples better than
+   the passage mirrored across the array by ``2 ambiguity_nats``
+   (:func:`~shipsense.trackers.tracker.bank_starts.accepted`): the tracker
+   starts about when the data locate the ship rather than a whole window
+   later (``experiments/first_track.py``).  Until then the reported belief is
+   the prior's (the array centroid with the passage prior's spread: honest,
+   not informative); a bank starts from a fit's information plus that
+   prior's, so never wider than the prior;
 3. **tracking**: a bank of the distinct fits (filter unit ``ukf``, or the
    Huber UKF when ``robust``), without process noise -- the passages are
    straight and constant-velocity -- restarted from batch refits of its
    recent samples (:func:`~shipsense.trackers.tracker.restarts.refit_window`): every
    ``refit_every`` samples until the closest approach, once when the signal
-   has fallen to ``through_peak`` of its peak, when the selected hypothesis's
+   has fallen to ``through_peak`` of its peak, when the selection becomes
+   ambiguous (a near tie between hypotheses far apart has just arisen: the
+   filters' running likelihoods can drift near the closest approach, a refit
+   weighs the hypotheses by their fits to every sample), when the selected hypothesis's
    innovations say it has diverged, when its covariance collapses (see
    :mod:`~shipsense.trackers.tracker.restarts`), and when the windowed innovation
    consistency test fails (:mod:`~shipsense.trackers.tracker.consistency`: the
@@ -297,6 +309,11 @@ class Tracker:
     def _check_unpruned(self):
         if len(self.bank.idx) != self.bank.R * self.bank.H:
             raise ValueError("passage states need a bank without pruning (the tracker method's)")
+
+    EARLY_STARTS = True
+    """Whether a bank may start from an early attempt before its initialisation window is complete
+    (:func:`~shipsense.trackers.tracker.bank_starts.early_attempt`); an observer that must keep the
+    complete-window start (Passage-v1's) sets it False on its tracker."""
 
     # -- what the studies' variant changes (StudyBankTracker) ----------------------------------------------------
     TESTS_CONSISTENCY = True

@@ -163,23 +163,23 @@ def test_a_passage_is_tracked_as_alone_whatever_is_refitted_beside_it():
 
 def test_robust_refits_are_batched_per_window_length():
     """A robust tracker's refits (their information numpy's over the window) are batched per window length:
-    PassageHard-v1's passage 1 of this draw, refitted beside passage 0 with windows of other lengths, gets
+    PassageHard-v1's passage 1 of this draw, refitted beside the others with windows of other lengths, gets
     exactly what it gets alone; in one padded batch it moved."""
     from shipsense.config import load_scenario
     from shipsense.envs import PASSAGE_V1_VARIANTS
 
     sc = load_scenario("S2").with_updates(**PASSAGE_V1_VARIANTS["shipsense/PassageHard-v1"]["overrides"])
-    sim = simulate(sc, runs=2, seed=2, random=True)
-    y = sim.measurements[[1, 0]]
-    alone = Tracker(sc, passages=1).track(sim.times, y[:1])
-    both = Tracker(sc, passages=2)
+    sim = simulate(sc, runs=6, seed=2, random=True)
+    y = sim.measurements
+    alone = Tracker(sc, passages=1).track(sim.times, y[1:2])
+    both = Tracker(sc, passages=6)
     assert both.huber is not None and not both.pads_exactly
     res = both.track(sim.times, y)
-    np.testing.assert_array_equal(res.estimates[0], alone.estimates[0])
-    np.testing.assert_array_equal(res.covs[0], alone.covs[0])
-    padded = Tracker(sc, passages=2)
+    np.testing.assert_array_equal(res.estimates[1], alone.estimates[0])
+    np.testing.assert_array_equal(res.covs[1], alone.covs[0])
+    padded = Tracker(sc, passages=6)
     padded.pads_exactly = True                          # one padded batch, as the compiled fits take
-    assert not np.array_equal(padded.track(sim.times, y).estimates[0], alone.estimates[0])
+    assert not np.array_equal(padded.track(sim.times, y).estimates[1], alone.estimates[0])
 
 
 def test_each_passage_starts_from_its_own_data_and_nothing_raises_for_the_batch(s2):
@@ -295,9 +295,10 @@ def test_a_weak_window_fit_does_not_start_a_bank_wider_than_the_prior():
 
 def test_an_inconsistent_track_reports_no_more_than_the_prior_knows():
     """Wide-prior one-magnetometer passage 29: the early window fits are wrong (one magnetometer before the
-    closest approach), the refits fail their test for ~40 samples and the track is 20-150 m off while its
-    own covariance shrinks to metres.  The status says `inconsistent`; the covariance must say it too: the
-    truth stays inside the reported 99.9 % ellipse at every such sample."""
+    closest approach), the refits fail their test for several samples (15 before the ambiguity restart, 7
+    with it) and the track is 120-150 m off while its own covariance shrinks to metres.  The status says
+    `inconsistent`; the covariance must say it too: the truth stays inside the reported 99.9 % ellipse at
+    every such sample."""
     from shipsense.reproduce import wide
 
     sc, model, unit, y, truth, ends = wide.family_passages("one_magnetometer", 100, 0)
@@ -306,7 +307,7 @@ def test_an_inconsistent_track_reports_no_more_than_the_prior_knows():
     bad = res.status[0] == INCONSISTENT
     d = res.estimates[0, :, :2] - truth[29, :, :2]
     err = np.hypot(*d.T)
-    assert bad.sum() >= 10 and err[bad].max() > 20.0      # the case: a long stretch, far off
+    assert bad.sum() >= 5 and err[bad].max() > 20.0       # the case: a stretch far off
     q = np.einsum("ki,kij,kj->k", d, np.linalg.inv(res.position_cov[0]), d)
     assert q[bad].max() < 13.8, q[bad].max()
     assert err[ends[29] - 10: ends[29]].max() < 1.0       # and it recovers
