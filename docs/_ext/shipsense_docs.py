@@ -67,7 +67,7 @@ UNITS = {
     ("TrackerOptions", "report_nats"): "nats", ("TrackerOptions", "gof"): "- (test level)",
     ("TrackerOptions", "inflate"): "- (factor)", ("TrackerOptions", "history"): "samples",
     ("TrackerOptions", "consistency_window"): "samples", ("TrackerOptions", "consistency_level"): "- (test level)",
-    ("TrackerOptions", "rescan"): "-",
+    ("TrackerOptions", "rescan"): "-", ("TrackerOptions", "early_starts"): "-",
     ("TrackerConfig", "filter"): "-", ("TrackerConfig", "n_pu"): "-",
     ("ManoeuvreConfig", "body_fixed_share"): "- (fraction)", ("SpeedChangeConfig", "factor"): "- (ratio)",
     ("RandomManoeuvreConfig", "probability"): "- (probability)",

@@ -142,6 +142,9 @@ class TrackerOptions(ConfigModel):
         HUBER_GAMMA, description="Huber threshold on a whitened residual (robust updates and fits).")
     window_s: Annotated[Positive, within(3600.0, "s")] | None = Field(
         None, description="Length of the initialisation window after the detection, s.")
+    early_starts: Flag = Field(True, description="Start a bank before the initialisation window is complete, "
+                               "from a growing window's fit that locates the ship and beats its mirror image "
+                               "(false: only from the complete window, as Passage-v1's observer).")
     snr_start: Annotated[Positive, within(1e9, "")] | None = Field(
         None, description="Detection: the strongest field channel's signal-to-noise ratio that starts a window.")
     refine: Annotated[tuple[Count, ...], BeforeValidator(as_stages), Field(min_length=1)] | None = Field(

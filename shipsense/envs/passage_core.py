@@ -71,8 +71,9 @@ class PassageV1Core(PassagePrefetch):
         if sc.prior is None:
             raise ValueError(f"scenario {sc.name!r} has no [prior]: Passage-v1 draws passages from it")
         self.scenario = sc
-        tracker = Tracker(sc, passages=num_envs)
-        tracker.EARLY_STARTS = False   # Passage-v1 keeps its observer: a bank starts from the complete window
+        # Passage-v1 keeps its observer (and Passage-v2 the observer it was measured with): a bank starts from the
+        # complete initialisation window
+        tracker = Tracker(sc, passages=num_envs, early_starts=False)
         self.model = tracker.model
         arr = self.model.array
         self.S = len(arr.ids)

@@ -266,8 +266,8 @@ def field_trial_tracking(trial, runs, seed):
                 for label, use in (("magnetic", mags), ("fused", mags + accs)):
                     if label == "magnetic" and bias != TRIAL_BIASES_DEG[0]:
                         continue   # the same magnetometer data at every bias
-                    tracker = Tracker(nominal, passages=runs, sensors=use)
-                    tracker.EARLY_STARTS = False   # (the study's field trial as pinned: banks from complete windows)
+                    # (the study's field trial as pinned: banks from complete windows)
+                    tracker = Tracker(nominal, passages=runs, sensors=use, early_starts=False)
                     res = tracker.track(sim.times, sim.measurements[..., _columns(sim, use)])
                     truth = sim.truth[..., :2]
                     d = res.estimates[..., :2] - truth

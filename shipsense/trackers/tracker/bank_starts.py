@@ -101,9 +101,9 @@ def early_attempt(trk, have):
     """Whether passages ``have`` (...) samples after their detection, their windows not yet complete, try an
     early start (:func:`fit_windows`, :func:`accepted`): from :data:`EARLY_MIN` samples on, every
     ``window // EARLY_ATTEMPTS`` samples (at least every sample): at most about :data:`EARLY_ATTEMPTS` attempts
-    per window, so its cost is bounded.  Never when the tracker's ``EARLY_STARTS`` is False."""
+    per window, so its cost is bounded.  Never without the setting ``early_starts``."""
     every = max(1, trk.window // EARLY_ATTEMPTS)
-    return trk.EARLY_STARTS & (have >= EARLY_MIN) & (have < trk.window) & ((have - EARLY_MIN) % every == 0)
+    return trk.settings.early_starts & (have >= EARLY_MIN) & (have < trk.window) & ((have - EARLY_MIN) % every == 0)
 
 
 EARLY_MIN = 4

@@ -310,11 +310,6 @@ class Tracker:
         if len(self.bank.idx) != self.bank.R * self.bank.H:
             raise ValueError("passage states need a bank without pruning (the tracker method's)")
 
-    EARLY_STARTS = True
-    """Whether a bank may start from an early attempt before its initialisation window is complete
-    (:func:`~shipsense.trackers.tracker.bank_starts.early_attempt`); an observer that must keep the
-    complete-window start (Passage-v1's) sets it False on its tracker."""
-
     # -- what the studies' variant changes (StudyBankTracker) ----------------------------------------------------
     TESTS_CONSISTENCY = True
     """Whether the windowed innovation consistency test runs (with ``consistency_window``)."""

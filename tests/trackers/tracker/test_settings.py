@@ -20,7 +20,7 @@ SET = {"method": "bank", "unit": "cdkf", "robust": True, "huber_gamma": 2.0, "wi
        "refit_every": 15, "through_peak": 0.4, "nis_window": 8, "nis_limit": 4.0, "max_restarts": 2,
        "collapse": 0.3, "ambiguity_nats": 9.0, "report_nats": 2.0, "report_distance_m": 25.0, "distinct_m": 12.0,
        "gof": 0.02, "inflate": 3.0, "history": 500, "gap_limit_s": 7.0, "consistency_window": 15,
-       "consistency_level": 0.02, "rescan": True,
+       "consistency_level": 0.02, "rescan": True, "early_starts": False,
        "motion": MotionConfig(model="imm", turn_rate_deg_s=2.0, threshold=0.6)}
 
 
