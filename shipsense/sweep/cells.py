@@ -150,6 +150,10 @@ def _apply(data: dict, sensors: list[dict], condition: dict) -> dict:
             noise["dropout"] = v
         elif key == "outlier_eps":
             noise["model"], noise["eps"] = ("contaminated", v) if v > 0 else ("gaussian", noise.get("eps", 0.1))
+        elif key == "manoeuvre_probability":
+            manoeuvres = dict(data.get("manoeuvres") or {})
+            manoeuvres["random"] = {**(manoeuvres.get("random") or {}), "probability": v}
+            data["manoeuvres"] = manoeuvres
     if medium:
         data["medium"] = medium
     data.update(passage=passage, prior=prior or None, noise=noise or None)

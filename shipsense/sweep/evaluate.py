@@ -8,8 +8,9 @@ Per passage (``passage`` is its index in the cell; the columns of a chunk's tabl
 * ``rmse_m``: root-mean-square position error over the second half of the
   passage's samples;
 * ``rmse_over_crlb``: that RMSE over the root-mean of the position CRLB on the
-  same samples (the constant-velocity bound of the passage, with the bank's
-  initial covariance as prior information);
+  same samples (the constant-velocity bound of the passage, conditional on its
+  true manoeuvres where it makes any, with the bank's initial covariance as
+  prior information);
 * ``nees_mean``: mean position NEES over the same samples (2 is consistent);
   ``nees_coverage``: the share of them where the truth lies inside the
   reported 95 % ellipse (0.95 is honest; a sample without a covariance
@@ -96,7 +97,7 @@ def _chunk(task):
     rmse = np.sqrt(np.nansum(np.where(second, err, 0.0) ** 2, axis=1) / n)
     ratio = np.full(task.passages, np.nan)
     if "rmse_over_crlb" in task.metrics:
-        bound = crlb_position_trace(sc, model, truth)
+        bound = crlb_position_trace(sc, model, truth, sim)
         ratio = rmse / np.sqrt(np.sum(np.where(second, bound, 0.0), axis=1) / n)
     q = position_nees(est, pos_cov, truth)
     nees_mean = np.array([np.nanmean(q[r, second[r]]) if np.isfinite(q[r, second[r]]).any() else np.nan
@@ -107,24 +108,29 @@ def _chunk(task):
             "nees_coverage": coverage(q, second, axis=1).tolist(), "seconds": [seconds] * task.passages}
 
 
-def crlb_position(sc, model, truth):
-    """The position block (R, K, 2, 2) of each passage's constant-velocity CRLB, m², with the prior information
-    of the tracker's bank (its initial standard deviations)."""
+def crlb_position(sc, model, truth, sim=None):
+    """The position block (R, K, 2, 2) of each passage's CRLB, m², with the prior information of the tracker's
+    bank (its initial standard deviations): the constant-velocity bound, or, when the simulation ``sim`` of
+    the passages has manoeuvres, the bound conditional on each passage's true manoeuvres
+    (:func:`~shipsense.design.manoeuvre_bound.simulation_bound`; the same for a straight passage)."""
     from shipsense.design.fisher import pcrlb
+    from shipsense.design.manoeuvre_bound import simulation_bound
     from shipsense.trackers.tracker.settings import resolve_settings
 
     bank = resolve_settings(sc).bank
     J0 = np.diag(model.to_internal(bank.state_std(model.labels)) ** -2.0)
-    b = pcrlb(model, model.to_internal(truth), J0, per_run=True, Q=np.zeros_like(model.Q))
+    if sim is not None and np.any(sim.manoeuvre != 0):
+        b = simulation_bound(model, sim, J0, Q=np.zeros_like(model.Q))
+    else:
+        b = pcrlb(model, model.to_internal(truth), J0, per_run=True, Q=np.zeros_like(model.Q))
     return np.ascontiguousarray(model.cov_to_si(b)[..., :2, :2])
 
 
-def crlb_position_trace(sc, model, truth):
-    """Trace (R, K) of the position block of each passage's constant-velocity CRLB (:func:`crlb_position`),
-    m²."""
+def crlb_position_trace(sc, model, truth, sim=None):
+    """Trace (R, K) of the position block of each passage's CRLB (:func:`crlb_position`), m²."""
     from shipsense.trackers.metrics import position_crlb_trace
 
-    return position_crlb_trace(crlb_position(sc, model, truth))
+    return position_crlb_trace(crlb_position(sc, model, truth, sim))
 
 
 def track_passages(method, sc, times, y):

@@ -56,6 +56,8 @@ CONDITION_KEYS = {
     "prior_cpa": "[min, max] closest approach of the passages to the centroid, m",
     "dropout": "probability that a measurement component is missing",
     "outlier_eps": "share of outliers (contaminated noise at the scenario's outlier scale)",
+    "manoeuvre_probability": "share of passages that make one random manoeuvre (a turn or a speed change, the "
+                             "scenario's [manoeuvres.random] ranges or their defaults)",
 }
 """Site conditions a sweep can vary, with their meaning and units."""
 
@@ -163,7 +165,8 @@ def _check_condition_value(key, v):
         return
     if not _finite(v):
         raise ValueError(f"{where}: each value must be a finite number, got {v!r}")
-    limits = {"dropout": (0.0, 0.95), "outlier_eps": (0.0, 0.5), "noise_scale": (1e-3, 1e3),
+    limits = {"dropout": (0.0, 0.95), "outlier_eps": (0.0, 0.5), "manoeuvre_probability": (0.0, 1.0),
+              "noise_scale": (1e-3, 1e3),
               "source_scale": (1e-3, 1e3), "water_depth": (1.0, 1e4), "sigma_water": (1e-3, 100.0),
               "sigma_seabed": (1e-6, 100.0)}
     lo, hi = limits[key]

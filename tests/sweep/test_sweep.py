@@ -113,6 +113,7 @@ def test_a_cell_key_is_what_its_results_are_not_the_scenario_prose(tmp_path):
     ({"conditions": {"noise_scale": ["2"]}}, r"conditions\.noise_scale: each value must be a finite number"),
     ({"conditions": {"water_depth": [1.5]}}, r"layout 'pair' under \{'water_depth': 1\.5\}"),
     ({"conditions": {"prior_range": [[300.0, 100.0]]}}, r"conditions\.prior_range: \[min, max\]"),
+    ({"conditions": {"manoeuvre_probability": [1.5]}}, r"conditions\.manoeuvre_probability: 1\.5 is outside"),
     ({"passages": "8"}, r"passages: expected int"),
     ({"chunk": 0}, r"chunk: "),
     ({"template": "Q9"}, r"template: 'Q9' is not a sensor"),
@@ -218,3 +219,32 @@ def test_command_line(tmp_path, capsys):
         err = capsys.readouterr().err
         assert re.search(re.escape(message), err) and "Traceback" not in err
     assert not (tmp_path / "x").exists() and not (tmp_path / "out2").exists()
+
+
+def test_a_manoeuvre_condition_draws_manoeuvring_passages_and_bounds_them_by_their_manoeuvres(tmp_path):
+    """``manoeuvre_probability`` sets the share of passages that manoeuvre; the RMSE/CRLB column's bound is then
+    conditional on each passage's true manoeuvres (a turn changes it), and the constant-velocity one without."""
+    from shipsense.config import Scenario
+    from shipsense.models.field_model import model_from_scenario
+    from shipsense.simulator import simulate
+    from shipsense.sweep.evaluate import crlb_position
+
+    data = {**tomllib.loads(_sweep(tmp_path).read_text()), "conditions": {"manoeuvre_probability": [0.0, 1.0]}}
+    cells = build_cells(parse_sweep(data, "sweep.toml"), tmp_path)
+    probabilities = sorted({c.scenario["manoeuvres"]["random"]["probability"] for c in cells})
+    assert probabilities == [0.0, 1.0]
+    always = Scenario.model_validate(next(c.scenario for c in cells
+                                          if c.scenario["manoeuvres"]["random"]["probability"] == 1.0))
+    sim = simulate(always, runs=4, seed=1, random=True)
+    assert (sim.manoeuvre != 0).any(axis=1).all()                            # every passage manoeuvres
+    model = model_from_scenario(always)
+    truth = model.state_from_truth(sim.truth)
+    conditional = crlb_position(always, model, truth, sim)
+    straight = crlb_position(always, model, truth)                         # the constant-velocity bound
+    assert conditional.shape == straight.shape and np.isfinite(conditional).all()
+    assert not np.allclose(conditional, straight, rtol=1e-3)
+    never = Scenario.model_validate(next(c.scenario for c in cells
+                                         if c.scenario["manoeuvres"]["random"]["probability"] == 0.0))
+    quiet = simulate(never, runs=2, seed=1, random=True)
+    assert not quiet.manoeuvre.any()
+
