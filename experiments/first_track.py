@@ -27,13 +27,18 @@ Writes ``first_track.json`` and ``.csv``.
 
 from __future__ import annotations
 
-import argparse
 import json
 import time
+from itertools import product
 from pathlib import Path
 
 import numpy as np
-from tracker_consistency import CHUNK, FAMILIES, scenario  # (this folder: the consistency experiment's passages)
+from tracker_consistency import (  # (this folder: the consistency experiment's passages)
+    FAMILIES,
+    chunks,
+    passage_arguments,
+    scenario,
+)
 
 from shipsense import simulate
 from shipsense.sweep.evaluate import crlb_position
@@ -89,28 +94,19 @@ def summarise(parts):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--passages", type=int, default=200)
-    ap.add_argument("--family", nargs="+", default=list(FAMILIES), choices=list(FAMILIES))
-    ap.add_argument("--condition", nargs="+", default=["clean"], choices=["clean", "faulty"])
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--out", default="results/first_track")
-    args = ap.parse_args(argv)
+    args = passage_arguments(__doc__.splitlines()[0], "results/first_track", passages=200,
+                             conditions=["clean"]).parse_args(argv)
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     results = []
     print(f"{'family':<18} {'condition':<9} {'located':>8} {'initialising':>12} {'(passages)':>10} "
           f"{'RMSE/CRLB':>9} {'cover95':>7} {'early':>6} {'RMSE/CRLB':>9} {'cover95':>7} {'s/passage':>9}")
-    for family in args.family:
-        for condition in args.condition:
-            parts = [chunk_stats(family, condition, args.seed + lo, min(CHUNK, args.passages - lo))
-                     for lo in range(0, args.passages, CHUNK)]
-            r = {"family": family, "condition": condition, **summarise(parts)}
-            results.append(r)
-            print(f"{family:<18} {condition:<9} {r['located']:>8d} {r['initialising']:>12.2%} "
-                  f"{r['passages_initialising']:>10d} {r['shown_rmse_over_crlb']:>9.2f} {r['shown_coverage']:>7.3f} "
-                  f"{r['early_samples']:>6d} {r['early_rmse_over_crlb']:>9.2f} {r['early_coverage']:>7.3f} "
-                  f"{r['seconds_per_passage']:>9.3f}", flush=True)
+    for family, condition in product(args.family, args.condition):
+        r = {"family": family, "condition": condition, **summarise(chunks(args, chunk_stats, family, condition))}
+        results.append(r)
+        print(f"{family:<18} {condition:<9} {r['located']:>8d} {r['initialising']:>12.2%} "
+              f"{r['passages_initialising']:>10d} {r['shown_rmse_over_crlb']:>9.2f} {r['shown_coverage']:>7.3f} "
+              f"{r['early_samples']:>6d} {r['early_rmse_over_crlb']:>9.2f} {r['early_coverage']:>7.3f} "
+              f"{r['seconds_per_passage']:>9.3f}", flush=True)
     (out / "first_track.json").write_text(json.dumps(results, indent=2) + "\n")
     keys = list(results[0])
     (out / "first_track.csv").write_text(

@@ -152,16 +152,23 @@ def plot(results, path):
     plt.close(fig)
 
 
-def passage_arguments(description, out):
+def passage_arguments(description, out, passages=1000, conditions=("clean", "faulty")):
     """The options every experiment over the families' passages takes: how many, which families and conditions,
     the seed and the output folder."""
     ap = argparse.ArgumentParser(description=description)
-    ap.add_argument("--passages", type=int, default=1000)
+    ap.add_argument("--passages", type=int, default=passages)
     ap.add_argument("--family", nargs="+", default=list(FAMILIES), choices=list(FAMILIES))
-    ap.add_argument("--condition", nargs="+", default=["clean", "faulty"], choices=["clean", "faulty"])
+    ap.add_argument("--condition", nargs="+", default=list(conditions), choices=["clean", "faulty"])
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", default=out)
     return ap
+
+
+def chunks(args, stats, *lead):
+    """``stats(*lead, seed, count)`` of every chunk of ``args.passages`` passages (seeds ``args.seed`` + the
+    chunk's first passage), and ``args.out`` made: the chunked loop of the experiments over the families."""
+    Path(args.out).mkdir(parents=True, exist_ok=True)
+    return [stats(*lead, args.seed + lo, min(CHUNK, args.passages - lo)) for lo in range(0, args.passages, CHUNK)]
 
 
 def main(argv=None):
@@ -169,16 +176,14 @@ def main(argv=None):
     ap.add_argument("--method", nargs="+", default=["tracker", "bank"], choices=["tracker", "bank"])
     args = ap.parse_args(argv)
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     results = []
     print(f"{'family':<18} {'condition':<7} {'method':<8} {'conv.':>6} {'(appr.)':>7} {'(CRLB)':>7} {'RMSE/CRLB':>9} "
           f"{'NEES':>6} {'cover95':>7} {'NaN':>5} {'s/passage':>9}")
     for family in args.family:
         for condition in args.condition:
             for method in args.method:
-                parts = [chunk_stats(family, condition, method, args.seed + lo, min(CHUNK, args.passages - lo))
-                         for lo in range(0, args.passages, CHUNK)]
-                r = {"family": family, "condition": condition, "method": method, **summarise(parts)}
+                r = {"family": family, "condition": condition, "method": method,
+                     **summarise(chunks(args, chunk_stats, family, condition, method))}
                 results.append(r)
                 print(f"{family:<18} {condition:<7} {method:<8} {r['convergence']:>6.3f} "
                       f"{r['convergence_approach']:>7.3f} {r['convergence_bounded']:>7.3f} "
