@@ -32,10 +32,8 @@ prefix-stable).
 
 from __future__ import annotations
 
-import csv
 import json
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
@@ -56,8 +54,6 @@ STATE_LABELS = ("x", "y", "vx", "vy", "z", "mx", "my", "mz", "p")
 _STREAMS = ("prior", "prior_dir", "noise", "outlier", "dropout", "envelope", "seismic", "seismic_tail", "manoeuvre",
             "traffic")
 _TRAFFIC_STREAMS = ("count", "geometry", "prior", "prior_dir", "source", "source_dir", "manoeuvre")
-TRUTH_CSV_HEADER = ("run", "ship", "step", "time", *STATE_LABELS)
-"""Columns of the truth CSV (:meth:`Simulation.save_truth_csv`): one row per run, ship and sample."""
 
 
 @dataclass(frozen=True)
@@ -107,6 +103,7 @@ class Simulation:
     manoeuvres: Manoeuvres
     companions: np.ndarray | None = None
     ship_count: np.ndarray | None = None
+    STATE_LABELS = STATE_LABELS    # (the truth's columns; a class constant, not a field)
 
     @property
     def channels(self):
@@ -138,18 +135,6 @@ class Simulation:
         every = np.concatenate([self.truth[:, None], self.companions], axis=1)
         return np.where(self.ships_present[:, :, None, None], every, np.nan)
 
-    def save_truth_csv(self, path):
-        """Write the truth as CSV: ``run, ship, step, time`` and the state (:data:`STATE_LABELS`, SI), one row
-        per run, sailing ship and sample (:data:`TRUTH_CSV_HEADER`); ship 0 is the scenario's own passage."""
-        ships, present = self.ships, self.ships_present
-        with open(path, "w", newline="") as fh:
-            w = csv.writer(fh)
-            w.writerow(TRUTH_CSV_HEADER)
-            for r in range(self.runs):
-                for s in np.flatnonzero(present[r]):
-                    for k in range(self.times.size):
-                        w.writerow([r, s, k, f"{self.times[k]:.6g}", *map(repr, ships[r, s, k].tolist())])
-
     def save_npz(self, path):
         """Write arrays and channel labels to a NumPy ``.npz`` file.
 
@@ -169,29 +154,6 @@ class Simulation:
             manoeuvre_schedule=np.array(json.dumps(schedule)),
             **({} if self.companions is None else {"ships": self.ships, "ship_count": self.ship_count}),
         )
-
-    def save_csv(self, path):
-        """Write a tidy long-format CSV: ``run, step, time, sensor, channel, value`` (value empty if missing)."""
-        runs, steps, m = self.measurements.shape
-        with open(path, "w", newline="") as fh:
-            w = csv.writer(fh)
-            w.writerow(["run", "step", "time", "sensor", "channel", "value"])
-            for r in range(runs):
-                for k in range(steps):
-                    t = f"{self.times[k]:.6g}"
-                    row = self.measurements[r, k]
-                    for c, (sid, name) in enumerate(self.channels):
-                        w.writerow([r, k, t, sid, name, "" if not self.mask[r, k, c] else repr(float(row[c]))])
-
-    def save(self, path):
-        """Write ``.npz`` or ``.csv`` by the file's suffix."""
-        path = Path(path)
-        if path.suffix == ".npz":
-            self.save_npz(path)
-        elif path.suffix == ".csv":
-            self.save_csv(path)
-        else:
-            raise ValueError(f"output file must end in .npz or .csv, got {path.name!r}")
 
 
 def _passages(sc: Scenario, runs: int, random: bool, streams) -> np.ndarray:

@@ -144,7 +144,7 @@ def test_raw_envelope_chain_of_a_turning_passage_follows_the_field():
 
 def test_save_npz_writes_the_truth_and_the_schedule(tmp_path):
     sim = simulate("S2-turn", runs=2, seed=0)
-    sim.save(tmp_path / "s.npz")
+    sim.save_npz(tmp_path / "s.npz")
     data = np.load(tmp_path / "s.npz")
     np.testing.assert_array_equal(data["heading"], sim.heading)
     np.testing.assert_array_equal(data["speed"], sim.speed)

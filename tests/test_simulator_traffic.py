@@ -9,7 +9,8 @@ import pytest
 from shipsense import load_scenario, simulate
 from shipsense.config import ScenarioError
 from shipsense.physics.magnetic import dipole_field
-from shipsense.simulator import TRUTH_CSV_HEADER
+from shipsense.recording.tidy_csv import TRUTH_KEYS, write_truth
+from shipsense.simulator import STATE_LABELS
 
 
 def with_traffic(name, **traffic):
@@ -147,10 +148,10 @@ def test_the_shipped_crossing_is_the_sum_of_its_two_single_ship_passages():
 def test_truth_csv_has_a_row_per_run_ship_and_sample(tmp_path):
     sim = simulate(with_traffic("S2", count=[1, 3], geometry="crossing"), runs=5, seed=2, random=True)
     path = tmp_path / "truth.csv"
-    sim.save_truth_csv(path)
+    write_truth(sim, path)
     with open(path) as fh:
         rows = list(csv.reader(fh))
-    assert tuple(rows[0]) == TRUTH_CSV_HEADER
+    assert tuple(rows[0]) == (*TRUTH_KEYS, *STATE_LABELS)
     body = np.array(rows[1:], dtype=float)
     assert len(body) == sim.ship_count.sum() * sim.times.size
     run, ship, step = body[:, :3].astype(int).T

@@ -77,7 +77,9 @@ def cmd_simulate(args) -> int:
         bar.update(1)
         if args.truth:
             bar.set_description(f"write {args.truth}")
-            sim.save_truth_csv(truth_tmp)
+            from shipsense.recording.tidy_csv import write_truth
+
+            write_truth(sim, truth_tmp)
         bar.update(1)
     bar.close()
     _print_summary(sim)

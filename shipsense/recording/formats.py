@@ -107,7 +107,7 @@ def write_recording(sim, path):
     elif kind == "miniseed":
         miniseed.write(sim, path)
     elif kind == "csv":
-        sim.save_csv(path)
+        tidy_csv.write(sim, path)
     else:
         raise RecordingError(f"{path}: the extension must be one of "
                              f"{' '.join(s for v in SUFFIXES.values() for s in v)}")

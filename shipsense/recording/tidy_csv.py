@@ -32,6 +32,9 @@ from shipsense.recording.samples import RecordingError, Rows
 
 REQUIRED = ("time", "sensor", "channel", "value")
 
+TRUTH_KEYS = ("run", "ship", "step", "time")
+"""The truth CSV's first columns (:func:`write_truth`); the state's labels follow."""
+
 
 def read_rows(path, mapping) -> Rows:
     """The rows of the CSV file ``path`` (names renamed by ``mapping``)."""
@@ -108,3 +111,32 @@ def _rows(reader, path, index):
         values.append(value)
         lines.append(line)
     return times, sensors, channels, values, lines
+
+
+def write(sim, path):
+    """Write the measurements of ``sim`` (a :class:`~shipsense.simulator.Simulation`) as this format with a
+    ``run`` and a ``step`` column: ``run, step, time, sensor, channel, value`` (value empty if missing)."""
+    runs, steps, _ = sim.measurements.shape
+    with open(path, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["run", "step", "time", "sensor", "channel", "value"])
+        for r in range(runs):
+            for k in range(steps):
+                t = f"{sim.times[k]:.6g}"
+                row = sim.measurements[r, k]
+                for c, (sid, name) in enumerate(sim.channels):
+                    w.writerow([r, k, t, sid, name, "" if not sim.mask[r, k, c] else repr(float(row[c]))])
+
+
+def write_truth(sim, path):
+    """Write the truth of ``sim`` as CSV: :data:`TRUTH_KEYS` and the state (``sim.STATE_LABELS``, SI), one row
+    per run, sailing ship and sample; ship 0 is the scenario's own passage."""
+    ships, present = sim.ships, sim.ships_present
+    with open(path, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow([*TRUTH_KEYS, *sim.STATE_LABELS])
+        for r in range(sim.runs):
+            for s in np.flatnonzero(present[r]):
+                for k in range(sim.times.size):
+                    w.writerow([r, s, k, f"{sim.times[k]:.6g}", *map(repr, ships[r, s, k].tolist())])
+

@@ -4,13 +4,13 @@ import numpy as np
 import pytest
 
 from shipsense import load_scenario, simulate
-from shipsense.recording import RecordingError, read_recording
+from shipsense.recording import RecordingError, read_recording, tidy_csv
 
 
 def test_round_trip_through_the_simulators_csv(tmp_path):
     sim = simulate("S2", runs=1, seed=3)
     path = tmp_path / "rec.csv"
-    sim.save_csv(path)
+    tidy_csv.write(sim, path)
     times, y = read_recording(path, sim.scenario)
     np.testing.assert_allclose(times, sim.times)
     np.testing.assert_allclose(y, sim.measurements[0], rtol=1e-12)
@@ -34,7 +34,7 @@ def test_missing_values_are_masked_and_times_are_the_samples(tmp_path):
 def test_rows_in_any_order_read_as_the_sorted_file(tmp_path):
     sim = simulate("S2", runs=1, seed=3)
     path = tmp_path / "rec.csv"
-    sim.save_csv(path)
+    tidy_csv.write(sim, path)
     header, *rows = path.read_text().splitlines()
     by_sensor = sorted(rows, key=lambda r: (r.split(",")[-3], float(r.split(",")[-4])))   # sensor by sensor
     shuffled = tmp_path / "shuffled.csv"
