@@ -2,7 +2,8 @@
 
 Every field is an array over the passages of a batch; a passage's state is its row in each, so passages are a
 batch axis (the compiled step reads and writes the rows it steps) and a passage is carried between trackers
-as its rows (:meth:`PassageArrays.row`, :meth:`PassageArrays.put_row`).
+as its rows (:meth:`PassageArrays.row`, :meth:`PassageArrays.put_row`), with its rows of the bank
+(:func:`passage_states`, :func:`set_passage_states`).
 """
 
 from __future__ import annotations
@@ -10,6 +11,9 @@ from __future__ import annotations
 from dataclasses import dataclass, fields
 
 import numpy as np
+
+from shipsense.trackers.filters.core import Belief
+from shipsense.trackers.tracker.results import Gap, PassageState
 
 WAITING, STARTING, RUNNING, PENDING = 0, 1, 2, 3
 """Phases of a passage: no data yet, detection/initialisation, a bank running, its window fits deferred."""
@@ -97,3 +101,65 @@ class PassageArrays:
                 arr[p][:hist] = values[name]
             else:
                 arr[p] = values[name]
+
+
+def passage_indices(trk, passages):
+    """``passages`` as an int64 vector of indices of the tracker ``trk``'s passages (not booleans, not
+    fractions)."""
+    idx = np.asarray(passages)
+    if idx.size == 0:
+        return np.zeros(0, dtype=np.int64)
+    if idx.ndim != 1 or idx.dtype.kind not in "iu":
+        raise ValueError(f"passages must be a sequence of passage indices (integers), got {passages!r}")
+    if idx.min() < 0 or idx.max() >= trk.P:
+        raise IndexError(f"passages {idx.tolist()} out of range for {trk.P} passages")
+    return idx.astype(np.int64)
+
+
+def check_unpruned(bank):
+    """Refuse a bank whose hypotheses were pruned (a passage's rows would not be its own)."""
+    if len(bank.idx) != bank.R * bank.H:
+        raise ValueError("passage states need a bank without pruning (the tracker method's)")
+
+
+def passage_states(trk, passages):
+    """:meth:`~shipsense.trackers.tracker.tracker.Tracker.passage_states` of the tracker ``trk``."""
+    idx = passage_indices(trk, passages)
+    check_unpruned(trk.bank)
+    H = trk.H
+    out = []
+    for p in idx.tolist():
+        fields_, hist = trk.state.row(p)
+        rows = slice(p * H, (p + 1) * H)
+        b, modal = trk.bank.belief, trk.bank.modal
+        out.append(PassageState(trk.model, hist, fields_, b.mean[rows].copy(), b.chol[rows].copy(),
+                                b.ok[rows].copy(), trk.bank.cum[p].copy(),
+                                tuple((g.start_s, g.end_s) for g in trk.gaps if g.passage == p),
+                                None if modal is None else tuple(a[rows].copy() for a in modal)))
+    return out
+
+
+def set_passage_states(trk, passages, states):
+    """:meth:`~shipsense.trackers.tracker.tracker.Tracker.set_passage_states` of the tracker ``trk``."""
+    idx = passage_indices(trk, passages)
+    states = list(states)
+    if idx.size != len(states) or np.unique(idx).size != idx.size:
+        raise ValueError(f"give one state for each of distinct passages, got {len(states)} states for "
+                         f"passages {idx.tolist()}")
+    if any(not isinstance(st, PassageState) or st.model is not trk.model for st in states):
+        raise ValueError("passage states must come from this tracker or a sibling (Tracker.sibling)")
+    check_unpruned(trk.bank)
+    H, b = trk.H, trk.bank.belief
+    moved = set(idx.tolist())
+    trk.gaps = [g for g in trk.gaps if g.passage not in moved]      # (a previous occupant's)
+    for p, st in zip(idx.tolist(), states):
+        trk.state.put_row(p, st.fields, st.hist, trk.layout)
+        rows = slice(p * H, (p + 1) * H)
+        b.mean[rows], b.chol[rows], b.ok[rows] = st.mean, st.chol, st.ok
+        if trk.bank.modal is not None:
+            for arr, part in zip(trk.bank.modal, st.modal):
+                arr[rows] = part
+        trk.bank.cum[p] = st.loglik
+        trk.gaps.extend(Gap(p, start, end) for start, end in st.gaps)
+    trk.bank.belief = Belief(*b)       # written in place: drop a filter's covariance cache
+

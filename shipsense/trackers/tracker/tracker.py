@@ -91,7 +91,14 @@ from shipsense.trackers.bank.selection import report
 from shipsense.trackers.filters.core import UNROLL_MIN_BATCH, Belief
 from shipsense.trackers.tracker import bank_starts
 from shipsense.trackers.tracker.consistency import quantile_table, window_test
-from shipsense.trackers.tracker.passages import PENDING, PHASES, RUNNING, PassageArrays
+from shipsense.trackers.tracker.passages import (
+    PENDING,
+    PHASES,
+    RUNNING,
+    PassageArrays,
+    passage_states,
+    set_passage_states,
+)
 from shipsense.trackers.tracker.results import (
     INCONSISTENT,
     INITIALISING,
@@ -99,7 +106,6 @@ from shipsense.trackers.tracker.results import (
     NO_DATA,
     TRACKING,
     Gap,
-    PassageState,
     Sample,
     TrackResult,
 )
@@ -202,8 +208,8 @@ class Tracker:
         self.pads_exactly = self.huber is None and spec is not None and spec[0] == FIELD   # (bank_starts.refit)
         self._R_used = np.ascontiguousarray(self.filter_model.R[None], dtype=float)
         self._testing = bool(opts.consistency_window) and self.TESTS_CONSISTENCY
-        self._layout = PassageArrays.layout(self.model.m, self.model.n, self.settings, self._history())
-        self.reset(passages)
+        self.layout = PassageArrays.layout(self.model.m, self.model.n, self.settings, self._history())
+        self.reset(passages)   # (PassageArrays.layout)
 
     labels = property(lambda self: self.model.labels, doc="State component names.")
 
@@ -215,7 +221,7 @@ class Tracker:
             raise ValueError(f"passages must be at least 1, got {passages}")
         n, H = self.model.n, self.H
         self.P = P
-        self.state = PassageArrays.fresh(P, self._layout)
+        self.state = PassageArrays.fresh(P, self.layout)
         self.gaps = []
         self.seconds = {"initialiser": 0.0, "refits": 0.0}   # time spent in window fits and in refits
         self._blank = None                                    # the prior Sample of P passages (prior_sample)
@@ -231,7 +237,7 @@ class Tracker:
     def reset_passages(self, passages):
         """Start passages ``passages`` (indices) over, leaving the others as they are."""
         idx = np.asarray(passages, dtype=int)
-        self.state.reset(idx, self._layout)
+        self.state.reset(idx, self.layout)
         H, n = self.H, self.model.n
         self.bank.reset_runs(idx, np.broadcast_to(self._prior[0], (idx.size, H, n)), self._prior[1])
         return self
@@ -254,61 +260,14 @@ class Tracker:
     def passage_states(self, passages):
         """The :class:`PassageState` of each of ``passages`` (indices): copies, for :meth:`set_passage_states`
         of this tracker or a sibling (:meth:`sibling`)."""
-        idx = self._passage_indices(passages)
-        self._check_unpruned()
-        H = self.H
-        out = []
-        for p in idx.tolist():
-            fields, hist = self.state.row(p)
-            rows = slice(p * H, (p + 1) * H)
-            b, modal = self.bank.belief, self.bank.modal
-            out.append(PassageState(self.model, hist, fields, b.mean[rows].copy(), b.chol[rows].copy(),
-                                    b.ok[rows].copy(), self.bank.cum[p].copy(),
-                                    tuple((g.start_s, g.end_s) for g in self.gaps if g.passage == p),
-                                    None if modal is None else tuple(a[rows].copy() for a in modal)))
-        return out
+        return passage_states(self, passages)
 
     def set_passage_states(self, passages, states):
         """Carry on ``states`` (:meth:`passage_states` of this tracker or a sibling) as passages ``passages``
         (indices, distinct): everything of theirs is replaced, as if they had run here (their gaps in
         ``gaps`` too)."""
-        idx = self._passage_indices(passages)
-        states = list(states)
-        if idx.size != len(states) or np.unique(idx).size != idx.size:
-            raise ValueError(f"give one state for each of distinct passages, got {len(states)} states for "
-                             f"passages {idx.tolist()}")
-        if any(not isinstance(st, PassageState) or st.model is not self.model for st in states):
-            raise ValueError("passage states must come from this tracker or a sibling (Tracker.sibling)")
-        self._check_unpruned()
-        H, b = self.H, self.bank.belief
-        moved = set(idx.tolist())
-        self.gaps = [g for g in self.gaps if g.passage not in moved]      # (a previous occupant's)
-        for p, st in zip(idx.tolist(), states):
-            self.state.put_row(p, st.fields, st.hist, self._layout)
-            rows = slice(p * H, (p + 1) * H)
-            b.mean[rows], b.chol[rows], b.ok[rows] = st.mean, st.chol, st.ok
-            if self.bank.modal is not None:
-                for arr, part in zip(self.bank.modal, st.modal):
-                    arr[rows] = part
-            self.bank.cum[p] = st.loglik
-            self.gaps.extend(Gap(p, start, end) for start, end in st.gaps)
-        self.bank.belief = Belief(*b)       # written in place: drop a filter's covariance cache
+        set_passage_states(self, passages, states)
         return self
-
-    def _passage_indices(self, passages):
-        """``passages`` as an int64 vector of indices in range (not booleans, not fractions)."""
-        idx = np.asarray(passages)
-        if idx.size == 0:
-            return np.zeros(0, dtype=np.int64)
-        if idx.ndim != 1 or idx.dtype.kind not in "iu":
-            raise ValueError(f"passages must be a sequence of passage indices (integers), got {passages!r}")
-        if idx.min() < 0 or idx.max() >= self.P:
-            raise IndexError(f"passages {idx.tolist()} out of range for {self.P} passages")
-        return idx.astype(np.int64)
-
-    def _check_unpruned(self):
-        if len(self.bank.idx) != self.bank.R * self.bank.H:
-            raise ValueError("passage states need a bank without pruning (the tracker method's)")
 
     # -- what the studies' variant changes (StudyBankTracker) ----------------------------------------------------
     TESTS_CONSISTENCY = True
