@@ -425,7 +425,7 @@ the filter's code (compiled at the entry's first call; the steps are here so tha
 
 class TrackerStep:
     """The compiled step of a tracker's bank (``unit`` on ``model``, ``H`` hypotheses a passage), or None
-    from :meth:`of` where it does not apply; its arguments that do not change between samples kept."""
+    from :meth:`TrackerStep.of` where it does not apply; its arguments that do not change between samples kept."""
 
     @classmethod
     def of(cls, unit, model, H):
