@@ -429,6 +429,8 @@ class TrackerStep:
 
     @classmethod
     def of(cls, unit, model, H):
+        """The step of ``unit`` on ``model`` with ``H`` hypotheses a passage, or None where the model has no
+        compiled measurement kernel or a transition that changes between samples."""
         spec = kernel_of(model)
         if spec is None or np.ndim(model.A) != 2 or np.ndim(model.Q) != 2:
             return None
