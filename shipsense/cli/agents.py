@@ -37,7 +37,9 @@ def cmd_train(args) -> int:
         raise BadInput(message) from None
     best, final = s["best"], s["final"]
     print(f"{s['algorithm']} on {s['env']}: {s['timesteps']} steps in {s['seconds']:.0f} s "
-          f"({s['frames_per_second']:.0f} frames/s, {s['n_envs']} envs)")
+          f"({s['frames_per_second']:.0f} frames/s, {s['n_envs']} envs; {s['own_frames_per_second']:.0f} frames/s "
+          f"without the {s['imitation_seconds']:.0f} s of imitation and {s['evaluation_seconds']:.0f} s of held-out "
+          f"episodes)")
     for name, p in (("best", best), ("final", final)):
         r = p["return"]
         metrics = ", ".join(f"{k} {m['mean']:.4g}" for k, m in p["metrics"].items())

@@ -1,6 +1,10 @@
 """The Passage environment's compiled per-environment kernels: the sensors an action reads, what it computes
 from its observer's output (the observation's features, the position error and NEES against the truth) and the
-episode's sums (:class:`~shipsense.envs.passage_core.PassageV1Core` calls them on all its environments at once)."""
+episode's sums (:class:`~shipsense.envs.passage_core.PassageV1Core` calls them on all its environments at once).
+
+They keep the GIL (no ``nogil``): each runs for microseconds, and a thread that gives the GIL up for so little
+waits to get it back whenever the process's background thread (the run-ins done ahead,
+:mod:`~shipsense.envs.prefetch`) runs Python -- up to the interpreter's switch interval (5 ms) a call."""
 
 from __future__ import annotations
 
@@ -39,7 +43,7 @@ def error_and_nees(d0, d1, a, b, c):
     return math.hypot(d0, d1), (c * (d0 * d0) - 2 * b * d0 * d1 + a * (d1 * d1)) / (a * c - b * b)
 
 
-@njit(cache=True, error_model="numpy", nogil=True)
+@njit(cache=True, error_model="numpy")
 def write_observations(est, cov, status, k, since, gains, centre, position_scale, steps, obs):
     """:meth:`~shipsense.envs.passage_core.PassageV1Core.observe` into ``obs`` (E, 9 + 2 S) float32: the table's
     entries in float64 (NaN -> 0, +-inf -> +-1), clipped to [-1, 1]."""
@@ -60,7 +64,7 @@ def write_observations(est, cov, status, k, since, gains, centre, position_scale
             obs[e, i] = min(max(v, -1.0), 1.0)
 
 
-@njit(cache=True, error_model="numpy", nogil=True)
+@njit(cache=True, error_model="numpy")
 def read_sensors(actions, who, subsets, sensor_of, y_all, k, since, last_read, y, reads):
     """The reads of :meth:`~shipsense.envs.passage_core.PassageV1Core.step`: every environment's reads
     (``reads``, float) under its action (a row of ``subsets``); for environments ``who``, the next sample
@@ -88,7 +92,7 @@ def read_sensors(actions, who, subsets, sensor_of, y_all, k, since, last_read, y
     return -1
 
 
-@njit(cache=True, error_model="numpy", nogil=True)
+@njit(cache=True, error_model="numpy")
 def accumulate_steps(who, rewards, reads, returns, total_reads):
     """The episode's sums of environments ``who``: their rewards and reads."""
     for i in range(who.size):
@@ -97,7 +101,7 @@ def accumulate_steps(who, rewards, reads, returns, total_reads):
         total_reads[e] += reads[e]
 
 
-@njit(cache=True, error_model="numpy", nogil=True)
+@njit(cache=True, error_model="numpy")
 def measure_errors(envs, k, est, cov, truth, limit, est_hist, errors, inside, error, nees):
     """The measurement step of :class:`~shipsense.envs.passage_core.PassageV1Core` on environments ``envs``: the
     position error (into ``error``) and NEES (``nees``; inf where not finite) at each one's current sample,
@@ -113,7 +117,7 @@ def measure_errors(envs, k, est, cov, truth, limit, est_hist, errors, inside, er
         inside[e, ke] = nees[r] <= limit
 
 
-@njit(cache=True, error_model="numpy", nogil=True)
+@njit(cache=True, error_model="numpy")
 def predicted_beliefs(envs, est, cov, x_scale, A, X, P):
     """The observers' beliefs of environments ``envs`` predicted one step, in the model's internal units (the
     linearisation point of the predicted gains of
@@ -139,6 +143,54 @@ def predicted_beliefs(envs, est, cov, x_scale, A, X, P):
             X[r, a] = acc
         matmul_into(A, Pi, tmp, n, n, n)
         matmul_into(tmp, A.T, P[r], n, n, n)
+
+
+@njit(cache=True, error_model="numpy")
+def apply_budget(actions, subsets, budget, reads, last_read, wakes):
+    """Passage-v2's read budget before a step (:meth:`~shipsense.envs.passage_v2.PassageV2Core.step`), for every
+    environment ``e``: an action (a row of ``subsets``) reading more sensors than the budget has left, ``budget -
+    reads[e]``, is replaced by action 0 (read nothing), in place in ``actions``; ``wakes[e]``: the sensors the
+    action then reads that were not read at the previous step (``last_read``).  An action outside ``subsets`` is
+    left for :func:`read_sensors` to refuse (no wakes)."""
+    S = subsets.shape[1]
+    for e in range(actions.size):
+        a = actions[e]
+        inside = a >= 0 and a < subsets.shape[0]
+        count, woken = 0, 0
+        if inside:
+            for s in range(S):
+                if subsets[a, s]:
+                    count += 1
+                    if not last_read[e, s]:
+                        woken += 1
+        if inside and count > budget - reads[e]:
+            actions[e] = 0
+            woken = 0
+        wakes[e] = woken
+
+
+@njit(cache=True, error_model="numpy")
+def accumulate_costs(who, step_wakes, energy_term, wakes, energy):
+    """Passage-v2's episode sums of environments ``who``: their wake-ups and the energy their steps cost (the
+    negative ``energy_term``)."""
+    for i in range(who.size):
+        e = who[i]
+        wakes[e] += step_wakes[e]
+        energy[e] -= energy_term[e]
+
+
+@njit(cache=True, error_model="numpy")
+def write_budget_features(budget, reads, next_mark, k, steps, obs, col):
+    """Passage-v2's two observation entries into columns ``col`` and ``col + 1`` of ``obs`` (E, obs_dim) float32:
+    the share of the read budget left, ``(budget - reads) / max(budget, 1)`` (1 without a budget), and the samples
+    to the next checkpoint (``next_mark[k] - k``) / ``steps``, both clipped to [0, 1]."""
+    K = next_mark.size
+    for e in range(k.size):
+        left = 1.0 if math.isinf(budget) else (budget - reads[e]) / max(budget, 1.0)
+        obs[e, col] = min(max(left, 0.0), 1.0)
+        ke = k[e]
+        ahead = (next_mark[min(ke, K - 1)] - ke) / steps
+        obs[e, col + 1] = min(max(ahead, 0.0), 1.0)
 
 
 numba_cache.key_on_sources(globals())   # the caches follow the files these kernels are compiled from

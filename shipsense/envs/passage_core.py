@@ -223,8 +223,9 @@ class PassageV1Core(PassagePrefetch):
         """Predicted drop (nats) of the position covariance's log-det for every action, from the observer's
         estimate and covariance predicted one step, linearised there (0 while the observer has no track)."""
         blind = self._blind(envs)
-        self.gains[envs[blind]] = 0.0
-        envs = envs[~blind]   # (the prior's mean is the array centroid: a sensor may sit there)
+        if blind.any():
+            self.gains[envs[blind]] = 0.0
+            envs = envs[~blind]   # (the prior's mean is the array centroid: a sensor may sit there)
         if envs.size == 0:
             return
         n = self.model.n
@@ -255,16 +256,20 @@ class PassageV1Core(PassagePrefetch):
         if bad >= 0:
             raise ValueError(f"actions must be integers in [0, {len(self.subsets)}), got {actions[bad]} for "
                              f"environment {bad}")
-        self._record(self.tracker.update(self.times[self.k[who]], y, passages=who), who)
-        error, nees = np.zeros(self.E), np.zeros(self.E)
-        error[who], nees[who] = self._measure(who)
+        if envs is None:          # (every environment: the observer's fresh output is theirs in order)
+            _copy_outputs(self.tracker.update(self.times[self.k], y), Ellipsis, self.last)
+            error, nees = self._measure(who)
+        else:
+            self._record(self.tracker.update(self.times[self.k[who]], y, passages=who), who)
+            error, nees = np.zeros(self.E), np.zeros(self.E)
+            error[who], nees[who] = self._measure(who)
         self._predict_gains(who)
         error_term, energy_term = self.reward_terms(error, reads, who)
         rewards = error_term + energy_term
         accumulate_steps(who, rewards, reads, self.returns, self.reads)
         info = {"error": error, "nees": nees, "inside95": nees <= CHI2_2_95, "reads": reads,
                 "error_term": error_term, "energy_term": energy_term, "status": self.last.status.copy(),
-                "truth": self.truth[self._rows, self.k, :2].copy(), "estimate": self.last.estimate[:, :2].copy()}
+                "truth": self.truth[self._rows, self.k, :2], "estimate": self.last.estimate[:, :2].copy()}
         return rewards, self.k >= self.K - 1, np.zeros(self.E, dtype=bool), info
 
     # -- the reward's parts (a later version's core changes them) --------------------------------------------

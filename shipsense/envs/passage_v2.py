@@ -105,6 +105,7 @@ import numpy as np
 
 from shipsense.arguments import number
 from shipsense.envs.core_env import CoreVectorEnv
+from shipsense.envs.features import accumulate_costs, apply_budget, write_budget_features
 from shipsense.envs.passage_core import PassageV1Core
 from shipsense.envs.passage_v1 import PassageV1Env, PassageV1VectorEnv, passage_spaces
 
@@ -164,16 +165,10 @@ class PassageV2Core(PassageV1Core):
         if actions.dtype.kind not in "iu":
             raise ValueError(f"actions must be integers in [0, {len(self.subsets)}), got {actions.dtype} values")
         actions = actions.astype(np.int64, copy=True).reshape(self.E)
-        inside = (actions >= 0) & (actions < len(self.subsets))
-        want = np.where(inside[:, None], self.subsets[np.where(inside, actions, 0)], False)
-        over = want.sum(axis=1) > self.budget - self.reads
-        actions[over & inside] = 0
-        want[over] = False
-        self.step_wakes = (want & ~self.last_read).sum(axis=1).astype(float)
+        apply_budget(actions, self.subsets, float(self.budget), self.reads, self.last_read, self.step_wakes)
         rewards, terminated, truncated, info = super().step(actions, envs)
         who = self._rows if envs is None else np.asarray(envs, dtype=np.int64)
-        self.wakes[who] += self.step_wakes[who]
-        self.energy[who] -= info["energy_term"][who]
+        accumulate_costs(who, self.step_wakes, info["energy_term"], self.wakes, self.energy)
         info["wakes"] = self.step_wakes.copy()
         info["budget_left"] = self.budget_left()
         return rewards, terminated, truncated, info
@@ -198,10 +193,8 @@ class PassageV2Core(PassageV1Core):
     def observe(self):
         """Passage-v1's observations and the two of v2 (the module docstring)."""
         obs = super().observe()
-        left = np.ones(self.E) if np.isinf(self.budget) else self.budget_left() / max(self.budget, 1.0)
-        obs[:, 9 + 2 * self.S] = np.clip(left, 0.0, 1.0)
-        ahead = self._next_mark[np.minimum(self.k, self.K - 1)] - self.k
-        obs[:, 10 + 2 * self.S] = np.clip(ahead / max(self.K - 1, 1), 0.0, 1.0)
+        write_budget_features(float(self.budget), self.reads, self._next_mark, self.k, float(max(self.K - 1, 1)), obs,
+                              9 + 2 * self.S)
         return obs
 
 

@@ -31,14 +31,19 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvWrapper
 def unbatch_info(info, num_envs):
     """gymnasium's vector info ``{key: array, "_key": mask}`` -> a list of ``num_envs`` per-environment dicts."""
     out = [{} for _ in range(num_envs)]
+    every = range(num_envs)
     for key, value in info.items():
         if key.startswith("_") or key in ("final_obs", "final_info"):
             continue
-        mask = info.get(f"_{key}", np.ones(num_envs, dtype=bool))
-        rows = unbatch_info(value, num_envs) if isinstance(value, dict) else None
-        for i in np.flatnonzero(mask):
-            out[i][key] = rows[i] if rows is not None else (value[i].item() if isinstance(value[i], np.generic)
-                                                            else value[i])
+        mask = info.get(f"_{key}")
+        if isinstance(value, dict):
+            rows = unbatch_info(value, num_envs)
+        elif isinstance(value, np.ndarray) and value.ndim == 1 and value.dtype != object:
+            rows = value.tolist()         # (Python numbers, as each element's .item(); in one call)
+        else:
+            rows = [v.item() if isinstance(v, np.generic) else v for v in value]
+        for i in every if mask is None else np.flatnonzero(mask).tolist():
+            out[i][key] = rows[i]
     return out
 
 

@@ -145,6 +145,7 @@ def _eval_callback(env_id, env_kwargs, out, every, episodes, masked, progress, a
         environment's cheap baselines (:data:`CURVE_BASELINES`) play the same episodes once, for the curve."""
 
         def _on_training_start(self):
+            t0 = time.perf_counter()
             self.env = gym.make(env_id, **(env_kwargs or {}))
             self.curve, self.best, self.next = [], -np.inf, every
             self.baselines = {}
@@ -152,6 +153,7 @@ def _eval_callback(env_id, env_kwargs, out, every, episodes, masked, progress, a
                 returns, _, _ = run_episodes(self.env, load_policy(self.env, name, seed=HELD_OUT_SEED),
                                              HELD_OUT_SEED, range(episodes))
                 self.baselines[name] = float(np.mean(returns))
+            self.seconds = time.perf_counter() - t0     # (the held-out episodes' time: not PPO's)
             self.bar = tqdm(total=self.locals["total_timesteps"], desc=f"train {env_id}", unit="step", leave=False,
                             disable=None if progress else True)
             if at_start:   # the policy it starts from (behaviour cloning) is a candidate too
@@ -162,6 +164,7 @@ def _eval_callback(env_id, env_kwargs, out, every, episodes, masked, progress, a
             return self.model.predict(obs, deterministic=True, **kw)[0]
 
         def evaluate(self):
+            t0 = time.perf_counter()
             returns, _, metrics = run_episodes(self.env, self._agent, HELD_OUT_SEED, range(episodes))
             s = summarise(returns, metrics)
             point = {"timesteps": int(self.num_timesteps), **s}
@@ -172,6 +175,7 @@ def _eval_callback(env_id, env_kwargs, out, every, episodes, masked, progress, a
             if s["return"]["mean"] > self.best:
                 self.best = s["return"]["mean"]
                 self.model.save(Path(out) / MODEL_FILES["best"])
+            self.seconds += time.perf_counter() - t0
 
         def _on_step(self):
             self.bar.update(self.training_env.num_envs)
@@ -265,7 +269,10 @@ def train(kind, env_id=None, timesteps=None, out=None, seed=0, n_envs=8, eval_ev
     (:func:`imitate`), and the held-out evaluation at step 0 scores the clone, so the best model is never worse
     than it on those seeds.  None (both): :func:`training_defaults`, the measured best (for Passage-v1: shaping
     1 and a clone of greedy); ``imitate_policy="none"``: PPO from scratch.  Bad arguments raise one
-    ``ValueError`` naming the argument.  Returns the summary written to ``out/evaluation.json``.
+    ``ValueError`` naming the argument.  Returns the summary written to ``out/evaluation.json``; its
+    ``frames_per_second`` is the agent's steps over the whole run (behaviour cloning and the held-out episodes
+    included), ``own_frames_per_second`` over the time left to the agent's own steps and updates
+    (``imitation_seconds`` and ``evaluation_seconds`` taken out).
     """
     timesteps = DEFAULT_TIMESTEPS.get(kind, 0) if timesteps is None else timesteps
     env_id, timesteps, seed, n_envs, eval_every, eval_episodes, env_kwargs = _check(
@@ -310,12 +317,14 @@ def train(kind, env_id=None, timesteps=None, out=None, seed=0, n_envs=8, eval_ev
     callback = _eval_callback(env_id, env_kwargs, out, eval_every, eval_episodes, masked, progress,
                               at_start=teacher is not None)
     t0 = time.perf_counter()
-    agreement = None
+    agreement, imitation_seconds = None, 0.0
     if teacher is not None:
         agreement = imitate(model, venv, teacher, imitation_steps)   # (PPO only: checked above)
         venv.seed(seed)
+        imitation_seconds = time.perf_counter() - t0
     model.learn(total_timesteps=timesteps, callback=callback, tb_log_name=ALGORITHMS[kind])
     seconds = time.perf_counter() - t0
+    own_seconds = max(seconds - imitation_seconds - callback.seconds, 1e-9)   # (the agent's steps and updates)
     model.save(out / MODEL_FILES["final"])
     venv.close()
     curve = callback.curve
@@ -328,7 +337,9 @@ def train(kind, env_id=None, timesteps=None, out=None, seed=0, n_envs=8, eval_ev
                "shaping": shaping, "imitate_policy": imitate_policy, "imitation_agreement": agreement,
                "imitation_steps": imitation_steps if imitate_policy is not None else 0,
                "timesteps": int(model.num_timesteps), "n_envs": n_envs, "seed": seed, "seconds": seconds,
-               "frames_per_second": model.num_timesteps / seconds, "held_out_seed": HELD_OUT_SEED,
+               "frames_per_second": model.num_timesteps / seconds, "imitation_seconds": imitation_seconds,
+               "evaluation_seconds": callback.seconds, "own_frames_per_second": model.num_timesteps / own_seconds,
+               "held_out_seed": HELD_OUT_SEED,
                "eval_episodes": eval_episodes, "best": best, "final": curve[-1],
                "held_out_baselines": callback.baselines,
                "files": {"best_model": MODEL_FILES["best"], "final_model": MODEL_FILES["final"],

@@ -189,6 +189,24 @@ def test_train_scheduling_from_a_cloned_greedy_scores_the_clone_first(tmp_path):
     assert 0.0 <= summary["imitation_agreement"] <= 1.0
     assert json.loads((out / "learning_curve.json").read_text())[0]["timesteps"] == 0   # the clone, scored
     assert set(summary["held_out_baselines"]) == {"greedy", "round-robin", "random"}     # drawn on the curve
+    # the agent's own time is the run's without the cloning and the held-out episodes
+    assert summary["imitation_seconds"] > 0 and summary["evaluation_seconds"] > 0
+    own = summary["timesteps"] / summary["own_frames_per_second"]
+    assert own + summary["imitation_seconds"] + summary["evaluation_seconds"] == pytest.approx(summary["seconds"])
+
+
+def test_unbatch_info_gives_each_environment_its_entries_as_python_values():
+    from shipsense.envs.sb3 import unbatch_info
+
+    info = {"error": np.array([1.5, 2.5, 3.5]), "_error": np.array([True, False, True]),
+            "status": np.array([2, 3, 1], dtype=np.int8), "truth": np.arange(6.0).reshape(3, 2),
+            "episode_metrics": {"return": np.array([0.0, -1.0, 0.0]), "_return": np.array([False, True, False])},
+            "_episode_metrics": np.array([False, True, False])}
+    out = unbatch_info(info, 3)
+    assert out[0]["error"] == 1.5 and type(out[0]["error"]) is float and "error" not in out[1]
+    assert out[1]["status"] == 3 and type(out[1]["status"]) is int      # (no mask: every environment)
+    np.testing.assert_array_equal(out[2]["truth"], [4.0, 5.0])
+    assert out[1]["episode_metrics"] == {"return": -1.0} and "episode_metrics" not in out[0]
 
 
 @pytest.mark.parametrize("args, flag", [(["--imitate", "oracle"], "--imitate"), (["--shaping", "-2"], "--shaping")])
