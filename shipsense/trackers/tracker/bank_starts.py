@@ -274,11 +274,11 @@ def start_banks(trk, runs, fits, tau, inflate, out):
 def restart(trk, runs, snr, out):
     """Refit the passages among ``runs`` whose bank is due (alarms, schedule, peak, collapse, a failed
     consistency test: :func:`~shipsense.trackers.tracker.restarts.due`; a selection that has just become
-    ambiguous, ``out.ambiguous``); with motion modes, not before a window
-    of samples has come after the last manoeuvring one (a refit's line starts after the manoeuvre)."""
+    ambiguous, ``out.ambiguous``); with motion modes, not before a window of samples has come after the last
+    manoeuvring one (a refit's line starts after the manoeuvre), or :data:`EARLY_MIN` samples for a passage
+    whose bank's fit failed (:func:`settled`)."""
     if trk.modes is not None:
-        since = trk.state.since[runs]
-        runs = runs[(since < 0) | (trk.state.n[runs] - since > trk.window)]
+        runs = runs[settled(trk, runs)]
         if runs.size == 0:
             return
     flags, s = np.empty((runs.size, 4), dtype=bool), trk.state
@@ -303,6 +303,21 @@ def restart(trk, runs, snr, out):
         out.status[ok], trk.state.cons_now[ok] = INCONSISTENT, True
 
 
+def settled(trk, runs):
+    """Whether passages ``runs`` (R,) have had enough samples since their last manoeuvring one (state ``since``)
+    to refit a line after it: a window's (``window``), or :data:`EARLY_MIN` for a passage whose bank's fit
+    failed (``trusted`` false).
+
+    A bank that does not explain its data waits for the least: it is wrong already, and a manoeuvre it reported
+    while trusted may have ended long before a window's samples; a passage that is not trusted never moves its
+    ``since`` on (:meth:`~shipsense.trackers.tracker.tracker.Tracker.update`: its manoeuvre modes explain the
+    misfit of a start across a manoeuvre, not a manoeuvre of their own) and its refits fit the samples since its
+    bank's start (:func:`refit`)."""
+    since = trk.state.since[runs]
+    wait = np.where(trk.state.trusted[runs], trk.window, EARLY_MIN)
+    return (since < 0) | (trk.state.n[runs] - since > wait)
+
+
 def newly_tied(trk, runs, out):
     """Whether the selections of passages ``runs`` (R,) have just become ambiguous (``out.ambiguous``: a near
     tie between hypotheses far apart, :func:`~shipsense.trackers.bank.selection.report`), not at a (re)start.
@@ -318,12 +333,17 @@ def newly_tied(trk, runs, out):
 
 
 def refit(trk, runs, alarm, rescan, out):
-    """Batch refits of passages ``runs`` to their samples since the window start (at most ``history``),
+    """Batch refits of passages ``runs`` to their samples since the window start (at most ``history``; with
+    motion modes, after the last manoeuvring sample, and for a bank whose fit failed since its start),
     started from the selected estimate, the bank's live hypotheses and (``multistart``) the initial
     window fits; the bank restarts from the ``keep`` best distinct fits."""
     o, H, n = trk.settings, trk.H, trk.model.n
     first = np.maximum(np.maximum(trk.state.k0[runs], trk.state.since[runs] + 1),
                        trk.state.n[runs] - trk.state.y_hist.shape[1] + 1)
+    if trk.modes is not None:
+        # with motion modes, a bank whose fit failed refits the samples since its start: those before it, which
+        # its fit did not explain, may hold a manoeuvre (a start across one), which no line explains
+        first = np.where(trk.state.trusted[runs], first, np.maximum(first, trk.state.start[runs]))
     lengths = trk.state.n[runs] - first + 1
     if not trk.pads_exactly and np.unique(lengths).size > 1:
         # one batch pads the shorter windows with missing samples: the compiled least-squares fits and their

@@ -432,11 +432,13 @@ class Tracker:
     def _manoeuvres(self, runs, sel, out):
         """The motion modes' probabilities of the selected hypotheses ``sel`` of passages ``runs`` into ``out``;
         a passage whose manoeuvre modes hold more than ``[tracker.motion] threshold`` is ``manoeuvring`` (unless
-        inconsistent), and its later refits start after this sample (the samples of a manoeuvre lie about the
-        line after it)."""
+        inconsistent), and, if its bank's fit passed, its later refits start after this sample (the samples of a
+        manoeuvre lie about the line after it; a bank whose fit failed explains its misfit by the manoeuvre modes,
+        which says nothing of when a manoeuvre ended: :func:`~shipsense.trackers.tracker.bank_starts.settled`)."""
         prob = self.bank.modal.prob[runs * self.H + sel]
         man = runs[1.0 - prob[:, 0] > self.settings.motion.threshold]
-        self.state.since[man] = self.state.n[man]
+        man_trusted = man[self.state.trusted[man]]
+        self.state.since[man_trusted] = self.state.n[man_trusted]
         out.status[man] = np.where(out.status[man] == INCONSISTENT, INCONSISTENT, MANOEUVRING)
 
     def _compiled_step(self, runs, yi, out, stepped=None):

@@ -88,3 +88,36 @@ def test_a_bad_motion_option_is_refused_naming_it(field, value):
 
     with pytest.raises(ShipsenseError, match=f"motion.{field}"):
         resolve_settings("S2", motion={field: value})
+
+
+@pytest.fixture(scope="module")
+def started_across_a_turn():
+    """A passage of S1-P2's electrode envelopes (a random passage with a random manoeuvre, as
+    ``experiments/manoeuvres.py`` draws them) whose turn ends as its bank starts: the initialisation window's
+    fit spans the turn, so it fails, and the bank starts untrusted."""
+    sc = load_scenario("S1-P2")
+    end = sc.period * (sc.steps - 1)
+    sc = sc.with_updates(manoeuvres={"body_fixed_share": 0.0, "random": {
+        "probability": 0.5, "turn_share": 0.5, "turn_rate_deg_s": [1.0, 3.0], "turn_deg": [20.0, 90.0],
+        "speed_factor": [0.5, 2.0], "acceleration": [0.05, 0.3], "start": [0.1 * end, 0.5 * end]}})
+    sim = simulate(sc, runs=30, seed=0, random=True)
+    p = 13
+    tr = Tracker(sc, passages=1, motion={"model": "imm"})
+    cols = np.isin([c[0] for c in sim.channels], tr.model.array.ids)
+    res = tr.track(sim.times, sim.measurements[p:p + 1][..., cols])
+    return sim.manoeuvre[p], sim.truth[p], tr, res
+
+
+def test_a_bank_started_across_a_turn_is_refitted_after_it(started_across_a_turn):
+    """The bank whose start spans the turn reports it inconsistent, then is refitted on the samples after its
+    start (its manoeuvre modes explained the failed fit, not a manoeuvre: they do not hold its refits back a
+    window after them), and tracks the straight leg after it: consistent and within 2 m at the end (at over 100 m)."""
+    moving, truth, tr, res = started_across_a_turn
+    names = res.status_names()[0]
+    started = np.flatnonzero(~np.isin(names, ["initialising", "no data"])).min()
+    assert moving.any() and np.flatnonzero(moving).max() <= started + 1      # (the case: a start across a turn)
+    assert names[started] == "inconsistent"
+    assert tr.state.restarts[0] >= 1
+    last = slice(-8, None)
+    assert not (names[last] == "inconsistent").any()
+    assert np.hypot(*(res.estimates[0, last, :2] - truth[last, :2]).T).max() < 2.0
