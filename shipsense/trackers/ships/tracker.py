@@ -158,14 +158,14 @@ class ShipsTracker:
         ``y`` (C, K, m) SI (see the module docstring).  Returns ``(born, mean, cov, gain, penalty)``: born (C,)
         bool, the joint fit's state (C, 2n) and covariance (C, 2n, 2n) SI at ``k``, the log-likelihood gain
         :math:`\\ell_2 - \\ell_1` (C,) and the penalty (C,)."""
-        o, n = self.settings, self.base.n
+        o = self.settings
         yw = self._window(y, k)
         x1 = self._back(x1)
         _, chi2_1 = one_ship_fit(self.one, yw, x1)
         th, chi2_2, info = two_ship_fits(self.one, self.joint_fit, yw, x1)
         th = self._labelled(th, x1)
         gain = 0.5 * (chi2_1 - chi2_2)
-        penalty = o.penalty * 0.5 * n * np.log(np.maximum(np.isfinite(yw).sum(axis=(1, 2)), 2))
+        penalty = self._penalty(yw)
         apart = self._separation(th) >= o.min_separation_m
         mean, cov = self._at_end(th, info)
         ok = np.isfinite(gain) & np.isfinite(mean).all(axis=1) & np.isfinite(cov).all(axis=(1, 2))
@@ -184,9 +184,13 @@ class ShipsTracker:
         th, chi2_2, info = two_ship_fits(self.one, self.joint_fit, yw, np.stack(starts, axis=1), x2)
         th = self._labelled(th, x1, x2)
         _, chi2_1 = one_ship_fit(self.one, yw, x1)
-        penalty = o.penalty * 0.5 * n * np.log(np.maximum(np.isfinite(yw).sum(axis=(1, 2)), 2))
-        keep = (0.5 * (chi2_1 - chi2_2) > penalty) & (self._separation(th) >= o.min_separation_m)
+        keep = (0.5 * (chi2_1 - chi2_2) > self._penalty(yw)) & (self._separation(th) >= o.min_separation_m)
         return keep, *self._at_end(th, info)
+
+    def _penalty(self, yw):
+        r"""The model-order penalty (C,) of windows ``yw`` (C, W, m): ``penalty`` times BIC's
+        :math:`\tfrac12 n \ln N`, ``n`` one ship's state size, ``N`` the window's measurements."""
+        return self.settings.penalty * 0.5 * self.base.n * np.log(np.maximum(np.isfinite(yw).sum(axis=(1, 2)), 2))
 
     def _separation(self, th):
         """Distance (C,) between the two ships of joint fits ``th`` (C, 2n) at the window's middle, m."""
@@ -217,11 +221,8 @@ class ShipsTracker:
         tracked_since = np.full(P, -1)
         yi = y / b.y_scale
         for k in range(K):
-            one_ship = ~two
             st = first.status[:, k]
             tracked_since = np.where(st >= TRACKING, np.where(tracked_since < 0, k, tracked_since), -1)
-            s1 = one_ship & (st >= TRACKING)
-            est[s1, k, 0], cov[s1, k, 0], status[s1, k, 0] = first.estimates[s1, k], first.covs[s1, k], st[s1]
             run = np.flatnonzero(two & (born[:, 1] < k))
             if run.size:
                 belief = Belief.from_cov(mean[run], jcov[run])
@@ -239,9 +240,9 @@ class ShipsTracker:
                 jcov[again[fine]] = c2[fine] / np.outer(self.joint.x_scale, self.joint.x_scale)
                 merged = again[~still & ~dead[again, 1]]  # one ship explains the window: track 2 dies
                 died[merged, 1], dead[merged, 1], two[merged] = k, True, False
-                one_ship = ~two
-                s1 = one_ship & (st >= TRACKING)
-                est[s1, k, 0], cov[s1, k, 0], status[s1, k, 0] = first.estimates[s1, k], first.covs[s1, k], st[s1]
+            one_ship = ~two                             # (after the refits: a track 2 that died leaves one)
+            s1 = one_ship & (st >= TRACKING)
+            est[s1, k, 0], cov[s1, k, 0], status[s1, k, 0] = first.estimates[s1, k], first.covs[s1, k], st[s1]
             if o.max_ships > 1 and due:
                 cand = np.flatnonzero(one_ship & (tracked_since >= 0)
                                       & ~dead[:, 0] & (born[:, 1] < 0))

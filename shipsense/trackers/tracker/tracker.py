@@ -209,7 +209,7 @@ class Tracker:
         self._R_used = np.ascontiguousarray(self.filter_model.R[None], dtype=float)
         self._testing = bool(opts.consistency_window) and self.TESTS_CONSISTENCY
         self.layout = PassageArrays.layout(self.model.m, self.model.n, self.settings, self._history())
-        self.reset(passages)   # (PassageArrays.layout)
+        self.reset(passages)
 
     labels = property(lambda self: self.model.labels, doc="State component names.")
 
