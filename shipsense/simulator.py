@@ -171,7 +171,7 @@ def _passages(sc: Scenario, runs: int, random: bool, streams) -> np.ndarray:
     if pr is None:
         raise ValueError(f"scenario {sc.name!r} has no [prior] section: random passages need one")
     u = streams["prior"].random((runs, 6))
-    centre = np.array([s.position[:2] for s in sc.sensors]).mean(axis=0)
+    centre = array_centre(sc)
     rng_ = pr.range[0] + (pr.range[1] - pr.range[0]) * u[:, 0]
     brg = np.deg2rad(pr.bearing_deg[0] + (pr.bearing_deg[1] - pr.bearing_deg[0]) * u[:, 1])
     start = centre + rng_[:, None] * np.stack([np.cos(brg), np.sin(brg)], axis=-1)
@@ -184,13 +184,26 @@ def _passages(sc: Scenario, runs: int, random: bool, streams) -> np.ndarray:
     speed = pr.speed[0] + (pr.speed[1] - pr.speed[0]) * u[:, 3]
     x0[:, 0:2] = start
     x0[:, 2:4] = speed[:, None] * np.stack([np.cos(course), np.sin(course)], axis=-1)
-    if pr.moment is not None:
-        mag = np.exp(np.log(pr.moment[0]) + np.log(pr.moment[1] / pr.moment[0]) * u[:, 4])
-        d = streams["prior_dir"].standard_normal((runs, 3))
-        x0[:, 5:8] = mag[:, None] * d / np.linalg.norm(d, axis=-1, keepdims=True)
-    if pr.p is not None:
-        x0[:, 8] = np.exp(np.log(pr.p[0]) + np.log(pr.p[1] / pr.p[0]) * u[:, 5])
+    prior_source(pr, u[:, 4], u[:, 5], streams["prior_dir"], x0)
     return x0
+
+
+def prior_source(pr, u_moment, u_p, directions, x):
+    """Write a source drawn from the passage prior ``pr`` into states ``x`` (..., 9): the moment's size
+    log-uniform in ``pr.moment`` at the uniforms ``u_moment`` (...), its direction isotropic (normals of the
+    generator ``directions``), and the electric dipole log-uniform in ``pr.p`` at ``u_p`` (...); the parts the
+    prior does not give stay as they are."""
+    if pr.moment is not None:
+        mag = np.exp(np.log(pr.moment[0]) + np.log(pr.moment[1] / pr.moment[0]) * u_moment)
+        d = directions.standard_normal(u_moment.shape + (3,))
+        x[..., 5:8] = mag[..., None] * d / np.linalg.norm(d, axis=-1, keepdims=True)
+    if pr.p is not None:
+        x[..., 8] = np.exp(np.log(pr.p[0]) + np.log(pr.p[1] / pr.p[0]) * u_p)
+
+
+def array_centre(sc: Scenario) -> np.ndarray:
+    """The centroid (2,) of the scenario's sensors in the horizontal plane, m: the centre of its passages."""
+    return np.array([s.position[:2] for s in sc.sensors]).mean(axis=0)
 
 
 def sample_passages(scenario, runs: int, seed: int = 0, random: bool = True) -> np.ndarray:
@@ -384,18 +397,12 @@ def _companions(sc: Scenario, x0, random: bool, tstreams, times):
     xc = np.repeat(x0[:, None, :], C, axis=1)
     named = geometry > 0
     if named.any():
-        centre = np.array([s.position[:2] for s in sc.sensors]).mean(axis=0)
+        centre = array_centre(sc)
         xc[..., 0:2], xc[..., 2:4] = companion_tracks(x0[:, None, :], centre, geometry, separation, offset, angle,
                                                       ratio, side)
         if random:   # a source of its own, drawn from the prior as ship 0's is
-            pr = sc.prior
             us = tstreams["source"].random((runs, C, 2))
-            if pr.moment is not None:
-                mag = np.exp(np.log(pr.moment[0]) + np.log(pr.moment[1] / pr.moment[0]) * us[..., 0])
-                d = tstreams["source_dir"].standard_normal((runs, C, 3))
-                xc[..., 5:8] = mag[..., None] * d / np.linalg.norm(d, axis=-1, keepdims=True)
-            if pr.p is not None:
-                xc[..., 8] = np.exp(np.log(pr.p[0]) + np.log(pr.p[1] / pr.p[0]) * us[..., 1])
+            prior_source(sc.prior, us[..., 0], us[..., 1], tstreams["source_dir"], xc)
     if not named.all():
         drawn = _passages(sc, runs * C, True, tstreams).reshape(runs, C, -1)
         drawn[..., 0:2] -= drawn[..., 2:4] * offset[..., None]       # starting its passage time_offset later
