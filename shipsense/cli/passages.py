@@ -159,6 +159,8 @@ def cmd_track(args) -> int:
         raise BadInput(f"--filter must be one of {', '.join(FILTER_NAMES)}, got {args.filter!r}")
     if args.passage_gap is not None and not (args.passage_gap > 0 and np.isfinite(args.passage_gap)):
         raise BadInput(f"--passage-gap must be a positive number of seconds, got {args.passage_gap!r}")
+    if args.ships != "1" and (args.method != "tracker" or args.filter is not None):
+        raise BadInput("--ships 2|auto runs the several-ship tracker: --method bank and --filter do not apply")
     out = Path(args.out)
     writable("--out", out, directory=True)
     if args.data:
@@ -199,21 +201,12 @@ def cmd_track(args) -> int:
 def _track_ships(args, sc, out, sim, source) -> int:
     """``track --ships 2|auto`` of a simulated passage: the several-ship tracker (:mod:`shipsense.cli.ships`)."""
     from shipsense.atomic import staged_directory
-    from shipsense.cli.ships import describe_ships, max_ships, track_ships_to_files
+    from shipsense.cli.ships import describe_ships, track_ships_into
 
-    if args.method != "tracker" or args.filter is not None:
-        raise BadInput("--ships 2|auto runs the several-ship tracker: --method bank and --filter do not apply")
     truth = sim.ships[0] if sim.companions is not None else sim.truth[:1]
     with staged_directory(out) as stage:
-        try:
-            summary = track_ships_to_files(sc, sim.times, sim.measurements[0], stage, ships=max_ships(args.ships),
-                                           truth=truth, progress=not QUIET["on"])
-        except ValueError as err:
-            raise BadInput(str(err)) from None
-        if not args.no_plot:
-            from shipsense.plotting import plot_ships
-
-            plot_ships(summary, stage / "track.png", title=f"{sc.name}: several ships (2-sigma ellipses)")
+        summary = track_ships_into(sc, sim.times, sim.measurements[0], stage, args,
+                                   f"{sc.name}: several ships (2-sigma ellipses)", truth=truth)
     for line in describe_ships(summary, source):
         print(line)
     print(f"wrote {out / 'estimates.csv'}" + ("" if args.no_plot else f" and {out / 'track.png'}"))

@@ -100,6 +100,7 @@ def track_recordings(args, sc) -> int:
     from shipsense import budget
     from shipsense.atomic import staged_directory
     from shipsense.cli.common import EXIT_OK, QUIET, first_use, within_budget
+    from shipsense.cli.ships import describe_ships, track_ships_into
     from shipsense.cli.track import describe, track_to_files
     from shipsense.recording import RecordingError, read_recording
     from shipsense.recording.mapping import load_mapping
@@ -122,9 +123,7 @@ def track_recordings(args, sc) -> int:
     gap_limit = float(resolve_settings(sc).gap_limit_s)
     passage_gap = args.passage_gap if args.passage_gap is not None else PASSAGE_GAP_LIMITS * gap_limit
     first_use("track", args.filter)
-    ships = getattr(args, "ships", "1") != "1"
-    if ships and (args.method != "tracker" or args.filter is not None):
-        raise BadInput("--ships 2|auto runs the several-ship tracker: --method bank and --filter do not apply")
+    ships = getattr(args, "ships", "1") != "1"      # (its options checked by the command: cmd_track)
     rows, described = [], []
     with staged_directory(out) as stage:   # every recording's tables and plots, or nothing
         for (f, times, y), target in zip(recordings, targets):
@@ -140,7 +139,9 @@ def track_recordings(args, sc) -> int:
                 what = (f"recording {f}{f' passage {n}' if len(parts) > 1 else ''} ({len(t)} samples, "
                         f"{100 * np.isnan(yp).mean():.1f} % of values missing)")
                 if ships:
-                    described.append(track_ships(sc, t, yp, stage / folder.relative_to(out), args, what, f.name))
+                    summary = track_ships_into(sc, t, yp, stage / folder.relative_to(out), args,
+                                               f"{sc.name}: {f.name}, several ships")
+                    described.append(describe_ships(summary, what))
                     continue
                 try:
                     summary = track_to_files(sc, t, yp, stage / folder.relative_to(out), method=args.method,
@@ -175,20 +176,3 @@ def track_recordings(args, sc) -> int:
         print(f"wrote {len(rows)} tracked passages of {len(files)} recording(s) into {out} (estimates.csv, "
               f"selection_log.csv{'' if args.no_plot else ', track.png'} in each folder) and {out / 'summary.csv'}")
     return EXIT_OK
-
-
-def track_ships(sc, t, y, folder, args, what, name):
-    """One passage of a recording through the several-ship tracker (``--ships 2|auto``,
-    :mod:`shipsense.cli.ships`) into ``folder``: the lines to print."""
-    from shipsense.cli.common import QUIET
-    from shipsense.cli.ships import describe_ships, max_ships, track_ships_to_files
-
-    try:
-        summary = track_ships_to_files(sc, t, y, folder, ships=max_ships(args.ships), progress=not QUIET["on"])
-    except ValueError as err:
-        raise BadInput(str(err)) from None
-    if not args.no_plot:
-        from shipsense.plotting import plot_ships
-
-        plot_ships(summary, folder / "track.png", title=f"{sc.name}: {name}, several ships")
-    return describe_ships(summary, what)

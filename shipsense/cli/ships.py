@@ -10,21 +10,20 @@ own colour, with 2-sigma ellipses).  The one-ship tracker stays the default of `
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from shipsense.atomic import atomic_path
+from shipsense.cli.common import QUIET, BadInput
+from shipsense.cli.track import fmt, state_line
 from shipsense.trackers.ships import ShipsResult, ShipsSettings, ShipsTracker
 from shipsense.trackers.tracker.results import STATUSES
 
-SHIPS_CHOICES = ("1", "2", "auto")
-"""``--ships``: the most ships tracked at once (``auto``: as many as the tracker can, two)."""
-
 
 def max_ships(choice) -> int:
-    """The most ships of a ``--ships`` choice (:data:`SHIPS_CHOICES`)."""
+    """The most ships of a ``--ships`` choice (``1``, ``2``, or ``auto``: as many as the tracker can, two)."""
     return 2 if choice == "auto" else int(choice)
 
 
@@ -44,25 +43,16 @@ def track_ships_to_files(scenario, times, measurements, out, *, ships=2, truth=N
     tracker = ShipsTracker(scenario, passages=1, settings=ShipsSettings(max_ships=int(ships)))
     t = np.asarray(times, dtype=float)
     result = tracker.track(t[None], np.asarray(measurements, dtype=float)[None], progress=progress)
-    out = Path(out)
-    part = out / ".estimates.csv.part"     # renamed at the end: an interrupted run leaves no half table
-    try:
-        with open(part, "w") as fh:
-            fh.write(",".join(["time", "ship", *result.labels, "std_x", "std_y", "cov_xx", "cov_xy", "cov_yy",
-                               "status"]) + "\n")
-            est, cov, status = result.estimates[0], result.covs[0], result.status_names()[0]
-            k, s = np.nonzero(result.present[0])              # sample-major: the tracks of a sample together
-            P = cov[k, s, :2, :2]
-            cols = [np.char.mod("%.6g", t[k]), np.char.mod("%d", s + 1),
-                    *(np.char.mod("%.6g", est[k, s, i]) for i in range(len(result.labels))),
-                    np.char.mod("%.4g", np.sqrt(P[:, 0, 0])), np.char.mod("%.4g", np.sqrt(P[:, 1, 1])),
-                    np.char.mod("%.6g", P[:, 0, 0]), np.char.mod("%.6g", P[:, 0, 1]), np.char.mod("%.6g", P[:, 1, 1]),
-                    status[k, s].astype(str)]
-            fh.write("".join(",".join(row) + "\n" for row in zip(*cols)))
-    except BaseException:
-        part.unlink(missing_ok=True)
-        raise
-    os.replace(part, out / "estimates.csv")
+    with atomic_path(Path(out) / "estimates.csv") as tmp, open(tmp, "w") as fh:
+        fh.write(",".join(["time", "ship", *result.labels, "std_x", "std_y", "cov_xx", "cov_xy", "cov_yy",
+                           "status"]) + "\n")
+        est, cov, status = result.estimates[0], result.covs[0], result.status_names()[0]
+        k, s = np.nonzero(result.present[0])              # sample-major: the tracks of a sample together
+        P = cov[k, s, :2, :2]
+        cols = [fmt(t[k], "%.6g"), fmt(s + 1, "%d"), *(fmt(est[k, s, i], "%.6g") for i in range(len(result.labels))),
+                fmt(np.sqrt(P[:, 0, 0]), "%.4g"), fmt(np.sqrt(P[:, 1, 1]), "%.4g"),
+                fmt(P[:, 0, 0], "%.6g"), fmt(P[:, 0, 1], "%.6g"), fmt(P[:, 1, 1], "%.6g"), status[k, s].astype(str)]
+        fh.write("".join(",".join(row) + "\n" for row in zip(*cols)))
     return ShipsSummary(tracker, result, None if truth is None else np.asarray(truth))
 
 
@@ -83,9 +73,24 @@ def describe_ships(summary: ShipsSummary, source: str) -> list[str]:
         f, c = r.estimates[0, last, s], r.covs[0, last, s]
         when = "at the end" if last == len(T) - 1 else f"last at t = {T[last]:.6g} s"
         lines.append(f"  ship {s + 1} (from t = {T[born]:.6g} s, {when}, {STATUSES[r.status[0, last, s]]}): "
-                     f"x = {f[0]:.1f} m, y = {f[1]:.1f} m, v = ({f[2]:.2f}, {f[3]:.2f}) m/s, 2-sigma "
-                     f"{2 * np.sqrt(c[0, 0]):.2f} / {2 * np.sqrt(c[1, 1]):.2f} m"
-                     + (f"; ended at t = {T[died]:.6g} s" if died >= 0 else ""))
+                     f"{state_line(f, c)}" + (f"; ended at t = {T[died]:.6g} s" if died >= 0 else ""))
     if r.born[0, 0] < 0:
         lines[1:] = ["  no ship: the one-ship tracker did not start tracking"]
     return lines
+
+
+def track_ships_into(sc, times, measurements, folder, args, title, truth=None) -> ShipsSummary:
+    """``track --ships 2|auto`` of one passage into ``folder``: :func:`track_ships_to_files` (a bad input as
+    :class:`~shipsense.cli.common.BadInput`) and, unless ``--no-plot``, the picture ``track.png`` titled
+    ``title``."""
+    try:
+        summary = track_ships_to_files(sc, times, measurements, folder, ships=max_ships(args.ships), truth=truth,
+                                       progress=not QUIET["on"])
+    except ValueError as err:
+        raise BadInput(str(err)) from None
+    if not args.no_plot:
+        from shipsense.plotting import plot_ships
+
+        plot_ships(summary, Path(folder) / "track.png", title=title)
+    return summary
+

@@ -85,7 +85,7 @@ class TrackSummary:
         return int(self.tracker.state.restarts[0])
 
 
-def _fmt(col, spec):
+def fmt(col, spec):
     return np.char.mod(spec, col)
 
 
@@ -95,16 +95,16 @@ def _write_block(est_fh, log_fh, t, s, truth, labels, modes=()):
     probabilities are columns ``p_<mode>``)."""
     status = np.asarray(STATUSES)[s["status"]]
     P = s["cov"][:, :2, :2]
-    cols = [_fmt(t, "%.6g"), *(_fmt(s["estimate"][:, i], "%.6g") for i in range(len(labels))),
-            _fmt(np.sqrt(P[:, 0, 0]), "%.4g"), _fmt(np.sqrt(P[:, 1, 1]), "%.4g"), _fmt(s["selected"], "%d")]
+    cols = [fmt(t, "%.6g"), *(fmt(s["estimate"][:, i], "%.6g") for i in range(len(labels))),
+            fmt(np.sqrt(P[:, 0, 0]), "%.4g"), fmt(np.sqrt(P[:, 1, 1]), "%.4g"), fmt(s["selected"], "%d")]
     if truth is not None:
         err = np.hypot(s["estimate"][:, 0] - truth[:, 0], s["estimate"][:, 1] - truth[:, 1])
-        cols += [_fmt(truth[:, 0], "%.6g"), _fmt(truth[:, 1], "%.6g"), _fmt(err, "%.4g")]
-    cols += [_fmt(P[:, 0, 0], "%.6g"), _fmt(P[:, 0, 1], "%.6g"), _fmt(P[:, 1, 1], "%.6g"), status]
-    cols += [_fmt(s["modes"][:, j], "%.4g") for j in range(len(modes))]
+        cols += [fmt(truth[:, 0], "%.6g"), fmt(truth[:, 1], "%.6g"), fmt(err, "%.4g")]
+    cols += [fmt(P[:, 0, 0], "%.6g"), fmt(P[:, 0, 1], "%.6g"), fmt(P[:, 1, 1], "%.6g"), status]
+    cols += [fmt(s["modes"][:, j], "%.4g") for j in range(len(modes))]
     est_fh.write("\n".join(",".join(row) for row in zip(*cols)) + "\n")
     gap = np.where(np.isfinite(s["gap_nats"]), s["gap_nats"], np.nan)
-    cols = [_fmt(t, "%.6g"), status, _fmt(s["selected"], "%d"), _fmt(s["hypotheses"], "%d"), _fmt(gap, "%.4g"),
+    cols = [fmt(t, "%.6g"), status, fmt(s["selected"], "%d"), fmt(s["hypotheses"], "%d"), fmt(gap, "%.4g"),
             np.where(s["ambiguous"], "true", "false")]
     log_fh.write("\n".join(",".join(row) for row in zip(*cols)) + "\n")
 
@@ -188,15 +188,20 @@ def _track_blocks(tracker, t, y, truth, steps, parts, header, labels, keys, keep
     keep["_last"] = s
 
 
+def state_line(f, c) -> str:
+    """A tracked state ``f`` (n,) SI with its covariance ``c`` (n, n) as ``track`` prints it: position,
+    velocity and the 2-sigma of x and y."""
+    return (f"x = {f[0]:.1f} m, y = {f[1]:.1f} m, v = ({f[2]:.2f}, {f[3]:.2f}) m/s, 2-sigma "
+            f"{2 * np.sqrt(c[0, 0]):.2f} / {2 * np.sqrt(c[1, 1]):.2f} m")
+
+
 def describe(summary: TrackSummary, source: str) -> list[str]:
     """The lines ``shipsense track`` prints about a tracked passage."""
     tr, f, c = summary.tracker, summary.final, summary.final_cov
     what = ("the studies' bank of " f"{tr.H} hypotheses ({tr.unit.name})" if tr.settings.method == "bank" else
             f"the project's tracker ({tr.unit.name}{', robust' if tr.settings.robust else ''})")
     lines = [f"tracked {source} with {what}",
-             f"  at the end ({summary.final_status}): x = {f[0]:.1f} m, y = {f[1]:.1f} m, v = ({f[2]:.2f}, "
-             f"{f[3]:.2f}) m/s, 2-sigma {2 * np.sqrt(c[0, 0]):.2f} / {2 * np.sqrt(c[1, 1]):.2f} m; "
-             f"{summary.restarts} restarts"]
+             f"  at the end ({summary.final_status}): {state_line(f, c)}; {summary.restarts} restarts"]
     counts = np.bincount(summary.plot["status"], minlength=len(STATUSES))
     if counts[NO_DATA] == len(summary.plot["status"]):
         lines[1:] = ["  no sample of the passage had a field value: nothing to track"]
