@@ -118,6 +118,10 @@ class JointModel:
         b = self.base.state_bounds
         return None if b is None else (np.tile(b[0], self.ships), np.tile(b[1], self.ships))
 
-    def without_process_noise(self):
-        """The same ships with Q = 0."""
-        return JointModel(self.base.without_process_noise(), self.ships)
+    def cov_to_internal(self, P_si):
+        """A covariance (..., n, n) in SI units, in internal units."""
+        return np.asarray(P_si) / np.outer(self.x_scale, self.x_scale)
+
+    def cov_to_si(self, P):
+        """A covariance (..., n, n) in internal units, in SI units."""
+        return np.asarray(P) * np.outer(self.x_scale, self.x_scale)

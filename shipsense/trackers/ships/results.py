@@ -53,11 +53,6 @@ class ShipsResult:
         """The number of ships at each sample (P, K)."""
         return self.present.sum(axis=-1)
 
-    @property
-    def track_ids(self):
-        """The track id (1, 2, ...) of each track slot, (I,)."""
-        return np.arange(1, self.estimates.shape[2] + 1)
-
     def status_names(self):
         """Status names (P, K, I)."""
         return np.asarray(STATUSES, dtype=object)[self.status]

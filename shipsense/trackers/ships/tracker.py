@@ -237,7 +237,7 @@ class ShipsTracker:
                 still, m2, c2 = self.refit(y[again], self.joint.to_si(mean[again]), k, first.estimates[again, k])
                 fine = np.isfinite(m2).all(axis=1)
                 mean[again[fine]] = self.joint.to_internal(m2[fine])
-                jcov[again[fine]] = c2[fine] / np.outer(self.joint.x_scale, self.joint.x_scale)
+                jcov[again[fine]] = self.joint.cov_to_internal(c2[fine])
                 merged = again[~still & ~dead[again, 1]]  # one ship explains the window: track 2 dies
                 died[merged, 1], dead[merged, 1], two[merged] = k, True, False
             one_ship = ~two                             # (after the refits: a track 2 that died leaves one)
@@ -251,12 +251,12 @@ class ShipsTracker:
                     new = cand[ok]
                     if new.size:
                         mean[new] = self.joint.to_internal(m2[ok])
-                        jcov[new] = c2[ok] / np.outer(self.joint.x_scale, self.joint.x_scale)
+                        jcov[new] = self.joint.cov_to_internal(c2[ok])
                         two[new], born[new, 1] = True, k
             live = np.flatnonzero(two)
             if live.size:
                 xs = self.joint.split(mean[live]) * b.x_scale
-                cs = jcov[live] * np.outer(self.joint.x_scale, self.joint.x_scale)
+                cs = self.joint.cov_to_si(jcov[live])
                 for s in range(I):
                     est[live, k, s] = xs[:, s]
                     cov[live, k, s] = cs[:, s * n:(s + 1) * n, s * n:(s + 1) * n]
