@@ -144,7 +144,7 @@ def score_baselines(problem, candidates, placement, criterion, seed=0, random_la
     sets = baseline_layouts(candidates, k, np.random.default_rng(seed), random_layouts)
     out = {}
     rand = sets["random"]
-    ok = pl.feasible(rand, None, problem) if problem is not None else np.ones(len(rand), dtype=bool)
+    ok = pl.feasible(rand, None, problem)
     vals = np.full(len(rand), -np.inf)
     if ok.any():
         vals[ok] = values(rand[ok])

@@ -2,7 +2,7 @@
 
 ``shipsense check LAYOUT.toml [...] [--junit FILE]`` checks each file
 (:func:`~shipsense.design.observability.check_scenario`) and reports its two-ship resolvable separation
-(:func:`~shipsense.design.resolvability.scenario_resolvability`, on the same prior passages: a figure, not a
+(:func:`~shipsense.design.resolvability.resolvable_separation`, on the same prior passages: a figure, not a
 verdict -- it does not change the exit code); the exit code is
 the worst outcome -- 2 a file that cannot be read or validated, 4 a
 degenerate array, 3 an ambiguous one, 0 all observable -- and the JUnit
@@ -40,17 +40,16 @@ class GateResult:
 def check_layouts(layouts, passages=8, seed=0, progress=False, errors=(ValueError, OSError)):
     """Check each layout file; a file that cannot be loaded or validated is an ``"error"`` result (its
     message kept), not an exception, so one bad file does not hide the others' verdicts."""
-    from shipsense.config import load_scenario
-    from shipsense.design.observability import check_scenario
-    from shipsense.design.resolvability import scenario_resolvability
+    from shipsense.design.observability import check_array, scenario_passages
+    from shipsense.design.resolvability import resolvable_separation
 
     out = []
     for layout in layouts:
         t0 = time.perf_counter()
         try:
-            sc = load_scenario(layout)
-            v = check_scenario(sc, passages=passages, seed=seed, progress=progress)
-            res = scenario_resolvability(sc, passages=passages, seed=seed)
+            sc, model, thetas = scenario_passages(layout, passages, seed)       # (one set-up for both checks)
+            v = check_array(model, thetas, sc.steps, seed=seed, progress=progress)
+            res = resolvable_separation(model, thetas, sc.steps)
             out.append(GateResult(str(layout), v.verdict, time.perf_counter() - t0, v, sc, res))
         except errors as err:
             out.append(GateResult(str(layout), "error", time.perf_counter() - t0, str(err)))

@@ -327,8 +327,9 @@ def _ambiguity(model, theta, alt, chi2, dist, source):
     return Ambiguity(model.to_si(theta), model.to_si(alt), chi2, dist, source)
 
 
-def check_scenario(scenario, passages=8, seed=0, progress=False, **kwargs):
-    """Verdict for a scenario's array: passages from its ``[prior]`` (or its nominal passage)."""
+def scenario_passages(scenario, passages=8, seed=0):
+    """A scenario's array and the passages a check draws: ``(scenario, model, thetas)``, ``thetas`` (P, n)
+    internal units, ``passages`` from its ``[prior]`` (its nominal passage without one)."""
     from shipsense.config import load_scenario
     from shipsense.models.field_model import model_from_scenario
     from shipsense.simulator import sample_passages
@@ -336,5 +337,10 @@ def check_scenario(scenario, passages=8, seed=0, progress=False, **kwargs):
     sc = load_scenario(scenario)
     model = model_from_scenario(sc)
     truth = sample_passages(sc, passages if sc.prior is not None else 1, seed=seed, random=sc.prior is not None)
-    thetas = model.to_internal(model.state_from_truth(truth))
+    return sc, model, model.to_internal(model.state_from_truth(truth))
+
+
+def check_scenario(scenario, passages=8, seed=0, progress=False, **kwargs):
+    """Verdict for a scenario's array: passages from its ``[prior]`` (or its nominal passage)."""
+    sc, model, thetas = scenario_passages(scenario, passages, seed)
     return check_array(model, thetas, sc.steps, seed=seed, progress=progress, **kwargs)

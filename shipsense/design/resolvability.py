@@ -287,14 +287,9 @@ def resolvable_separation(model, thetas, steps, *, share=RESOLVE_SHARE, separati
 def scenario_resolvability(scenario, passages=8, seed=0, share=RESOLVE_SHARE):
     """:func:`resolvable_separation` of a scenario's array over passages from its ``[prior]`` (the nominal
     passage without one), the same draws as :func:`~shipsense.design.observability.check_scenario`'s."""
-    from shipsense.config import load_scenario
-    from shipsense.models.field_model import model_from_scenario
-    from shipsense.simulator import sample_passages
+    from shipsense.design.observability import scenario_passages
 
-    sc = load_scenario(scenario)
-    model = model_from_scenario(sc)
-    truth = sample_passages(sc, passages if sc.prior is not None else 1, seed=seed, random=sc.prior is not None)
-    thetas = model.to_internal(model.state_from_truth(truth))
+    sc, model, thetas = scenario_passages(scenario, passages, seed)
     return resolvable_separation(model, thetas, sc.steps, share=share)
 
 
