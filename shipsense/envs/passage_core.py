@@ -241,14 +241,19 @@ class PassageV1Core(PassagePrefetch):
     def _blind_status(status):
         return (status == NO_DATA) | (status == INITIALISING)
 
+    def integer_actions(self, actions, copy=False):
+        """``actions`` as an int64 vector (E,) (a copy with ``copy``); not integers (bools, fractions): one
+        ``ValueError``."""
+        actions = np.asarray(actions)
+        if actions.dtype.kind not in "iu":                    # (not bool, not fractions)
+            raise ValueError(f"actions must be integers in [0, {len(self.subsets)}), got {actions.dtype} values")
+        return actions.astype(np.int64, copy=copy).reshape(self.E)
+
     def step(self, actions, envs=None):
         """Advance environments ``envs`` (default all) by one sample with actions (E,) (indices of
         :attr:`subsets`).  Returns rewards, terminated, truncated (E,; never truncated) and an info dict of (E,)
         arrays; entries of environments that did not step are meaningless."""
-        actions = np.asarray(actions)
-        if actions.dtype.kind not in "iu":                    # (not bool, not fractions)
-            raise ValueError(f"actions must be integers in [0, {len(self.subsets)}), got {actions.dtype} values")
-        actions = actions.astype(np.int64, copy=False).reshape(self.E)
+        actions = self.integer_actions(actions)
         who = self._rows if envs is None else np.asarray(envs, dtype=np.int64)
         y, reads = np.empty((who.size, self.model.m)), np.empty(self.E)
         bad = read_sensors(actions, who, self.subsets, self.sensor_of, self.y, self.k, self.since, self.last_read, y,

@@ -299,8 +299,11 @@ class PassageV1VectorEnv(CoreVectorEnv):
     def __init__(self, num_envs=1, scenario="S2", overrides=None, k=1, energy_cost=0.01, error_scale=1.0,
                  render_mode=None):
         self.check_render_mode(render_mode)
-        core = PassageV1Core(num_envs, scenario, overrides, k, energy_cost, error_scale)
-        super().__init__(core, passage_spaces(core), render_mode)
+        self.start_on(PassageV1Core(num_envs, scenario, overrides, k, energy_cost, error_scale), render_mode)
+
+    def start_on(self, core, render_mode):
+        """Set this vector environment up on ``core`` (of ``num_envs`` environments) with its spaces."""
+        CoreVectorEnv.__init__(self, core, passage_spaces(core), render_mode)
         self.subsets = core.subsets
 
     def close_extras(self, **kwargs):

@@ -104,10 +104,9 @@ from __future__ import annotations
 import numpy as np
 
 from shipsense.arguments import number
-from shipsense.envs.core_env import CoreVectorEnv
 from shipsense.envs.features import accumulate_costs, apply_budget, write_budget_features
 from shipsense.envs.passage_core import PassageV1Core
-from shipsense.envs.passage_v1 import PassageV1Env, PassageV1VectorEnv, passage_spaces
+from shipsense.envs.passage_v1 import PassageV1Env, PassageV1VectorEnv
 
 
 class PassageV2Core(PassageV1Core):
@@ -161,10 +160,7 @@ class PassageV2Core(PassageV1Core):
     def step(self, actions, envs=None):
         """Passage-v1's step (:meth:`~shipsense.envs.passage_core.PassageV1Core.step`) after the budget: an action
         reading more sensors than the budget has left reads nothing."""
-        actions = np.asarray(actions)
-        if actions.dtype.kind not in "iu":
-            raise ValueError(f"actions must be integers in [0, {len(self.subsets)}), got {actions.dtype} values")
-        actions = actions.astype(np.int64, copy=True).reshape(self.E)
+        actions = self.integer_actions(actions, copy=True)      # (the budget writes into it)
         apply_budget(actions, self.subsets, float(self.budget), self.reads, self.last_read, self.step_wakes)
         rewards, terminated, truncated, info = super().step(actions, envs)
         who = self._rows if envs is None else np.asarray(envs, dtype=np.int64)
@@ -218,10 +214,8 @@ class PassageV2VectorEnv(PassageV1VectorEnv):
     def __init__(self, num_envs=1, scenario="S2", overrides=None, k=1, energy_cost=0.01, wake_cost=0.1,
                  budget=20, checkpoints=4, error_scale=1.0, render_mode=None):
         self.check_render_mode(render_mode)
-        core = PassageV2Core(num_envs, scenario, overrides, k, energy_cost, wake_cost, budget, checkpoints,
-                             error_scale)
-        CoreVectorEnv.__init__(self, core, passage_spaces(core), render_mode)
-        self.subsets = core.subsets
+        self.start_on(PassageV2Core(num_envs, scenario, overrides, k, energy_cost, wake_cost, budget, checkpoints,
+                                    error_scale), render_mode)
 
 
 __all__ = ["PassageV2Core", "PassageV2Env", "PassageV2VectorEnv"]
