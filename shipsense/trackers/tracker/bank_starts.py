@@ -180,10 +180,10 @@ def accepted(trk, fits, yw, taus):
     mirrored passage (tens to hundreds of metres off) about as well as the true one, and the search may
     find the one alone, with a curvature that would call it metres-accurate.
     """
-    o, xs = trk.settings, trk.model.x_scale
+    o = trk.settings
     A = transitions(trk.model, taus[:, -1])                                        # window start -> now
     cov = np.linalg.inv(fits.info[:, 0] / (o.inflate * trk.kappa) + trk.prior_info)
-    pos = (A @ cov @ np.swapaxes(A, -1, -2))[:, :2, :2] * np.outer(xs[:2], xs[:2])
+    pos = trk.model.cov_to_si(A @ cov @ np.swapaxes(A, -1, -2))[:, :2, :2]
     ok = fits.fit_ok & (crlb_sd(pos) < EARLY_SD_M)        # (crlb_sd: the larger axis's standard deviation)
     if ok.any():
         ok[ok] = mirror_gap(trk, fits.take(ok), yw[ok], taus[ok]) > 2.0 * o.ambiguity_nats
