@@ -5,6 +5,7 @@ cluster -- run with ``SHIPSENSE_README_LONG=1``, from the repository's root)."""
 import os
 import re
 import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -29,7 +30,9 @@ def test_the_python_blocks_run_in_order(tmp_path, monkeypatch):
 def test_the_shell_blocks_run(body, why):
     if why and not LONG:
         pytest.skip(f"long ({why}): set SHIPSENSE_README_LONG=1")
-    subprocess.run(["bash", "-e", "-c", body], cwd=README.parent, check=True)
+    # the interpreter's own bin folder first: its ``shipsense`` command, even when the venv is not activated
+    path = os.pathsep.join([str(Path(sys.executable).parent), os.environ.get("PATH", "")])
+    subprocess.run(["bash", "-e", "-c", body], cwd=README.parent, check=True, env={**os.environ, "PATH": path})
 
 
 def test_the_set_up_commands_agree_on_torch():
