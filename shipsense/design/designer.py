@@ -27,6 +27,7 @@ import numpy as np
 
 from shipsense.design import placement as pl
 from shipsense.design import resolvability as rv
+from shipsense.json_numbers import finite_or_none
 
 CRITERIA = (*pl.CRITERIA, "resolvability")
 """The design criteria: the relaxation's D, A and E (:data:`~shipsense.design.placement.CRITERIA`) and the
@@ -68,8 +69,8 @@ class DesignResult:
             "criterion": self.criterion, "k": self.k, "candidates": len(self.candidates),
             "passages": len(self.thetas), "method": r.method, "solver": r.solver, "converged": r.converged,
             "solver_status": r.status, "solver_message": r.message, "prior_floor": self.prior_floor,
-            "relaxation_objective": _finite(r.relaxation), "upper_bound": _finite(r.upper_bound),
-            "design_objective": _finite(r.value), "certified_gap": _finite(r.certified_gap),
+            "relaxation_objective": finite_or_none(r.relaxation), "upper_bound": finite_or_none(r.upper_bound),
+            "design_objective": finite_or_none(r.value), "certified_gap": finite_or_none(r.certified_gap),
             "guaranteed_efficiency": r.guaranteed_efficiency,
             "branch_and_bound": r.branch_and_bound, "ambiguity_cuts": len(r.cuts),
             "verdict": r.verdict.verdict if r.verdict is not None else None,
@@ -80,11 +81,6 @@ class DesignResult:
             "resolvability": self.resolvability.to_json() if self.resolvability is not None else None,
             "seconds": self.timings.get("total"), "timings": self.timings,
         }
-
-
-def _finite(x):
-    """A number for the JSON report: None where it is not finite (no relaxation, no bound)."""
-    return float(x) if x is not None and np.isfinite(x) else None
 
 
 def default_candidates(scenario):
@@ -153,7 +149,7 @@ def score_baselines(problem, candidates, placement, criterion, seed=0, random_la
     for name, idx in named.items():
         v = float(values(np.asarray(idx)[None])[0])
         eff = _efficiency(criterion, v, placement.value, problem.n if problem is not None else placement.dimension)
-        out[name] = {"value": _finite(v), "efficiency_vs_design": eff,
+        out[name] = {"value": finite_or_none(v), "efficiency_vs_design": eff,
                      "sensors": [list(map(float, p)) for p in candidates[idx]]}
     return out
 

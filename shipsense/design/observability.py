@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from shipsense.design.fisher import passage_fim
+from shipsense.json_numbers import finite_or_none
 from shipsense.models.transitions import powers
 from shipsense.trackers.fit.least_squares import fit_passages
 
@@ -73,13 +74,9 @@ class Verdict:
     labels: tuple = ()
 
     def to_json(self):
-        return {"verdict": self.verdict, "min_chi2": _finite_or_none(self.min_chi2),
+        return {"verdict": self.verdict, "min_chi2": finite_or_none(self.min_chi2),
                 "pairs": [p.to_json(self.labels) for p in self.pairs], "fim_rank": int(self.fim_rank),
-                "fim_condition": _finite_or_none(self.fim_condition), "passages": self.passages}
-
-
-def _finite_or_none(x):
-    return float(x) if np.isfinite(x) else None
+                "fim_condition": finite_or_none(self.fim_condition), "passages": self.passages}
 
 
 # -- discrepancy and least squares ------------------------------------------------

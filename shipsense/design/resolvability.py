@@ -57,6 +57,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from shipsense.design.fisher import weighted_jacobian
+from shipsense.json_numbers import finite_or_none
 from shipsense.models.transitions import powers
 
 SEPARATIONS_M = 0.5 * 2.0 ** (np.arange(0, 89) / 8.0)
@@ -95,11 +96,8 @@ class Resolvability:
                 f"abreast; joint Fisher information: the separation's CRLB sd <= the separation)")
 
     def to_json(self):
-        def finite(x):
-            return float(x) if np.isfinite(x) else None
-
-        return {"separation_m": finite(self.separation_m), "share": self.share,
-                "per_draw_m": [finite(x) for x in self.per_draw_m],
+        return {"separation_m": finite_or_none(self.separation_m), "share": self.share,
+                "per_draw_m": [finite_or_none(x) for x in self.per_draw_m],
                 "criterion": "CRLB sd of the separation <= separation (Smith 2005)",
                 "geometry": "twin ships abreast on parallel lines, the drawn passage between them"}
 

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from shipsense.allocator import release_free_memory
+from shipsense.json_numbers import jsonable
 from shipsense.trackers.metrics import convergence_rate, mrmse, squared_axis_errors
 
 LEAN = ("positions", "loglik", "selected")
@@ -73,7 +74,7 @@ class Output:
         """Write ``summary.json``, after any figures not drawn yet (:meth:`draw`)."""
         self.draw()
         path = self.dir / "summary.json"
-        path.write_text(json.dumps(_jsonable(data), indent=2) + "\n")
+        path.write_text(json.dumps(jsonable(data), indent=2) + "\n")
         self.files.append(path)
         return path
 
@@ -82,23 +83,6 @@ def _fmt(v):
     if isinstance(v, (float, np.floating)):
         return f"{float(v):.6g}"
     return v
-
-
-def _jsonable(x):
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return _jsonable(x.tolist())
-    if isinstance(x, (np.bool_, bool)):
-        return bool(x)
-    if isinstance(x, (np.integer,)):
-        return int(x)
-    if isinstance(x, (float, np.floating)):
-        v = float(x)
-        return v if np.isfinite(v) else None
-    return x
 
 
 class Stages:
