@@ -113,7 +113,8 @@ def _ellipse(ax, mean, cov, color, nsig=2.0):
 def plot_track(summary, times, path, truth=None, title=None, ellipses=8):
     """A tracked passage (:class:`~shipsense.cli.track.TrackSummary`) to a PNG: the array, the truth (if known)
     and the estimated track with 2-sigma ellipses, coloured by status; and over time the position error
-    against the reported 2-sigma (or the 2-sigma alone).  A passage the tracker never tracked (one sample, no
+    against the reported 2-sigma (or the 2-sigma alone); with motion modes, their probabilities over time (the
+    selected hypothesis's, stacked).  A passage the tracker never tracked (one sample, no
     field above the noise) draws the array and says so; nothing is drawn on a log scale that has no positive
     value."""
     from shipsense.trackers.tracker.results import INITIALISING, STATUSES
@@ -122,9 +123,18 @@ def plot_track(summary, times, path, truth=None, title=None, ellipses=8):
     k, est, cov, status = pl["k"], pl["estimate"], pl["cov"][:, :2, :2], pl["status"]
     t = np.asarray(times)[k]
     tracked = (status > INITIALISING) & np.isfinite(est[:, :2]).all(axis=1)
+    modes = pl.get("modes")
+    names = summary.tracker.mode_names
+    with_modes = modes is not None and len(names) > 0 and modes.ndim == 2 and modes.shape[1] == len(names)
     # fixed margins, not a layout engine: the constrained layout measured every text twice per figure
-    fig, ax = plt.subplots(1, 2, figsize=(14, 6.5), width_ratios=[1.3, 1])
-    fig.subplots_adjust(left=0.06, right=0.98, bottom=0.09, top=0.93, wspace=0.18)
+    if with_modes:   # the motion modes' probabilities under the error panel
+        fig, axd = plt.subplot_mosaic([["map", "error"], ["map", "modes"]], figsize=(14, 7.5),
+                                      width_ratios=[1.3, 1], height_ratios=[1.6, 1])
+        fig.subplots_adjust(left=0.06, right=0.98, bottom=0.08, top=0.94, wspace=0.18, hspace=0.32)
+        ax = [axd["map"], axd["error"]]
+    else:
+        fig, ax = plt.subplots(1, 2, figsize=(14, 6.5), width_ratios=[1.3, 1])
+        fig.subplots_adjust(left=0.06, right=0.98, bottom=0.09, top=0.93, wspace=0.18)
     a = ax[0]
     if truth is not None:
         a.plot(truth[:, 0], truth[:, 1], "-", color="tab:red", lw=2, label="truth")
@@ -134,7 +144,7 @@ def plot_track(summary, times, path, truth=None, title=None, ellipses=8):
         a.text(0.5, 0.96, f"no estimate: the tracker did not start tracking in {summary.samples} sample"
                f"{'s' if summary.samples != 1 else ''}", transform=a.transAxes,
                ha="center", va="top", fontsize=9, color="0.3")
-    colours = {2: "tab:blue", 3: "tab:green", 4: "tab:orange"}
+    colours = {2: "tab:blue", 3: "tab:green", 4: "tab:orange", 5: "tab:purple"}
     for code, colour in colours.items():
         at = (status == code) & tracked
         if at.any() and code != 2:
@@ -178,6 +188,19 @@ def plot_track(summary, times, path, truth=None, title=None, ellipses=8):
     if b.get_legend_handles_labels()[0]:
         b.legend(fontsize=8, loc="upper right")
     b.set_title("error against the reported uncertainty")
+    if with_modes:
+        m = axd["modes"]
+        known = np.isfinite(modes).all(axis=1)
+        m.stackplot(t[known], modes[known].T, labels=[name.replace("_", " ") for name in names], alpha=0.8,
+                    step="mid")
+        m.set_xlim(b.get_xlim())
+        m.set_ylim(0, 1)
+        m.set_xlabel("time [s]")
+        m.set_ylabel("probability")
+        m.grid(alpha=0.3)
+        m.legend(fontsize=8, loc="upper left", ncol=len(names), framealpha=0.9)
+        m.set_title("motion modes (the selected hypothesis's)")
+        b.set_xlabel("")
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path

@@ -448,3 +448,28 @@ def test_an_interruption_inside_compiled_code_is_an_interruption(monkeypatch, ca
     monkeypatch.setattr(parser, "cmd_scenarios", interrupted_in_a_kernel)
     assert main(["scenarios"]) == 130
     assert "interrupted" in capsys.readouterr().err
+
+
+def test_the_track_figure_draws_the_motion_modes_when_the_tracker_has_them(tmp_path, monkeypatch):
+    """With the IMM (S2-turn sets it) the figure gains a third panel, the selected hypothesis's mode
+    probabilities stacked to 1 wherever a hypothesis is selected; the constant-velocity figure keeps two."""
+    import matplotlib.figure
+
+    drawn = []
+    save = matplotlib.figure.Figure.savefig
+
+    def keep(fig, *a, **k):
+        drawn.append([(ax.get_title(), [c.get_paths() for c in ax.collections]) for ax in fig.axes])
+        return save(fig, *a, **k)
+
+    monkeypatch.setattr(matplotlib.figure.Figure, "savefig", keep)
+    assert main(["--quiet", "track", "S2-turn", "--out", str(tmp_path / "turn")]) == 0
+    assert main(["--quiet", "track", "S2", "--out", str(tmp_path / "straight")]) == 0
+    turn, straight = drawn[-2], drawn[-1]
+    assert len(straight) == 2 and not any("motion modes" in title for title, _ in straight)
+    assert len(turn) == 3
+    title, bands = turn[2]
+    assert "motion modes" in title and len(bands) == 4          # cv, turn left, turn right, speed
+    v = bands[-1][0].vertices                                    # the last band's edges: the top is the total
+    top = [v[v[:, 0] == x, 1].max() for x in np.unique(v[:, 0])]
+    assert np.allclose(top, 1.0, atol=1e-6)
