@@ -5,8 +5,9 @@
   the variants ``shipsense/PassageEasy-v1`` and ``shipsense/PassageHard-v1`` (:data:`PASSAGE_V1_VARIANTS`).
 * ``shipsense/Passage-v2`` (:class:`~shipsense.envs.passage_v2.PassageV2Env`, native vector version
   :class:`~shipsense.envs.passage_v2.PassageV2VectorEnv`): Passage-v1 with wake-up costs, a read budget and
-  an error counted at checkpoints, where planning ahead pays; variant ``shipsense/PassageManoeuvring-v2``
-  (manoeuvring ships, the IMM observer) (:data:`PASSAGE_V2_VARIANTS`).
+  an error counted at checkpoints, where planning ahead pays; variants ``shipsense/PassageManoeuvring-v2``
+  (manoeuvring ships, the IMM observer) and ``shipsense/PassageHard-v2`` (PassageHard-v1's task with an
+  observer robust to partial reads under contamination, :data:`HARD_V2_OBSERVER`) (:data:`PASSAGE_V2_VARIANTS`).
 * ``shipsense/ArrayDesign-v1`` (:class:`~shipsense.envs.site_design.SiteDesignEnv`, native vector version
   :class:`~shipsense.envs.site_design.SiteDesignVectorEnv`): place k sensors at a site drawn per episode;
   variants ``shipsense/ArrayDesignSmall-v1`` (k = 3 of 25 candidates) and ``shipsense/ArrayDesignLarge-v1``
@@ -69,6 +70,14 @@ PASSAGE_V1_THRESHOLDS = {"shipsense/PassageEasy-v1": -6.0, PASSAGE_V1_ID: -5.3, 
 the hard variant the best baseline's (random: greedy is worse there, its observer loses most passages)."""
 
 
+HARD_V2_OBSERVER = {"through_peak": None, "rescan": True}
+"""``shipsense/PassageHard-v2``'s observer: tracker options (a scenario's ``[tracker]`` table) chosen on training
+passages (docs: the agents findings, "PassageHard-v2").  With 2 of 6 sensors read, the SNR of the strongest
+channel read falls below half its run-in peak at the first step that reads two far sensors, so v1's observer
+took the peak as passed, refitted once and never again (``through_peak``: off, so the scheduled refits every
+``refit_every`` samples run the whole passage, and the first fit waits for the complete window); the global
+initialiser reruns with them (``rescan``), so a track started on outliers can be left for the ship's."""
+
 _V2_COSTS = {"energy_cost": 0.01, "wake_cost": 0.1, "budget": 20, "checkpoints": 4}
 """Passage-v2's costs, budget (reads per passage of ~60 agent steps) and checkpoints, shaped on training seeds."""
 
@@ -80,13 +89,22 @@ PASSAGE_V2_VARIANTS = {
     "shipsense/PassageManoeuvring-v2": {"scenario": "S2", "k": 1, **_V2_COSTS, "overrides": {
         **PASSAGE_V1_VARIANTS[PASSAGE_V1_ID]["overrides"], "manoeuvres": {"random": {"probability": 0.5}},
         "tracker": {"motion": {"model": "imm"}}}},
+    # PassageHard-v1's task (its array, noise, prior, k = 2 and v1's reward: no wake-up cost, budget or
+    # checkpoints) with an observer made robust to partial reads under contamination (HARD_V2_OBSERVER)
+    "shipsense/PassageHard-v2": {"scenario": "S2", "k": 2, "energy_cost": 0.01, "wake_cost": 0.0, "budget": None,
+                                 "checkpoints": 0, "overrides": {
+                                     **PASSAGE_V1_VARIANTS["shipsense/PassageHard-v1"]["overrides"],
+                                     "tracker": HARD_V2_OBSERVER}},
 }
 """Passage-v2's registered variants: id -> constructor kwargs."""
 
-PASSAGE_V2_THRESHOLDS = {PASSAGE_V2_ID: -9.2, "shipsense/PassageManoeuvring-v2": None}
+PASSAGE_V2_THRESHOLDS = {PASSAGE_V2_ID: -9.2, "shipsense/PassageManoeuvring-v2": None,
+                         "shipsense/PassageHard-v2": -133.4}
 """``reward_threshold`` per variant: the rollout planner's mean return on held-out seeds (docs: the environments
 guide), rounded down to 0.1: an agent that reaches it plans as well as rollout over greedy; None where that is
-not measured yet (the manoeuvring variant)."""
+not measured yet (the manoeuvring variant).  ``PassageHard-v2``, whose task and reward are PassageHard-v1's,
+takes Passage-v1's rule: the best baseline's mean return on held-out seeds (round-robin's; docs: the agents
+findings, "PassageHard-v2"), rounded to 0.1."""
 
 
 def register_envs() -> None:
@@ -113,5 +131,5 @@ def register_envs() -> None:
                          kwargs=kwargs, reward_threshold=threshold)
 
 
-__all__ = ["DESIGN_ID", "DESIGN_V1_ID", "DESIGN_V1_VARIANTS", "PASSAGE_V1_ID", "PASSAGE_V1_VARIANTS", "PASSAGE_V2_ID",
-           "PASSAGE_V2_VARIANTS", "register_envs"]
+__all__ = ["DESIGN_ID", "DESIGN_V1_ID", "DESIGN_V1_VARIANTS", "HARD_V2_OBSERVER", "PASSAGE_V1_ID",
+           "PASSAGE_V1_VARIANTS", "PASSAGE_V2_ID", "PASSAGE_V2_VARIANTS", "register_envs"]

@@ -81,11 +81,25 @@ for none), ``checkpoints`` (a count, default 4; 0 for every step).  All JSON-abl
   change speed (the scenario's ``[manoeuvres]``) and the
   interacting-multiple-model observer (``[tracker.motion]``).  Second
   ships are left to a variant once the simulator draws them.
+* ``shipsense/PassageHard-v2``: ``shipsense/PassageHard-v1``'s task (six
+  magnetometers 30 m apart, two read per step, outliers, dropouts, its
+  wide prior) and reward (v1's: no wake-up cost, budget or checkpoints:
+  ``wake_cost=0``, ``budget=None``, ``checkpoints=0``), with an observer
+  made robust to partial reads under contamination
+  (``shipsense.envs.HARD_V2_OBSERVER``, tracker options): its scheduled
+  refits and global rescans run the whole passage, where v1's stopped at
+  the first step that read two far sensors (the strongest channel read
+  fell below half the run-in's peak, which the observer took for the
+  closest approach), and its first fit waits for the complete window
+  rather than stopping where outliers made the signal look past its peak.
 
 ``shipsense/Passage-v2``'s ``reward_threshold`` is the rollout planner's
 mean return on held-out passages (docs: the environments guide): an agent
 that reaches it plans as well as a one-step lookahead over greedy with
 Monte Carlo futures.  The manoeuvring variant's is not measured yet (None).
+``shipsense/PassageHard-v2``'s is the best baseline's mean return on
+held-out passages, as for Passage-v1's variants (docs: the agents
+findings, "PassageHard-v2").
 
 ## Version history
 
@@ -96,7 +110,11 @@ Monte Carlo futures.  The manoeuvring variant's is not measured yet (None).
   learned scheduler could only copy it; these are the known sources of
   headroom over myopic scheduling (budgets and switching costs that link
   steps, terminal objectives).
-* v1: :mod:`shipsense.envs.passage_v1`.
+* v1: :mod:`shipsense.envs.passage_v1`.  ``shipsense/PassageHard-v1``'s
+  task moved to ``shipsense/PassageHard-v2`` (2026-11-28) with a robust
+  observer: on v1's, a few passages where the observer lost the ship
+  decided its baselines' means (greedy, which reads where the observer
+  believes the ship is, never found it again).
 """
 
 from __future__ import annotations
