@@ -1,6 +1,7 @@
 """Several ships: the several-ship tracker on two ships crossing and on one-ship passages.
 
     PYTHONPATH=. python experiments/several_ships.py --passages 40 --separations 10 20 60
+    PYTHONPATH=. python experiments/several_ships.py --passages 40 --families --separations 5 10   # sweep only
 
 Two magnetometers (S2's M1, M2): ``S2-crossing`` random passages (ship 0 from S2's prior, a second ship
 crossing it at 30 m at its closest approach to the array centre) and ``S2`` random one-ship passages, the
@@ -110,9 +111,11 @@ def main():
     ap.add_argument("--seed", type=int, default=2026)
     ap.add_argument("--separations", type=float, nargs="*", default=[],
                     help="also run S2-crossing with these closest approaches of the two ships (m)")
+    ap.add_argument("--families", nargs="*", default=["S2-crossing", "S2"], choices=["S2-crossing", "S2"],
+                    help="the table's scenarios (none: only the separations)")
     args = ap.parse_args()
     np.set_printoptions(precision=3, suppress=True)
-    for name in ("S2-crossing", "S2"):
+    for name in args.families:
         res = run(name, args.passages, args.seed)
         print(f"{name} (two magnetometers, {res.pop('passages')} random passages, second half):")
         for k, v in res.items():
