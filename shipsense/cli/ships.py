@@ -119,6 +119,7 @@ def track_ships_into(sc, times, measurements, folder, args, title, truth=None) -
     if not args.no_plot:
         from shipsense.plotting import plot_ships
 
-        plot_ships(summary, Path(folder) / "track.png", title=title)
+        plot_ships(summary.result, summary.tracker.base.array, Path(folder) / "track.png", truth=summary.truth,
+                   title=title)
     return summary
 
