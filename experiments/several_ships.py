@@ -122,8 +122,10 @@ def main():
             print(f"  {k}: {v}")
     for d in args.separations:
         res = run("S2-crossing", args.passages, args.seed, separation=d)
-        print(f"S2-crossing at {d:g} m: cardinality {res['card']:.3f}, GOSPA {res['gospa_m']:.2f} m, median RMSE "
-              f"{res['rmse_median_m']} m, coverage {res['coverage']}")
+        print(f"S2-crossing at {d:g} m: cardinality {res['card']:.3f}, GOSPA {res['gospa_m']:.2f} m (missed "
+              f"{res['gospa_missed_m2']:.1f} m2, false {res['gospa_false_m2']:.1f} m2), births {res['births']}, "
+              f"median RMSE {res['rmse_median_m']} m, over the joint bound {res['rmse_over_joint_crlb_median']}, "
+              f"coverage {res['coverage']}")
 
 
 if __name__ == "__main__":
