@@ -206,44 +206,95 @@ def plot_track(summary, times, path, truth=None, title=None, ellipses=8):
     return path
 
 
-def plot_ships(summary, path, title=None, ellipses=6):
-    """The tracks of a :class:`~shipsense.cli.ships.ShipsSummary` to a PNG: the array, the true ships (if known,
-    dashed), every track in its own colour with 2-sigma ellipses, and the number of ships over time."""
-    r = summary.result
-    est, cov, T = r.estimates[0], r.covs[0], r.times[0]
-    fig, ax = plt.subplots(1, 2, figsize=(13, 6), width_ratios=[1.3, 1])
-    fig.subplots_adjust(left=0.07, right=0.98, bottom=0.09, top=0.92, wspace=0.2)
-    a = ax[0]
+def plot_ships(result, array, path=None, *, truth=None, present=None, title=None, ellipses=6):
+    """Several ships tracked in one passage: the array, the true ships (if known, dashed), every track in its own
+    colour with 2-sigma ellipses; over time the number of ships and, with the truth, GOSPA.
+
+    Parameters
+    ----------
+    result : ShipsResult
+        The several-ship tracker's result (:class:`~shipsense.trackers.ships.results.ShipsResult`); its first
+        passage is drawn.
+    array : SensorArray
+        The sensors (:class:`~shipsense.physics.array.SensorArray`).
+    path : path-like, optional
+        Where to write the PNG; None: the figure is returned, open.
+    truth : ndarray, shape (J, K, >= 2), optional
+        The true ships (x, y first, m; NaN where a ship does not sail).
+    present : ndarray of bool, shape (J, K), optional
+        Which true ships count at each sample for the number of ships and GOSPA (default: every sailing ship;
+        e.g. only those within the array's reach).
+    title : str, optional
+    ellipses : int
+        2-sigma ellipses drawn per track.
+
+    Notes
+    -----
+    GOSPA (:func:`~shipsense.trackers.metrics.gospa`, :math:`p = \\alpha = 2`, cut-off
+    :data:`~shipsense.trackers.metrics.GOSPA_CUTOFF_M`) is drawn with its parts, each as the length it adds,
+    :math:`\\sqrt{\\text{part}}`, m: the assigned ships' localisation error and :math:`c / \\sqrt 2` per missed
+    or false ship.
+    """
+    from shipsense.trackers.metrics import GOSPA_CUTOFF_M, gospa
+
+    est, cov, T = result.estimates[0], result.covs[0], result.times[0]
     colours = ("tab:blue", "tab:orange", "tab:green")
-    pts = [summary.tracker.base.array.positions[:, :2]]
-    if summary.truth is not None:
-        for j, tr in enumerate(summary.truth):
+    counted = None
+    if truth is not None:
+        truth = np.asarray(truth, dtype=float)
+        counted = np.isfinite(truth[..., 0]) & (True if present is None else np.asarray(present, dtype=bool))
+    fig = plt.figure(figsize=(13, 6.5))
+    grid = fig.add_gridspec(2 if truth is not None else 1, 2, width_ratios=[1.3, 1], left=0.07, right=0.98,
+                            bottom=0.09, top=0.92, wspace=0.2, hspace=0.35)
+    a = fig.add_subplot(grid[:, 0])
+    pts = [array.positions[:, :2]]
+    if truth is not None:
+        for j, tr in enumerate(truth):
             a.plot(tr[:, 0], tr[:, 1], "--", color="0.4", lw=1.2, label="truth" if j == 0 else None)
             pts.append(tr[np.isfinite(tr[:, 0]), :2])
     for s in range(est.shape[1]):
-        on = np.flatnonzero(r.present[0, :, s])
+        on = np.flatnonzero(result.present[0, :, s])
         if on.size == 0:
             continue
         c = colours[s % len(colours)]
         a.plot(est[on, s, 0], est[on, s, 1], "-", color=c, lw=1.6, label=f"ship {s + 1}")
+        a.plot(*est[on[0], s, :2], "o", color=c, ms=5)
         for i in on[np.linspace(0, on.size - 1, min(ellipses, on.size)).astype(int)]:
             _ellipse(a, est[i, s, :2], cov[i, s, :2, :2], c)
         pts.append(est[on, s, :2])
-    draw_array(a, summary.tracker.base.array)
+    draw_array(a, array)
     frame_map(a, pts, margin=0.1)
+    a.grid(alpha=0.3)
     a.legend(loc="best", fontsize=8)
-    a.set_title(title or "tracks (2-sigma ellipses)")
-    b = ax[1]
-    b.step(T, r.ship_count[0], where="post", color="k", label="tracked")
-    if summary.truth is not None:
-        b.step(T, np.isfinite(summary.truth[:, :, 0]).sum(axis=0), where="post", color="0.6", ls="--",
-               label="true")
-    b.set_xlabel("time [s]")
+    a.set_title(title or "tracks (2-sigma ellipses; a dot where each begins)")
+    b = fig.add_subplot(grid[0, 1])
+    b.step(T, result.ship_count[0], where="mid", color="k", label="tracked")
+    if counted is not None:
+        b.step(T, counted.sum(axis=0), where="mid", color="tab:red", ls="--",
+               label="true" + ("" if present is None else " (counted)"))
     b.set_ylabel("ships")
-    b.set_yticks(range(0, est.shape[1] + 1))
+    b.set_yticks(range(0, est.shape[1] + 2))
+    b.grid(alpha=0.3)
     b.legend(loc="best", fontsize=8)
+    b.set_title("number of ships")
+    if counted is None:
+        b.set_xlabel("time [s]")
+    else:
+        g = gospa(est, np.where(counted.T[..., None], np.moveaxis(truth, 0, 1), np.nan))
+        d = fig.add_subplot(grid[1, 1], sharex=b)
+        for part, colour in (("localisation", "tab:blue"), ("missed", "tab:red"), ("false", "tab:purple")):
+            d.fill_between(T, 0, np.sqrt(getattr(g, part)), step="mid", color=colour, alpha=0.3, lw=0, label=part)
+        d.step(T, g.total, where="mid", color="k", lw=1.4, label="GOSPA")
+        d.set_xlabel("time [s]")
+        d.set_ylabel("m")
+        d.grid(alpha=0.3)
+        d.legend(loc="best", fontsize=8, ncol=2)
+        d.set_title(f"GOSPA (p = 2, alpha = 2, c = {GOSPA_CUTOFF_M:g} m) and its parts")
+    if path is None:
+        return fig
     fig.savefig(path, dpi=110)
     plt.close(fig)
+    return path
 
 
 def plot_design(candidates, weights, chosen, truth, path, title=""):

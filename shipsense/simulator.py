@@ -430,8 +430,8 @@ def _superpose(array: SensorArray, truth, clean, companions, count):
     dist = np.where(present[:, :, None, None], dist, np.inf)
     nearest = np.argmin(dist, axis=1)                                               # (runs, K, S_acc)
     heard = np.take_along_axis(src[:, :, :, None, :], nearest[:, None, :, :, None], axis=1)[:, 0]
-    channel_dist = dist[..., np.searchsorted(acc, array.channel_sensor[array.axial])]
-    return superposed_readings(readings, present, array.axial, channel_dist), heard
+    channel_nearest = nearest[..., np.searchsorted(acc, array.channel_sensor[array.axial])]
+    return superposed_readings(readings, present, array.axial, channel_nearest), heard
 
 
 RAW_CHUNK_BYTES = 4 * 2**20

@@ -167,6 +167,9 @@ def test_truth_csv_has_a_row_per_run_ship_and_sample(tmp_path):
     ({"count": 2, "crossing_angle_deg": 180.0}, "traffic.crossing_angle_deg"),
     ({"count": 2, "separation": -1.0}, "traffic.separation"),
     ({"count": 2, "separation": [30.0, 20.0]}, "traffic.separation"),
+    ({"count": 2, "time_offset": [5.0, -5.0]}, "traffic.time_offset"),
+    ({"count": 2, "crossing_angle_deg": [100.0, 80.0]}, "traffic.crossing_angle_deg"),
+    ({"count": 2, "speed_ratio": [1.2, 1.1]}, "traffic.speed_ratio"),
 ])
 def test_bad_traffic_names_the_field(traffic, field):
     with pytest.raises(ScenarioError, match=rf"{field}[:.]"):

@@ -2,10 +2,12 @@
 
 :func:`track_ships_to_files` runs :class:`~shipsense.trackers.ships.ShipsTracker` over a passage and writes
 ``estimates.csv`` with one row per track and sample at which the track exists: ``time``, ``ship`` (the track
-id, 1 or 2, which persists), the ship's state (SI), ``std_x``, ``std_y``, the position covariance ``cov_xx``,
-``cov_xy``, ``cov_yy`` and the ``status``; :func:`describe_ships` gives the lines ``track`` prints (the
-number of ships at the end and each track's final state), :func:`plot_ships` the picture (every track in its
-own colour, with 2-sigma ellipses).  The one-ship tracker stays the default of ``track`` (``--ships 1``).
+id, 1 or 2, which persists), the ship's state (SI), ``std_x``, ``std_y``; on a simulated passage the true ship
+the track follows and its error (``true_ship``, ``true_x``, ``true_y``, ``error_m``: :func:`truth_columns`);
+the position covariance ``cov_xx``, ``cov_xy``, ``cov_yy`` and the ``status``.  :func:`describe_ships` gives
+the lines ``track`` prints (the number of ships at the end and each track's final state),
+:func:`~shipsense.plotting.plot_ships` the picture (every track in its own colour, with 2-sigma ellipses).
+The one-ship tracker stays the default of ``track`` (``--ships 1``).
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ import numpy as np
 from shipsense.atomic import atomic_path
 from shipsense.cli.common import QUIET, BadInput
 from shipsense.cli.track import fmt, state_line
+from shipsense.trackers.metrics import label_assignment
 from shipsense.trackers.ships import ShipsResult, ShipsSettings, ShipsTracker
 from shipsense.trackers.tracker.results import STATUSES
 
@@ -44,16 +47,41 @@ def track_ships_to_files(scenario, times, measurements, out, *, ships=2, truth=N
     t = np.asarray(times, dtype=float)
     result = tracker.track(t[None], np.asarray(measurements, dtype=float)[None], progress=progress)
     with atomic_path(Path(out) / "estimates.csv") as tmp, open(tmp, "w") as fh:
-        fh.write(",".join(["time", "ship", *result.labels, "std_x", "std_y", "cov_xx", "cov_xy", "cov_yy",
-                           "status"]) + "\n")
+        fh.write(",".join(["time", "ship", *result.labels, "std_x", "std_y",
+                           *(() if truth is None else ("true_ship", "true_x", "true_y", "error_m")),
+                           "cov_xx", "cov_xy", "cov_yy", "status"]) + "\n")
         est, cov, status = result.estimates[0], result.covs[0], result.status_names()[0]
         k, s = np.nonzero(result.present[0])              # sample-major: the tracks of a sample together
         P = cov[k, s, :2, :2]
         cols = [fmt(t[k], "%.6g"), fmt(s + 1, "%d"), *(fmt(est[k, s, i], "%.6g") for i in range(len(result.labels))),
-                fmt(np.sqrt(P[:, 0, 0]), "%.4g"), fmt(np.sqrt(P[:, 1, 1]), "%.4g"),
-                fmt(P[:, 0, 0], "%.6g"), fmt(P[:, 0, 1], "%.6g"), fmt(P[:, 1, 1], "%.6g"), status[k, s].astype(str)]
+                fmt(np.sqrt(P[:, 0, 0]), "%.4g"), fmt(np.sqrt(P[:, 1, 1]), "%.4g")]
+        if truth is not None:
+            j, xy, err = truth_columns(est, truth, k, s)
+            cols += [fmt(j, "%d"), fmt(xy[:, 0], "%.6g"), fmt(xy[:, 1], "%.6g"), fmt(err, "%.4g")]
+        cols += [fmt(P[:, 0, 0], "%.6g"), fmt(P[:, 0, 1], "%.6g"), fmt(P[:, 1, 1], "%.6g"), status[k, s].astype(str)]
         fh.write("".join(",".join(row) + "\n" for row in zip(*cols)))
     return ShipsSummary(tracker, result, None if truth is None else np.asarray(truth))
+
+
+def truth_columns(estimates, truth, k, s):
+    """The true ship each row's track follows, its true position and the track's error, for the rows at samples
+    ``k`` (N,) of tracks ``s`` (N,) of one passage's ``estimates`` (K, I, >= 2), against the true ships ``truth``
+    (J, K, >= 2; NaN where a ship does not sail).
+
+    The tracker does not keep the truth's order (track 1 is the ship it found first), so tracks and ships are
+    matched once over the passage by :func:`~shipsense.trackers.metrics.label_assignment` (the optimal assignment
+    of truncated squared distances, GOSPA's cut-off).  Returns the true ship (N,) int (the truth's numbering,
+    ``ship`` of ``simulate --truth``'s file: 0 the scenario's own passage; -1 for a track matched to no ship),
+    its position (N, 2), m, and the horizontal error (N,), m; NaN where the track has no ship or its ship does
+    not sail at that sample."""
+    truth = np.asarray(truth, dtype=float)
+    ship_track = label_assignment(estimates, np.moveaxis(truth, 0, 1))            # (J,): the track of each ship
+    track_ship = np.full(estimates.shape[1], -1)
+    matched = np.flatnonzero(ship_track >= 0)
+    track_ship[ship_track[matched]] = matched
+    j = track_ship[s]
+    xy = np.where((j >= 0)[:, None], truth[np.maximum(j, 0), k, :2], np.nan)
+    return j, xy, np.hypot(*(estimates[k, s, :2] - xy).T)
 
 
 def describe_ships(summary: ShipsSummary, source: str) -> list[str]:
@@ -91,6 +119,7 @@ def track_ships_into(sc, times, measurements, folder, args, title, truth=None) -
     if not args.no_plot:
         from shipsense.plotting import plot_ships
 
-        plot_ships(summary, Path(folder) / "track.png", title=title)
+        plot_ships(summary.result, summary.tracker.base.array, Path(folder) / "track.png", truth=summary.truth,
+                   title=title)
     return summary
 

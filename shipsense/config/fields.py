@@ -82,8 +82,25 @@ sensor's floor; below it the whitened residuals and the Fisher information overf
 Std = Annotated[Positive, within(1e3, "(SI)"), at_least(MIN_NOISE_STD, "(SI)")]
 Var = Annotated[Positive, within(1e6, "(SI²)"), at_least(MIN_NOISE_STD ** 2, "(SI²)")]
 Conductivity = Annotated[Positive, within(100.0, "S/m")]
-Range = Annotated[tuple[Finite, Finite], AfterValidator(check_range)]
-PositiveRange = Annotated[tuple[Positive, Positive], AfterValidator(check_range)]
+
+
+def range_of(kind):
+    """The type ``[min, max]`` of two values of type ``kind``, ``min <= max`` (:func:`check_range`)."""
+    return Annotated[tuple[kind, kind], AfterValidator(check_range)]
+
+
+Range = range_of(Finite)
+PositiveRange = range_of(Positive)
+
+
+def check_source_plane(sensors, z, min_distance, field, ships):
+    """Raise ``ValueError`` naming ``field`` when sources sailing anywhere in the plane at depth ``z`` (m) can
+    pass through a sensor of ``sensors`` (closer than ``min_distance`` m in z); ``ships`` says which sources
+    (for the message: "random passages", "ships")."""
+    for s in sensors:
+        if abs(s.position[2] - z) < min_distance:
+            raise ValueError(f"{field}: {ships} at z = {z:g} can pass through sensor {s.id!r} "
+                             f"(z = {s.position[2]:g}); keep the source plane {min_distance} m away")
 
 
 class ConfigModel(BaseModel):

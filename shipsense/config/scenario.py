@@ -30,6 +30,7 @@ from shipsense.config.fields import (
     Std,
     Var,
     Vec3,
+    check_source_plane,
     format_error,
     within,
 )
@@ -279,10 +280,7 @@ class Scenario(ConfigModel):
                 raise ValueError(f"passage: the source passes {gap:.3g} m from sensor {s.id!r} (closer than "
                                  f"{MIN_SOURCE_DISTANCE} m: the source would be inside the sensor)")
         if self.prior is not None:
-            for s in self.sensors:
-                if abs(s.position[2] - zt) < MIN_SOURCE_DISTANCE:
-                    raise ValueError(f"prior: random passages at z = {zt:g} can pass through sensor {s.id!r} "
-                                     f"(z = {s.position[2]:g}); keep the source plane {MIN_SOURCE_DISTANCE} m away")
+            check_source_plane(self.sensors, zt, MIN_SOURCE_DISTANCE, "prior", "random passages")
             if "magnetometer" in types and self.prior.moment is None:
                 raise ValueError("prior.moment: magnetometers need a moment magnitude range [min, max]")
             if "electrode" in types and self.prior.p is None:

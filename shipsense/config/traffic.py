@@ -12,7 +12,7 @@ from typing import Annotated, Literal
 
 from pydantic import Field, Strict, model_validator
 
-from shipsense.config.fields import ConfigModel, Finite, within
+from shipsense.config.fields import ConfigModel, Finite, check_source_plane, range_of, within
 from shipsense.physics.traffic import GEOMETRIES
 
 MAX_SHIPS = 8
@@ -40,33 +40,27 @@ class TrafficConfig(ConfigModel):
     moment and dipole for the nominal one.
     """
 
-    count: ShipCount | tuple[ShipCount, ShipCount] = Field(
+    count: ShipCount | range_of(ShipCount) = Field(
         1, description="Number of ships in a run, or [min, max] drawn uniformly per run.")
     geometry: Geometry | list[Geometry] = Field(
         "prior", description="How the companions sail: prior | crossing | head_on | overtaking | following; one "
                              "for every companion, or a list with one per companion (ships 1, 2, ...).")
-    separation: Separation | tuple[Separation, Separation] = Field(
+    separation: Separation | range_of(Separation) = Field(
         (20.0, 60.0), description="Closest approach of a named encounter to ship 0 (a follower: its distance "
                                   "astern), or [min, max], m.")
-    time_offset: Offset | tuple[Offset, Offset] = Field(
+    time_offset: Offset | range_of(Offset) = Field(
         0.0, description="Time of a named encounter after ship 0's closest approach to the array centre; for a "
                          "prior companion, how much later it starts its passage; or [min, max], s.")
-    crossing_angle_deg: Angle | tuple[Angle, Angle] = Field(
+    crossing_angle_deg: Angle | range_of(Angle) = Field(
         (60.0, 120.0), description="Angle between a crossing companion's course and ship 0's, or [min, max]; "
                                    "the side is drawn, deg.")
-    speed_ratio: Ratio | tuple[Ratio, Ratio] | None = Field(
+    speed_ratio: Ratio | range_of(Ratio) | None = Field(
         None, description="A named companion's speed over ship 0's, or [min, max] (default 1, overtaking 1.5; a "
                           "follower keeps ship 0's speed).")
 
     @model_validator(mode="after")
     def _check(self):
-        lo, hi = span(self.count)
-        if lo > hi:
-            raise ValueError(f"count: must be a number or [min, max] with min <= max, got {list(self.count)}")
-        for name in ("separation", "time_offset", "crossing_angle_deg", "speed_ratio"):
-            v = getattr(self, name)
-            if v is not None and not isinstance(v, (int, float)) and v[0] > v[1]:
-                raise ValueError(f"{name}: must be [min, max] with min <= max, got {list(v)}")
+        hi = span(self.count)[1]
         if isinstance(self.geometry, list) and len(self.geometry) != hi - 1:
             raise ValueError(f"geometry: a list needs one entry per companion ({hi - 1} for up to {hi} ships), "
                              f"got {len(self.geometry)}")
@@ -109,10 +103,7 @@ def check_traffic(sc, min_distance: float) -> None:
     if named and sc.passage.velocity[0] == 0 and sc.passage.velocity[1] == 0:
         raise ValueError(f"traffic.geometry: a {named[0]} companion sails relative to ship 0's course, but "
                          "passage.velocity is 0")
-    for s in sc.sensors:
-        if abs(s.position[2] - sc.passage.z) < min_distance:
-            raise ValueError(f"traffic: ships at z = {sc.passage.z:g} can pass through sensor {s.id!r} "
-                             f"(z = {s.position[2]:g}); keep the source plane {min_distance} m away")
+    check_source_plane(sc.sensors, sc.passage.z, min_distance, "traffic", "ships")
     if sc.envelope_chain.mode == "raw":
         raise ValueError("traffic.count: the raw envelope chain simulates one ship; use envelope_chain.mode = "
                          "\"ideal\" with several ships")

@@ -92,7 +92,7 @@ def companion_tracks(lead, centre, geometry, separation, offset, angle, ratio, s
     return start, vc
 
 
-def superposed_readings(readings, present, axial, distances):
+def superposed_readings(readings, present, axial, nearest):
     """What the sensors read with several ships: the sum of the present ships' readings, the nearest present
     ship's bearing on axial channels.
 
@@ -104,8 +104,9 @@ def superposed_readings(readings, present, axial, distances):
         Which ships sail in each run (at least one).
     axial : ndarray of bool, shape (m,)
         Bearing channels.
-    distances : ndarray, shape (runs, ships, steps, n_axial)
-        Each ship's distance from the sensor of each axial channel, m.
+    nearest : ndarray of int, shape (runs, steps, n_axial)
+        The present ship nearest to the sensor of each axial channel (the one it hears), an index into
+        ``ships``.
 
     Returns
     -------
@@ -114,7 +115,5 @@ def superposed_readings(readings, present, axial, distances):
     on = present[:, :, None, None]
     total = np.sum(np.where(on, readings, 0.0), axis=1)
     if np.any(axial):
-        d = np.where(on, distances, np.inf)
-        nearest = np.argmin(d, axis=1)[:, None]
-        total[..., axial] = np.take_along_axis(readings[..., axial], nearest, axis=1)[:, 0]
+        total[..., axial] = np.take_along_axis(readings[..., axial], nearest[:, None], axis=1)[:, 0]
     return total

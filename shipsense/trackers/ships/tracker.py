@@ -142,7 +142,8 @@ class ShipsTracker:
     def _labelled(self, th, ref1, ref2=None):
         """Joint fits ``th`` (C, 2n) with the two ships' blocks swapped where that puts them nearer (at the
         window's middle) to the tracks ``ref1`` and ``ref2`` (C, n) internal, at the window's first sample:
-        labels persist through refits."""
+        labels persist through refits.  Returns the labelled fits (C, 2n) and the distance (C,) between their
+        two ships at the window's middle, m (the same positions give both)."""
         n, W = self.base.n, self.window
         mid = shared_powers(self.base.A, W)[W // 2][:2]
         p1, p2, r1 = th[:, :n] @ mid.T, th[:, n:] @ mid.T, ref1 @ mid.T
@@ -151,7 +152,8 @@ class ShipsTracker:
             r2 = ref2 @ mid.T
             same, swap = same + np.sum((p2 - r2) ** 2, axis=1), swap + np.sum((p1 - r2) ** 2, axis=1)
         flip = swap < same
-        return np.where(flip[:, None], np.concatenate([th[:, n:], th[:, :n]], axis=1), th)
+        labelled = np.where(flip[:, None], np.concatenate([th[:, n:], th[:, :n]], axis=1), th)
+        return labelled, np.hypot(*(p1 - p2).T)
 
     def birth_test(self, y, x1, k):
         """The birth test of passages with ship 1 at ``x1`` (C, n) SI at sample ``k``, on their measurements
@@ -163,10 +165,10 @@ class ShipsTracker:
         x1 = self._back(x1)
         _, chi2_1 = one_ship_fit(self.one, yw, x1)
         th, chi2_2, info = two_ship_fits(self.one, self.joint_fit, yw, x1)
-        th = self._labelled(th, x1)
+        th, separation = self._labelled(th, x1)
         gain = 0.5 * (chi2_1 - chi2_2)
         penalty = self._penalty(yw)
-        apart = self._separation(th) >= o.min_separation_m
+        apart = separation >= o.min_separation_m
         mean, cov = self._at_end(th, info)
         ok = np.isfinite(gain) & np.isfinite(mean).all(axis=1) & np.isfinite(cov).all(axis=(1, 2))
         return ok & apart & (gain > penalty), mean, cov, gain, penalty
@@ -182,21 +184,15 @@ class ShipsTracker:
         x1, x2 = self._back(mean[:, :n]), self._back(mean[:, n:])
         starts = [x1, x2] + ([] if x1_alone is None else [self._back(x1_alone)])
         th, chi2_2, info = two_ship_fits(self.one, self.joint_fit, yw, np.stack(starts, axis=1), x2)
-        th = self._labelled(th, x1, x2)
+        th, separation = self._labelled(th, x1, x2)
         _, chi2_1 = one_ship_fit(self.one, yw, x1)
-        keep = (0.5 * (chi2_1 - chi2_2) > self._penalty(yw)) & (self._separation(th) >= o.min_separation_m)
+        keep = (0.5 * (chi2_1 - chi2_2) > self._penalty(yw)) & (separation >= o.min_separation_m)
         return keep, *self._at_end(th, info)
 
     def _penalty(self, yw):
         r"""The model-order penalty (C,) of windows ``yw`` (C, W, m): ``penalty`` times BIC's
         :math:`\tfrac12 n \ln N`, ``n`` one ship's state size, ``N`` the window's measurements."""
         return self.settings.penalty * 0.5 * self.base.n * np.log(np.maximum(np.isfinite(yw).sum(axis=(1, 2)), 2))
-
-    def _separation(self, th):
-        """Distance (C,) between the two ships of joint fits ``th`` (C, 2n) at the window's middle, m."""
-        n, W = self.base.n, self.window
-        mid = shared_powers(self.base.A, W)[W // 2][:2]
-        return np.hypot(*((th[:, :n] - th[:, n:]) @ mid.T).T)
 
     # -- a batch ------------------------------------------------------------------------------------------------
     def track(self, times, measurements, progress=False) -> ShipsResult:
