@@ -38,9 +38,10 @@ FIRST_USE = ("compiling the numerical kernels on their first use on this machine
 
 
 def first_use_notice(filter_name=None):
-    """:data:`FIRST_USE` if the tracker's compiled kernels (filter ``filter_name``'s update, default the
-    tracker's UKF, the predict, measurement kernel, least-squares loop, the grid search, the restart rule and the
-    tracker's step) are not yet compiled on disk for the current sources, else None."""
+    """:data:`FIRST_USE` if the tracker's compiled kernels (filter ``filter_name``'s step, default the
+    tracker's UKF, or its update where it has no step; its update loop, the predict, the measurement kernel, the
+    least-squares loop, the grid search and the restart rule) are not yet compiled on disk for the current
+    sources, else None."""
     from shipsense import numba_cache
     from shipsense.models import measurement
     from shipsense.trackers.filters import fused, kernels, time_update
@@ -50,11 +51,12 @@ def first_use_notice(filter_name=None):
     from shipsense.trackers.tracker import step as tracker_step
 
     code = fused.filter_code(filter_name or "ukf")
-    step = (tracker_step.prepare_sample,) + ((tracker_step.STEP_KERNELS[code],) if code in tracker_step.STEP_KERNELS
-                                       else ())
-    ready = numba_cache.cached(kernels.UPDATE_KERNELS[code], kernels.UPDATE_LOOPS[code], time_update.predict_kernel,
+    # the tracker calls the filter's compiled step where there is one (its update loop and the predict inside),
+    # else the update's entry: a kernel it does not call is not asked for (else the notice would never go away)
+    entry = (tracker_step.STEP_KERNELS[code] if code in tracker_step.STEP_KERNELS else kernels.UPDATE_KERNELS[code])
+    ready = numba_cache.cached(entry, kernels.UPDATE_LOOPS[code], time_update.predict_kernel,
                                measurement.batch_kernel, lm.lm_kernel, grid.grid_solve_kernel,
-                               grid.ridge_inverses, restarts.due, *step)
+                               grid.ridge_inverses, restarts.due, tracker_step.prepare_sample)
     return None if ready else FIRST_USE
 
 
