@@ -100,7 +100,6 @@ def track_recordings(args, sc) -> int:
     from shipsense import budget
     from shipsense.atomic import staged_directory
     from shipsense.cli.common import EXIT_OK, QUIET, first_use, within_budget
-    from shipsense.cli.ships import describe_ships, track_ships_into
     from shipsense.cli.track import describe, track_to_files
     from shipsense.recording import RecordingError, read_recording
     from shipsense.recording.mapping import load_mapping
@@ -124,6 +123,8 @@ def track_recordings(args, sc) -> int:
     passage_gap = args.passage_gap if args.passage_gap is not None else PASSAGE_GAP_LIMITS * gap_limit
     first_use("track", args.filter)
     ships = getattr(args, "ships", "1") != "1"      # (its options checked by the command: cmd_track)
+    if ships:   # (the several-ship tracker imported only when asked for)
+        from shipsense.cli.ships import describe_ships, track_ships_into
     rows, described = [], []
     with staged_directory(out) as stage:   # every recording's tables and plots, or nothing
         for (f, times, y), target in zip(recordings, targets):
