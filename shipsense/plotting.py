@@ -1,6 +1,6 @@
 """Figures: the array, the passages and the measurement traces.
 
-The figures a command writes to a file are :class:`~matplotlib.figure.Figure` objects drawn by the Agg canvas
+The figures a command writes to a file are ``matplotlib.figure.Figure`` objects drawn by the Agg canvas
 without pyplot (whose import and figure manager a command that writes one PNG does not need); ``plt``, pyplot
 on the Agg backend, is imported on first use (``from shipsense.plotting import plt``) for the figures that are
 shown or rendered to arrays.
@@ -28,7 +28,7 @@ def __getattr__(name):
 
 
 def save_png(fig, path, dpi=110):
-    """Write ``fig`` (a :class:`~matplotlib.figure.Figure`) to ``path``; a PNG with zlib's fastest level (a
+    """Write ``fig`` (a ``matplotlib.figure.Figure``) to ``path``; a PNG with zlib's fastest level (a
     figure of mostly flat colour: a fifth larger, encoded in about half the time of the default level)."""
     png = str(path).lower().endswith(".png")
     fig.savefig(path, dpi=dpi, **({"pil_kwargs": {"compress_level": 1}} if png else {}))
