@@ -19,8 +19,12 @@ Full-size command (the same passage)::
 import tempfile
 from pathlib import Path
 
+import numpy as np
+
+import shipsense
 from shipsense.cli import main
 from shipsense.plotting import show_image
+from shipsense.trackers import Tracker
 
 out = Path(tempfile.mkdtemp()) / "turn"
 assert main(["--quiet", "track", "S2-turn", "--out", str(out)]) == 0
@@ -36,11 +40,6 @@ show_image(out / "track.png")
 # The same samples through both trackers, in Python: the motion modes against constant velocity only.  The
 # constant-velocity tracker follows the line the ship was on; once the ship has turned its samples no longer
 # fit and it reports ``inconsistent``.
-import numpy as np
-
-import shipsense
-from shipsense.trackers import Tracker
-
 sc = shipsense.load_scenario("S2-turn")
 sim = shipsense.simulate(sc, runs=1, seed=0)
 for model in ("imm", "cv"):
