@@ -76,6 +76,7 @@ class Verdict:
     fim_condition: float = float("inf")
     passages: int = 0
     labels: tuple = ()
+    manoeuvring: int = 0      # of the passages, how many manoeuvre (their Fisher information follows it)
 
     def to_json(self):
         return {"verdict": self.verdict, "min_chi2": _finite_or_none(self.min_chi2),
@@ -309,7 +310,8 @@ def check_array(model, thetas, steps, *, far=DEFAULT_FAR, chi2_threshold=DEFAULT
         verdict = "ambiguous"
     else:
         verdict = "observable"
-    return Verdict(verdict, best, pairs, rank, cond, len(thetas), tuple(model.labels))
+    return Verdict(verdict, best, pairs, rank, cond, len(thetas), tuple(model.labels),
+                   0 if motion is None else int(motion.manoeuvring.sum()))
 
 
 def mirror_screen(model, thetas, steps, *, far=DEFAULT_FAR, stride=2, lines=None):

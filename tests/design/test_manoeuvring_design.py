@@ -112,6 +112,7 @@ def test_a_turn_away_from_the_array_before_it_is_reached_leaves_a_larger_bound()
     c = check_array(model, thetas, sc.steps, starts=0, motion=motion)
     c0 = check_array(model, thetas0, sc.steps, starts=0)
     assert c.fim_rank == c0.fim_rank == model.n
+    assert (c.manoeuvring, c0.manoeuvring) == (1, 0)
 
     def position_bound(J):
         return np.sqrt(np.trace(np.linalg.inv(J[0])[:2, :2]))
