@@ -211,10 +211,25 @@ def sample_passages(scenario, runs: int, seed: int = 0, random: bool = True) -> 
 
     Columns :data:`STATE_LABELS`; the same draws :func:`simulate` makes for ``seed``.
     """
+    return sample_manoeuvring_passages(scenario, runs, seed, random)[0]
+
+
+def sample_manoeuvring_passages(scenario, runs: int, seed: int = 0, random: bool = True):
+    """Initial truth states (runs, 9) of passages and their manoeuvre schedule: :func:`sample_passages` and
+    the manoeuvres of the scenario's ``[manoeuvres]`` table (random passages' draws from
+    ``[manoeuvres.random]``, the nominal passage's schedule; none without the table), the same draws
+    :func:`simulate` makes for ``seed``.
+
+    Returns
+    -------
+    x0 : ndarray, shape (runs, 9)
+    manoeuvres : Manoeuvres
+    """
     sc = load_scenario(scenario)
     seeds = np.random.SeedSequence(seed).spawn(len(_STREAMS))
     streams = {name: np.random.default_rng(s) for name, s in zip(_STREAMS, seeds)}
-    return _passages(sc, runs, random, streams)
+    x0 = _passages(sc, runs, random, streams)
+    return x0, passage_manoeuvres(sc, x0, random, streams)
 
 
 def _random_manoeuvres(sc: Scenario, x0, streams) -> Manoeuvres:

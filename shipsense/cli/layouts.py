@@ -73,7 +73,8 @@ def _print_verdict(result):
     # labelled by the file (or shipped name) as given, as the JSON and the JUnit report are: two files may hold
     # scenarios of one name
     print(f"{result.layout}: {verdict.verdict.upper()}  ({len(sc.sensors)} sensors, {verdict.passages} passage(s) "
-          f"{'from the prior' if sc.prior is not None else '(the nominal one)'}; {result.seconds:.1f} s)")
+          f"{'from the prior' if sc.prior is not None else '(the nominal one)'}"
+          f"{f', {verdict.manoeuvring} manoeuvring' if verdict.manoeuvring else ''}; {result.seconds:.1f} s)")
     print(f"  Fisher information: rank {verdict.fim_rank} of {len(verdict.labels)}, "
           f"condition number {verdict.fim_condition:.3g} (internal units)")
     print(f"  closest far-apart passage: chi-square {verdict.min_chi2:.3g} (ambiguous below 25)")

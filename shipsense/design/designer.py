@@ -1,7 +1,9 @@
 """`shipsense design` as a library call: design an array for a scenario, then write its report.
 
 :func:`design_array` builds the per-candidate Fisher matrices of prior
-passages, solves the relaxation (:func:`~shipsense.design.placement.place`,
+passages (with the manoeuvres of the scenario's ``[manoeuvres]`` table, drawn as the simulator draws them,
+along their true motion: :func:`~shipsense.design.manoeuvre_bound.passage_motion`), solves the relaxation
+(:func:`~shipsense.design.placement.place`,
 with ambiguity cuts unless disabled), scores baselines on the same passages
 and returns a :class:`DesignResult`; :func:`write_design` writes the layout
 (TOML), the report (JSON) and the plots, all atomically.  Errors the caller
@@ -49,6 +51,7 @@ class DesignResult:
     placement: pl.Placement
     truth: np.ndarray           # the prior passages (S, state), SI
     thetas: np.ndarray          # the same, internal units of the candidate model
+    motion: object              # their manoeuvres (a PassageMotion in the candidate model), None: straight
     model: object               # the candidate model
     k: int
     criterion: str
@@ -63,8 +66,10 @@ class DesignResult:
         return self.candidates[self.placement.chosen]
 
     def report(self) -> dict:
-        """The ``design.json`` document."""
+        """The ``design.json`` document (with ``manoeuvring_passages``, how many of the prior passages
+        manoeuvre, when the scenario's manoeuvres make some)."""
         r = self.placement
+        manoeuvring = {} if self.motion is None else {"manoeuvring_passages": int(self.motion.manoeuvring.sum())}
         return {
             "criterion": self.criterion, "k": self.k, "candidates": len(self.candidates),
             "passages": len(self.thetas), "method": r.method, "solver": r.solver, "converged": r.converged,
@@ -79,7 +84,7 @@ class DesignResult:
             "baselines": self.baselines,
             "separation_m": self.separation,
             "resolvability": self.resolvability.to_json() if self.resolvability is not None else None,
-            "seconds": self.timings.get("total"), "timings": self.timings,
+            "seconds": self.timings.get("total"), "timings": self.timings, **manoeuvring,
         }
 
 
@@ -218,8 +223,9 @@ def design_array(scenario, k, *, criterion="D", candidates=None, costs=None, bud
     """
     from tqdm import tqdm
 
+    from shipsense.design.manoeuvre_bound import passage_motion
     from shipsense.models.field_model import candidate_model, subset_model
-    from shipsense.simulator import sample_passages
+    from shipsense.simulator import sample_manoeuvring_passages
     from shipsense.trackers.tracker.settings import resolve_settings
 
     t_start = time.perf_counter()
@@ -252,9 +258,10 @@ def design_array(scenario, k, *, criterion="D", candidates=None, costs=None, bud
         raise ValueError("--budget needs candidate costs (a 'cost' column in the candidate CSV), and vice versa")
     template = scenario.sensors[0]
     model = candidate_model(scenario, cands)
-    truth = sample_passages(scenario, passages if scenario.prior is not None else 1, seed=seed,
-                            random=scenario.prior is not None)
+    truth, manoeuvres = sample_manoeuvring_passages(scenario, passages if scenario.prior is not None else 1,
+                                                    seed=seed, random=scenario.prior is not None)
     thetas = model.to_internal(model.state_from_truth(truth))
+    motion = passage_motion(model, truth, manoeuvres, scenario.times)
     bank = resolve_settings(scenario).bank
     prior_std = model.to_internal(bank.state_std(model.labels))
     timings = {}
@@ -264,11 +271,11 @@ def design_array(scenario, k, *, criterion="D", candidates=None, costs=None, bud
     try:
         if criterion == "resolvability":
             result, baselines = _resolvability_design(model, thetas, scenario.steps, k, cands, separation, seed,
-                                                      random_layouts, timings, check, bar)
+                                                      random_layouts, timings, check, bar, motion)
         else:
             result, baselines = _relaxation_design(model, thetas, scenario.steps, k, cands, criterion, costs,
                                                    budget, prior_std, stride, prior_floor, solver, cuts, bb_work,
-                                                   guard, seed, random_layouts, timings, check, bar)
+                                                   guard, seed, random_layouts, timings, check, bar, motion)
     finally:
         bar.close()
     resolvability = rv.resolvable_separation(subset_model(model, result.chosen), thetas, scenario.steps)
@@ -278,28 +285,29 @@ def design_array(scenario, k, *, criterion="D", candidates=None, costs=None, bud
                                          "description": f"{criterion}-optimal layout of {k} {template.type}s "
                                                         f"({template.kind}) designed from {scenario.name}"})
     timings["total"] = time.perf_counter() - t_start
-    return DesignResult(scenario, layout, cands, result, truth, thetas, model, k, criterion, prior_floor,
+    return DesignResult(scenario, layout, cands, result, truth, thetas, motion, model, k, criterion, prior_floor,
                         baselines, timings, resolvability, separation)
 
 
 def _relaxation_design(model, thetas, steps, k, cands, criterion, costs, budget, prior_std, stride, prior_floor,
-                       solver, cuts, bb_work, guard, seed, random_layouts, timings, check, bar):
-    """The D, A and E criteria's design: per-candidate Fisher matrices, the relaxation, rounding and ambiguity
-    cuts (:func:`~shipsense.design.placement.place_with_cuts`), the verdict and the baselines; ``(Placement,
-    baselines)``."""
+                       solver, cuts, bb_work, guard, seed, random_layouts, timings, check, bar, motion):
+    """The D, A and E criteria's design: per-candidate Fisher matrices (along the passages' ``motion``), the
+    relaxation, rounding and ambiguity cuts (:func:`~shipsense.design.placement.place_with_cuts`), the verdict
+    and the baselines; ``(Placement, baselines)``."""
     from shipsense.design.observability import check_array
     from shipsense.models.field_model import subset_model
 
     t0 = time.perf_counter()
     problem = pl.build_problem(model, thetas, steps, k, prior_std, stride=stride,
-                               prior_floor=prior_floor, progress=lambda f: bar.update(int(100 * f) - bar.n))
+                               prior_floor=prior_floor, progress=lambda f: bar.update(int(100 * f) - bar.n),
+                               motion=motion)
     timings["fisher"] = time.perf_counter() - t0
     if costs is not None:
         problem = problem.with_costs(costs, budget)
     bar.set_description("design: relaxation, rounding" + ("" if not cuts else " and ambiguity cuts"))
     if cuts:
         result = pl.place_with_cuts(problem, model, thetas, steps, criterion, solver=solver,
-                                    bb_work=bb_work, bb_seconds=guard)
+                                    bb_work=bb_work, bb_seconds=guard, motion=motion)
         timings["relaxation_and_rounding"] = result.seconds
         timings["ambiguity_check"] = result.check_seconds
     else:
@@ -307,7 +315,8 @@ def _relaxation_design(model, thetas, steps, k, cands, criterion, costs, budget,
         timings["relaxation_and_rounding"] = result.seconds
         t0 = time.perf_counter()
         if check:
-            result.verdict = check_array(subset_model(model, result.chosen), thetas[:4], steps, starts=8)
+            result.verdict = check_array(subset_model(model, result.chosen), thetas[:4], steps, starts=8,
+                                         motion=_first(motion, 4))
         timings["ambiguity_check"] = time.perf_counter() - t0 if check else None
     bar.set_description("design: baselines")
     t0 = time.perf_counter()
@@ -316,10 +325,16 @@ def _relaxation_design(model, thetas, steps, k, cands, criterion, costs, budget,
     return result, baselines
 
 
-def _resolvability_design(model, thetas, steps, k, cands, separation, seed, random_layouts, timings, check, bar):
-    """The ``resolvability`` criterion's design: per-candidate joint information, the search over sets
-    (:func:`~shipsense.design.resolvability.best_set`), the verdict and the baselines; ``(Placement,
-    baselines)``."""
+def _first(motion, count):
+    """The manoeuvres of the first ``count`` passages (None: straight passages)."""
+    return None if motion is None else motion.take(slice(0, count))
+
+
+def _resolvability_design(model, thetas, steps, k, cands, separation, seed, random_layouts, timings, check, bar,
+                          motion):
+    """The ``resolvability`` criterion's design: per-candidate joint information of twin ships abreast on
+    straight passages, the search over sets (:func:`~shipsense.design.resolvability.best_set`), the verdict
+    (with the passages' ``motion``) and the baselines; ``(Placement, baselines)``."""
     from shipsense.design.observability import check_array
     from shipsense.models.field_model import subset_model
 
@@ -343,7 +358,8 @@ def _resolvability_design(model, thetas, steps, k, cands, separation, seed, rand
     timings["search"] = result.seconds
     t0 = time.perf_counter()
     if check:
-        result.verdict = check_array(subset_model(model, chosen), thetas[:4], steps, starts=8)
+        result.verdict = check_array(subset_model(model, chosen), thetas[:4], steps, starts=8,
+                                     motion=_first(motion, 4))
     timings["ambiguity_check"] = time.perf_counter() - t0 if check else None
     bar.set_description("design: baselines")
     t0 = time.perf_counter()
@@ -412,6 +428,9 @@ def summary_lines(result):
     lines = [f"{result.criterion}-optimal design of {k} {template.type}s ({template.kind}) from "
              f"{len(result.candidates)} candidates and {len(result.thetas)} prior passages "
              f"({result.timings['total']:.1f} s)"]
+    if result.motion is not None:
+        lines.append(f"  {int(result.motion.manoeuvring.sum())} of the {len(result.thetas)} prior passages manoeuvre "
+                     f"(the scenario's [manoeuvres]): their Fisher information follows their true motion")
     if result.criterion == "resolvability":
         d0 = result.separation
         lines.append(f"  search: {r.method} ({r.solver}): "

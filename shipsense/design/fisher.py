@@ -16,9 +16,15 @@ Gaussian noise and linear dynamics is
 
 the expectation taken over true trajectories (Monte Carlo over the given ones).
 Jacobians are the models' analytic ones.
+
+A passage with known manoeuvres (:class:`PassageMotion`) moves by its own motion :math:`x_k = f_k(\theta)`
+instead, and :math:`A^k` above becomes the Jacobian :math:`\Phi_k = \partial x_k / \partial \theta
+= F_{k-1} \cdots F_0` of that motion (:func:`~shipsense.design.manoeuvre_bound.passage_motion`).
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -31,7 +37,31 @@ def trajectory(model, theta, steps):
     return np.einsum("kij,...j->...ki", powers(model.A, steps), np.asarray(theta, dtype=float))
 
 
-def weighted_jacobian(model, theta, Ak):
+@dataclass(frozen=True)
+class PassageMotion:
+    r"""The known motion of passages that do not keep a constant velocity (manoeuvring passages), internal
+    units.
+
+    Attributes
+    ----------
+    states : ndarray, shape (P, K, n)
+        The states :math:`x_k = f_k(\theta)` at every sample.
+    jacobians : ndarray, shape (P, K, n, n)
+        :math:`\Phi_k = \partial x_k / \partial \theta` (:math:`\Phi_0 = I`).
+    manoeuvring : ndarray of bool, shape (P,)
+        Which passages manoeuvre (the others move at constant velocity).
+    """
+
+    states: np.ndarray
+    jacobians: np.ndarray
+    manoeuvring: np.ndarray
+
+    def take(self, rows):
+        """The motion of passages ``rows`` (a slice of the passage axis)."""
+        return PassageMotion(self.states[rows], self.jacobians[rows], self.manoeuvring[rows])
+
+
+def weighted_jacobian(model, theta, Ak, states=None):
     r"""Whitened Jacobian rows of passages about their initial states: :math:`R^{-1/2} H(A^k \theta) A^k`.
 
     Parameters
@@ -39,19 +69,22 @@ def weighted_jacobian(model, theta, Ak):
     model : model with ``H`` and ``R`` (internal units)
     theta : ndarray, shape (..., n)
         Initial states (internal units).
-    Ak : ndarray, shape (K, n, n)
-        The transition's powers at the samples used (:func:`~shipsense.models.transitions.powers`).
+    Ak : ndarray, shape (K, n, n) or (..., K, n, n)
+        The transition's powers at the samples used (:func:`~shipsense.models.transitions.powers`), or each
+        passage's own motion Jacobians :math:`\Phi_k` (:class:`PassageMotion`).
+    states : ndarray, shape (..., K, n), optional
+        The states at those samples (default :math:`A^k \theta`; a manoeuvring passage's own).
 
     Returns
     -------
     W : ndarray, shape (..., K, m, n)
         ``W^T W`` summed over samples and channels is the passage's Fisher information.
     """
-    X = np.einsum("kij,...j->...ki", Ak, np.asarray(theta, dtype=float))
+    X = np.einsum("kij,...j->...ki", Ak, np.asarray(theta, dtype=float)) if states is None else states
     return (model.H(X) @ Ak) * (1.0 / np.sqrt(model.R))[:, None]
 
 
-def passage_fim(model, theta, steps, per_sensor=False, stride=1, block=10_000, progress=None):
+def passage_fim(model, theta, steps, per_sensor=False, stride=1, block=10_000, progress=None, motion=None):
     """Fisher information of passages about their initial state (internal units).
 
     Parameters
@@ -73,6 +106,10 @@ def passage_fim(model, theta, steps, per_sensor=False, stride=1, block=10_000, p
         samples paid Python overhead per call).
     progress : callable, optional
         Called with the fraction done after every block.
+    motion : PassageMotion, optional
+        The passages' own motion (``theta`` (P, n), ``steps`` samples): manoeuvring passages, whose
+        information is taken along their true states with their motion's Jacobians (module docstring);
+        default the constant velocity.
 
     Returns
     -------
@@ -82,6 +119,11 @@ def passage_fim(model, theta, steps, per_sensor=False, stride=1, block=10_000, p
     Ak = powers(model.A, steps)[::stride]                     # (K, n, n)
     batch, n = theta.shape[:-1], theta.shape[-1]
     flat = theta.reshape(-1, n)
+    if motion is not None:
+        if motion.jacobians.shape != (len(flat), steps, n, n):
+            raise ValueError(f"motion: {len(flat)} passages of {steps} samples and {n} states expected, "
+                             f"got Jacobians of shape {motion.jacobians.shape}")
+        motion = PassageMotion(motion.states[:, ::stride], motion.jacobians[:, ::stride], motion.manoeuvring)
     sensor = model.array.channel_sensor
     S = len(model.array.ids)
     order = np.argsort(sensor, kind="stable")
@@ -109,7 +151,12 @@ def passage_fim(model, theta, steps, per_sensor=False, stride=1, block=10_000, p
     if passages_per_block >= 1:       # short passages or small arrays: whole passages at once
         for b0 in range(0, len(flat), passages_per_block):
             th = flat[b0:b0 + passages_per_block]
-            out[b0:b0 + len(th)] = information(weighted_jacobian(model, th, Ak))
+            if motion is None:
+                W = weighted_jacobian(model, th, Ak)
+            else:
+                mo = motion.take(slice(b0, b0 + len(th)))
+                W = weighted_jacobian(model, th, mo.jacobians, mo.states)
+            out[b0:b0 + len(th)] = information(W)
             done += len(th) * K
             if progress is not None:
                 progress(done / total)
@@ -117,8 +164,12 @@ def passage_fim(model, theta, steps, per_sensor=False, stride=1, block=10_000, p
         per_block = max(1, block // max(1, m))
         for b, th in enumerate(flat):
             for k0 in range(0, K, per_block):
-                A = Ak[k0:k0 + per_block]
-                W = weighted_jacobian(model, th, A)                    # (kb, m, n)
+                if motion is None:
+                    A = Ak[k0:k0 + per_block]
+                    W = weighted_jacobian(model, th, A)                # (kb, m, n)
+                else:
+                    A = motion.jacobians[b, k0:k0 + per_block]
+                    W = weighted_jacobian(model, th, A, motion.states[b, k0:k0 + per_block])
                 out[b] += information(W[None])[0]
                 done += len(A)
                 if progress is not None:

@@ -47,8 +47,8 @@ def check_layouts(layouts, passages=8, seed=0, progress=False, errors=(ValueErro
     for layout in layouts:
         t0 = time.perf_counter()
         try:
-            sc, model, thetas = scenario_passages(layout, passages, seed)       # (one set-up for both checks)
-            v = check_array(model, thetas, sc.steps, seed=seed, progress=progress)
+            sc, model, thetas, motion = scenario_passages(layout, passages, seed)   # (one set-up for both checks)
+            v = check_array(model, thetas, sc.steps, seed=seed, progress=progress, motion=motion)
             res = resolvable_separation(model, thetas, sc.steps)
             out.append(GateResult(str(layout), v.verdict, time.perf_counter() - t0, v, sc, res))
         except errors as err:

@@ -29,8 +29,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from shipsense.design.fisher import measurement_information, pcrlb_from_information
-from shipsense.physics.manoeuvre import Manoeuvres, manoeuvring_motion, transition_jacobians
+from shipsense.design.fisher import PassageMotion, measurement_information, pcrlb_from_information
+from shipsense.physics.manoeuvre import STRAIGHT, Manoeuvres, manoeuvring_motion, transition_jacobians
 
 SINGULAR = 1e-9
 """Below this :math:`|\\det M_k|^{1/2}` the moment's transition is taken as the identity."""
@@ -92,3 +92,40 @@ def simulation_bound(model, sim, J0, Q=None):
     truth = np.asarray(sim.truth)
     F = manoeuvre_transitions(model, truth[:, 0, 0:2], truth[:, 0, 2:4], sim.manoeuvres, sim.times)
     return conditional_pcrlb(model, model.to_internal(model.state_from_truth(truth)), J0, F, Q=Q)
+
+
+def passage_motion(model, x0, manoeuvres: Manoeuvres, times):
+    r"""The known motion of passages starting at ``x0`` with a manoeuvre schedule, for their Fisher
+    information about the initial state (:func:`~shipsense.design.fisher.passage_fim`): the true states
+    (:func:`~shipsense.simulator.manoeuvring_truth`) and :math:`\Phi_k = F_{k-1} \cdots F_0`, the product of
+    the true transitions (:func:`manoeuvre_transitions`); None when no passage manoeuvres (the constant
+    velocity then is their motion).
+
+    Parameters
+    ----------
+    model : FieldModel
+    x0 : ndarray, shape (R, 9)
+        Initial truth states (:data:`~shipsense.simulator.STATE_LABELS`, SI), as
+        :func:`~shipsense.simulator.sample_manoeuvring_passages` draws them.
+    manoeuvres : Manoeuvres
+    times : ndarray, shape (K,)
+        Sample times, s.
+
+    Returns
+    -------
+    PassageMotion or None
+        Internal units, (R, K, n) and (R, K, n, n).
+    """
+    if not manoeuvres.any:
+        return None
+    from shipsense.simulator import manoeuvring_truth
+
+    x0 = np.asarray(x0, dtype=float)
+    truth = manoeuvring_truth(x0, manoeuvres, times)[0]
+    F = manoeuvre_transitions(model, x0[:, 0:2], x0[:, 2:4], manoeuvres, times)
+    phi = np.empty((len(x0), len(times), model.n, model.n))
+    phi[:, 0] = np.eye(model.n)
+    for k in range(1, len(times)):
+        phi[:, k] = F[:, k - 1] @ phi[:, k - 1]
+    return PassageMotion(model.to_internal(model.state_from_truth(truth)), phi,
+                         np.any(manoeuvres.kind != STRAIGHT, axis=1))

@@ -22,8 +22,13 @@ the search is global:
 
 Every passage's candidates are refined together, in batches of about
 :data:`FIT_CHUNK` Jacobian entries.  Far apart means a mean distance between
-the two tracks above ``far`` metres.  The verdict uses the actual measurement
-model, so identical layouts can differ by measurement kind (vector vs
+the two tracks above ``far`` metres.
+
+Manoeuvring passages (a scenario's ``[manoeuvres]``, drawn as the simulator draws them:
+:func:`scenario_passages`): the Fisher information follows each passage's true motion
+(:class:`~shipsense.design.fisher.PassageMotion`); the global search compares straight passages from the
+same initial states (the motion the tracker's global initialiser fits on a window).  The verdict uses the actual
+measurement model, so identical layouts can differ by measurement kind (vector vs
 total-field magnetometers on a line; vector vs magnitude electrodes on a line).
 """
 
@@ -72,6 +77,7 @@ class Verdict:
     fim_condition: float = float("inf")
     passages: int = 0
     labels: tuple = ()
+    manoeuvring: int = 0      # of the passages, how many manoeuvre (their Fisher information follows it)
 
     def to_json(self):
         return {"verdict": self.verdict, "min_chi2": finite_or_none(self.min_chi2),
@@ -269,16 +275,18 @@ def _search(model, thetas, steps, *, far, starts, seeds, refine=True, progress=F
 
 
 def check_array(model, thetas, steps, *, far=DEFAULT_FAR, chi2_threshold=DEFAULT_CHI2, starts=24, seed=0,
-                progress=False):
+                progress=False, motion=None):
     """Verdict of an array (through its model) on passages ``thetas`` (P, n) (internal units).
 
     ``degenerate`` if the Fisher information of some passage is numerically
     rank deficient or its condition number (internal units) exceeds 1e12; else ``ambiguous`` if some passage
     has a far-apart alternative within ``chi2_threshold``; else ``observable``.  The candidates of all
     passages are refined together (one batched fit), passage ``i``'s random starts drawn with seed ``seed + i``.
+    ``motion`` (:class:`~shipsense.design.fisher.PassageMotion`, optional): the passages' manoeuvres, for their
+    Fisher information (module docstring).
     """
     thetas = np.atleast_2d(np.asarray(thetas, dtype=float))
-    J = passage_fim(model, thetas, steps, stride=2)
+    J = passage_fim(model, thetas, steps, stride=2, motion=motion)
     w = np.linalg.eigvalsh(J)
     top = w.max(axis=-1, keepdims=True)
     rank = int((w > model.n * np.finfo(float).eps * top).sum(axis=-1).min())   # numerical rank
@@ -299,7 +307,8 @@ def check_array(model, thetas, steps, *, far=DEFAULT_FAR, chi2_threshold=DEFAULT
         verdict = "ambiguous"
     else:
         verdict = "observable"
-    return Verdict(verdict, best, pairs, rank, cond, len(thetas), tuple(model.labels))
+    return Verdict(verdict, best, pairs, rank, cond, len(thetas), tuple(model.labels),
+                   0 if motion is None else int(motion.manoeuvring.sum()))
 
 
 def mirror_screen(model, thetas, steps, *, far=DEFAULT_FAR, stride=2, lines=None):
@@ -325,19 +334,26 @@ def _ambiguity(model, theta, alt, chi2, dist, source):
 
 
 def scenario_passages(scenario, passages=8, seed=0):
-    """A scenario's array and the passages a check draws: ``(scenario, model, thetas)``, ``thetas`` (P, n)
-    internal units, ``passages`` from its ``[prior]`` (its nominal passage without one)."""
+    """A scenario's array and the passages a check draws: ``(scenario, model, thetas, motion)``, ``thetas``
+    (P, n) internal units, ``passages`` from its ``[prior]`` (its nominal passage without one), with the
+    manoeuvres of its ``[manoeuvres]`` table (the simulator's draws,
+    :func:`~shipsense.simulator.sample_manoeuvring_passages`) as their ``motion``
+    (:func:`~shipsense.design.manoeuvre_bound.passage_motion`; None when no passage manoeuvres)."""
     from shipsense.config import load_scenario
+    from shipsense.design.manoeuvre_bound import passage_motion
     from shipsense.models.field_model import model_from_scenario
-    from shipsense.simulator import sample_passages
+    from shipsense.simulator import sample_manoeuvring_passages
 
     sc = load_scenario(scenario)
     model = model_from_scenario(sc)
-    truth = sample_passages(sc, passages if sc.prior is not None else 1, seed=seed, random=sc.prior is not None)
-    return sc, model, model.to_internal(model.state_from_truth(truth))
+    truth, manoeuvres = sample_manoeuvring_passages(sc, passages if sc.prior is not None else 1, seed=seed,
+                                                    random=sc.prior is not None)
+    motion = passage_motion(model, truth, manoeuvres, sc.times)
+    return sc, model, model.to_internal(model.state_from_truth(truth)), motion
 
 
 def check_scenario(scenario, passages=8, seed=0, progress=False, **kwargs):
-    """Verdict for a scenario's array: passages from its ``[prior]`` (or its nominal passage)."""
-    sc, model, thetas = scenario_passages(scenario, passages, seed)
-    return check_array(model, thetas, sc.steps, seed=seed, progress=progress, **kwargs)
+    """Verdict for a scenario's array: passages from its ``[prior]`` (or its nominal passage), with their
+    manoeuvres."""
+    sc, model, thetas, motion = scenario_passages(scenario, passages, seed)
+    return check_array(model, thetas, sc.steps, seed=seed, progress=progress, motion=motion, **kwargs)

@@ -126,7 +126,7 @@ class DesignProblem:
         return self.J.shape[1]
 
 
-def build_problem(model, thetas, steps, k, prior_std, stride=2, prior_floor=None, progress=None):
+def build_problem(model, thetas, steps, k, prior_std, stride=2, prior_floor=None, progress=None, motion=None):
     """Per-candidate Fisher matrices of passages ``thetas`` (S, n) for the candidate ``model`` (one sensor each).
 
     The matrices are scaled by the prior standard deviations ``prior_std``
@@ -146,8 +146,11 @@ def build_problem(model, thetas, steps, k, prior_std, stride=2, prior_floor=None
         Bayes-optimal one (docs: Results).
     progress : callable, optional
         Called with the fraction of the Fisher matrices built.
+    motion : PassageMotion, optional
+        The passages' manoeuvres (:func:`~shipsense.design.fisher.passage_fim`); default straight passages.
     """
-    J = passage_fim(model, thetas, steps, per_sensor=True, stride=stride, progress=progress)   # (S, N, n, n)
+    J = passage_fim(model, thetas, steps, per_sensor=True, stride=stride, progress=progress,
+                    motion=motion)                                                           # (S, N, n, n)
     D = np.asarray(prior_std, dtype=float)
     if D.shape != (J.shape[-1],) or not np.all(np.isfinite(D)) or np.any(D <= 0):
         raise ValueError(f"prior_std must be {J.shape[-1]} positive numbers, got {D}")
@@ -794,13 +797,15 @@ def place(problem, criterion="D", method="auto", cuts=None, first_order_above=80
 
 
 def place_with_cuts(problem, candidate_model, thetas, steps, criterion="D", tau=DEFAULT_CHI2, max_rounds=6,
-                    check_passages=4, starts=8, seed=0, progress=False, solver="auto", bb_work=0, bb_seconds=None):
+                    check_passages=4, starts=8, seed=0, progress=False, solver="auto", bb_work=0, bb_seconds=None,
+                    motion=None):
     """Place sensors, then add ambiguity cuts until the rounded design passes the ambiguity check.
 
     The check is :func:`~shipsense.design.observability.check_array` on the
     rounded design (k sensors, not the candidates); each ambiguous pair it
     finds becomes one cut, with the pair's per-candidate discrepancy computed
-    for all candidates in one batch (:func:`pair_discrepancy`).
+    for all candidates in one batch (:func:`pair_discrepancy`).  ``motion``: the passages' manoeuvres
+    (:class:`~shipsense.design.fisher.PassageMotion`, for the check's Fisher information).
     """
     from shipsense.models.field_model import subset_model
 
@@ -816,7 +821,8 @@ def place_with_cuts(problem, candidate_model, thetas, steps, criterion="D", tau=
         t0 = time.perf_counter()
         design = subset_model(candidate_model, result.chosen)
         verdict = check_array(design, thetas[:check_passages], steps, chi2_threshold=tau, starts=starts,
-                              seed=seed, progress=progress)
+                              seed=seed, progress=progress,
+                              motion=None if motion is None else motion.take(slice(0, check_passages)))
         check_seconds += time.perf_counter() - t0
         result.verdict = verdict
         if verdict.verdict != "ambiguous":

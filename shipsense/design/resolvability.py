@@ -287,7 +287,7 @@ def scenario_resolvability(scenario, passages=8, seed=0, share=RESOLVE_SHARE):
     passage without one), the same draws as :func:`~shipsense.design.observability.check_scenario`'s."""
     from shipsense.design.observability import scenario_passages
 
-    sc, model, thetas = scenario_passages(scenario, passages, seed)
+    sc, model, thetas, _ = scenario_passages(scenario, passages, seed)
     return resolvable_separation(model, thetas, sc.steps, share=share)
 
 

@@ -98,11 +98,11 @@ PASSAGE_V2_VARIANTS = {
 }
 """Passage-v2's registered variants: id -> constructor kwargs."""
 
-PASSAGE_V2_THRESHOLDS = {PASSAGE_V2_ID: -9.2, "shipsense/PassageManoeuvring-v2": None,
+PASSAGE_V2_THRESHOLDS = {PASSAGE_V2_ID: -9.2, "shipsense/PassageManoeuvring-v2": -43.9,
                          "shipsense/PassageHard-v2": -133.4}
 """``reward_threshold`` per variant: the rollout planner's mean return on held-out seeds (docs: the environments
-guide), rounded down to 0.1: an agent that reaches it plans as well as rollout over greedy; None where that is
-not measured yet (the manoeuvring variant).  ``PassageHard-v2``, whose task and reward are PassageHard-v1's,
+guide; the manoeuvring variant's on 100 passages, docs: Trained agents), rounded down to 0.1: an agent that
+reaches it plans as well as rollout over greedy.  ``PassageHard-v2``, whose task and reward are PassageHard-v1's,
 takes Passage-v1's rule: the best baseline's mean return on held-out seeds (round-robin's; docs: the agents
 findings, "PassageHard-v2"), rounded to 0.1."""
 

@@ -96,13 +96,18 @@ for none), ``checkpoints`` (a count, default 4; 0 for every step).  All JSON-abl
 ``shipsense/Passage-v2``'s ``reward_threshold`` is the rollout planner's
 mean return on held-out passages (docs: the environments guide): an agent
 that reaches it plans as well as a one-step lookahead over greedy with
-Monte Carlo futures.  The manoeuvring variant's is not measured yet (None).
-``shipsense/PassageHard-v2``'s is the best baseline's mean return on
-held-out passages, as for Passage-v1's variants (docs: the agents
-findings, "PassageHard-v2").
+Monte Carlo futures.  The manoeuvring variant's is the same rule on 100
+held-out passages (docs: Trained agents, "PassageManoeuvring-v2"); there
+rollout is not clearly better than greedy, and greedy-threshold scores
+above it on average.  ``shipsense/PassageHard-v2``'s is the best baseline's
+mean return on held-out passages, as for Passage-v1's variants (docs: the
+agents findings, "PassageHard-v2").
 
 ## Version history
 
+* v2, later: ``shipsense/PassageManoeuvring-v2``'s ``reward_threshold``
+  measured (-43.9; it was None).  Its dynamics, spaces and rewards are
+  unchanged, and so are Passage-v2's.
 * v2: wake-up costs, a read budget per passage and an error that counts at
   checkpoints, two observation entries for them, ``wakes`` and
   ``budget_left`` in ``info``.  Why: on Passage-v1 the information-greedy
