@@ -102,6 +102,9 @@ uniform over the free candidates; sequential greedy D-optimal on the
 episode's own criterion; ``convex``: :func:`shipsense.design.designer.design_array`
 (relaxation, rounding, exchange, ambiguity cuts, branch and bound) on the
 site's scenario, free candidates and passages, then its sensors in turn.
+The native vector version offers ``random`` and ``greedy`` batched
+(:meth:`SiteDesignVectorEnv.baseline`), the teachers of behaviour cloning
+(``shipsense train placement --imitate greedy``).
 
 ## Version history
 
@@ -232,7 +235,7 @@ class GreedyPolicy:
         self.env = env
 
     def __call__(self, obs):
-        return int(np.argmax(self.env.core.gain[0]))      # -inf where not free
+        return int(self.env.core.greedy_actions()[0])
 
 
 class ConvexPolicy:
@@ -280,6 +283,24 @@ class SiteDesignVectorEnv(CoreVectorEnv):
                           ambiguity, max_steps, site, reward)
         super().__init__(core, _spaces(core), render_mode)
 
+    BASELINES = ("random", "greedy")
+    """The baselines offered batched (:meth:`baseline`); ``convex`` (seconds per site) only by the single env."""
+
     def action_masks(self):
         """Boolean masks (num_envs, N) of the candidates each environment can take."""
         return self.core.masks().copy()
+
+    def baseline(self, name, seed=None):
+        """The batched baseline policy ``name`` (one of :attr:`BASELINES`): ``policy(obs) -> actions`` (num_envs,),
+        reading the environments' state (``obs`` unused): ``greedy`` the largest gain in each environment (as the
+        single env's), ``random`` a uniformly random free candidate from its own generator seeded with ``seed``
+        (the environments' generators are left alone).  Behaviour cloning takes its teacher here
+        (:func:`~shipsense.envs.training.imitate`)."""
+        if name not in self.BASELINES:
+            raise ValueError(f"policy {name!r} is not offered by ArrayDesign-v1's vector env (offered: "
+                             f"{', '.join(self.BASELINES)})")
+        core = self.core
+        if name == "greedy":
+            return lambda obs=None: core.greedy_actions()
+        rng = np.random.default_rng(seed)
+        return lambda obs=None: core.random_actions(rng)

@@ -170,6 +170,16 @@ class DesignCore:
     def masks(self):
         return self.free & ~self.placed
 
+    def greedy_actions(self):
+        """Sequential greedy D-optimal, per environment (E,): the free candidate whose addition raises the score
+        most (the largest :attr:`gain`; -inf where not free)."""
+        return np.argmax(self.gain, axis=1)
+
+    def random_actions(self, rng):
+        """A uniformly random free candidate per environment (E,), from the generator ``rng`` (one draw per
+        candidate and environment; an environment with no free candidate gets 0)."""
+        return np.argmax(np.where(self.masks(), rng.random((self.E, self.N)), -1.0), axis=1)
+
     def observe(self):
         return np.concatenate([self.features, self.free.astype(np.float32), self.placed.astype(np.float32),
                                self.gain_feature(), (self.count / self.k).astype(np.float32)[:, None]], axis=1)

@@ -213,3 +213,38 @@ def test_vector_env_refuses_a_wrong_number_of_seeds():
     venv = SiteDesignVectorEnv(2, **SMALL)
     with pytest.raises(ValueError, match="seed"):
         venv.reset(seed=[1, 2, 3])
+
+
+def test_vector_baselines_act_as_the_single_envs_and_random_picks_free_candidates_reproducibly():
+    """The native vector env's batched greedy picks, in each environment, what the single env's greedy picks on
+    the same site; its random one only free candidates, the same ones under the same seed."""
+    kwargs = {**SMALL, "site": None, "passages": 1, "stride": 8}
+    venv = SiteDesignVectorEnv(2, **kwargs)
+    single = SiteDesignEnv(**kwargs)
+    greedy = venv.baseline("greedy")
+    venv.reset(seed=[3, 8])
+    picks = []
+    for _ in range(3):
+        a = greedy()
+        picks.append(a)
+        venv.step(a)
+    for i, s in enumerate((3, 8)):
+        single.reset(seed=s)
+        act = single.baseline("greedy")
+        for a in picks:
+            assert act(None) == a[i]
+            single.step(act(None))
+    draws = []
+    for _ in range(2):
+        venv.reset(seed=[3, 8])
+        rand, seq = venv.baseline("random", seed=4), []
+        for _ in range(3):
+            masks = venv.action_masks()
+            a = rand()
+            assert masks[np.arange(2), a].all()
+            seq.append(a)
+            venv.step(a)
+        draws.append(np.array(seq))
+    assert np.array_equal(*draws)
+    with pytest.raises(ValueError, match="'convex' is not offered.*random, greedy"):
+        venv.baseline("convex")
