@@ -4,8 +4,8 @@ ArrayDesign-v1's observation (:mod:`shipsense.envs.site_design`) holds, per cand
 square grid, whether it is free of exclusions ``f_i``, whether a sensor stands there ``p_i`` and its gain if
 placed next ``g_i`` (divided by the largest), after the site's features ``s`` (10) and before the fraction of the
 sensors placed ``c``.  A flat network has to learn one logit per candidate from all ``3 N + 11`` inputs; cloned
-from greedy on 30,000 steps it matches greedy's pick on under a third of unseen steps (it learns the sites by heart).
-Here the logit of candidate ``i`` is one small network ``h`` of that candidate's own inputs and the shared ones,
+from greedy it learns the training sites by heart rather than greedy's rule.  Here the logit of candidate ``i``
+is one small network ``h`` of that candidate's own inputs and the shared ones,
 
 .. math::
 

@@ -294,7 +294,8 @@ def train(kind, env_id=None, timesteps=None, out=None, seed=0, n_envs=8, eval_ev
     vector env offers, e.g. ``"greedy"``) first clones that policy's actions on ``imitation_steps`` steps
     (:func:`imitate`), and the held-out evaluation at step 0 scores the clone, so the best model is never worse
     than it on those seeds.  None (both): :func:`training_defaults`, the measured best (for Passage-v1: shaping
-    1 and a clone of greedy); ``imitate_policy="none"``: PPO from scratch.  Bad arguments raise one
+    1 and a clone of greedy; for ArrayDesign-v1: a clone of greedy, under the masks); ``imitate_policy="none"``:
+    PPO from scratch.  Bad arguments raise one
     ``ValueError`` naming the argument.  Returns the summary written to ``out/evaluation.json``; its
     ``frames_per_second`` is the agent's steps over the whole run (behaviour cloning and the held-out episodes
     included), ``own_frames_per_second`` over the time left to the agent's own steps and updates
