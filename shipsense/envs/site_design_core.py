@@ -198,7 +198,7 @@ class DesignCore:
 
     def greedy_actions(self):
         """Sequential greedy D-optimal, per environment (E,): the free candidate whose addition raises the score
-        most (the largest :attr:`gain`; -inf where not free)."""
+        most (the largest ``gain``; -inf where not free)."""
         return np.argmax(self.gain, axis=1)
 
     def random_actions(self, rng):
