@@ -50,10 +50,11 @@ nitpicky = True
 default_role = "literal"   # the docstrings' single backticks are code, as in the README
 nitpick_ignore_regex = [
     # base classes from other packages, named by show-inheritance (gymnasium.Env, gymnasium's VectorEnv,
-    # SB3's VecEnv, numpy's SeedSequence, concurrent.futures.Future, argparse's parser, pydantic's BaseModel):
+    # SB3's VecEnv, sb3-contrib's maskable policy, torch's Module, numpy's SeedSequence, concurrent.futures.Future,
+    # argparse's parser, pydantic's BaseModel):
     # their inventories would be fetched from
     # the network, which the build does not use.  A reference to a shipsense name is never ignored.
-    ("py:class", r"(gymnasium|stable_baselines3|numpy|concurrent\.futures|argparse|pydantic)\..+"),
+    ("py:class", r"(gymnasium|stable_baselines3|sb3_contrib|torch|numpy|concurrent\.futures|argparse|pydantic)\..+"),
 ]
 
 # -- API reference: shipsense_docs.generate_api writes one page per public module at every build ------------

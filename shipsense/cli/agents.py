@@ -17,7 +17,7 @@ def cmd_train(args) -> int:
         raise BadInput(f"--timesteps must be >= 64, got {args.timesteps}")
     timesteps = args.timesteps or training.DEFAULT_TIMESTEPS[args.task]
     evaluations = max(1, timesteps // args.eval_every) if args.eval_every else 10
-    imitation = args.imitation_steps if args.task == "scheduling" and args.imitate != "none" else 0
+    imitation = args.imitation_steps if args.imitate != "none" else 0
     within_budget(args, budget.training(args.task, timesteps + imitation, evaluations, args.eval_episodes))
     env_kwargs = json_kwargs("--env-kwargs", args.env_kwargs)
     out = args.out or f"results/train-{args.task}"

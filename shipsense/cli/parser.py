@@ -144,8 +144,8 @@ def build_parser() -> argparse.ArgumentParser:
                         help="train a sensor-scheduling (PPO) or placement (MaskablePPO) agent (needs the rl extra)")
     tr.add_argument("task", choices=["placement", "scheduling"])
     tr.add_argument("--timesteps", type=whole_flag(1, TIMESTEPS_MAX), default=None,
-                    help="environment steps (default: 30000 for scheduling, after 30000 steps of imitation; 20000 "
-                         "for placement)")
+                    help="environment steps (default: 30000 for scheduling, 20000 for placement, each after 30000 "
+                         "steps of imitation)")
     tr.add_argument("--env", default=None, metavar="ID",
                     help="environment id (default: shipsense/ArrayDesign-v1 for placement, shipsense/Passage-v1 for "
                          "scheduling)")
@@ -160,8 +160,8 @@ def build_parser() -> argparse.ArgumentParser:
                          "the observer's position information); the optimal policies do not change "
                          "(default: 1 where the environment declares a potential, else 0)")
     tr.add_argument("--imitate", default=None, metavar="BASELINE",
-                    help="scheduling: clone this baseline by behaviour cloning, then train PPO from the clone "
-                         "('none': PPO from scratch; default: greedy where the environment offers it)")
+                    help="clone this baseline by behaviour cloning, then train (Maskable)PPO from the clone "
+                         "('none': from scratch; default: greedy where the environment offers it)")
     tr.add_argument("--imitation-steps", type=whole_flag(64, TIMESTEPS_MAX), default=30_000, metavar="STEPS",
                     help="environment steps of the baseline that --imitate clones (default: %(default)s)")
     tr.add_argument("--out", default=None, help="output directory (default: results/train-TASK)")

@@ -97,11 +97,17 @@ fixed site as a dict of :class:`~shipsense.envs.sites.Site` fields),
 
 ## Baselines
 
-``BASELINES = ("random", "greedy", "convex")`` through :meth:`baseline`:
+``BASELINES = ("random", "greedy", "convex", "exhaustive")`` through :meth:`baseline`:
 uniform over the free candidates; sequential greedy D-optimal on the
 episode's own criterion; ``convex``: :func:`shipsense.design.designer.design_array`
 (relaxation, rounding, exchange, ambiguity cuts, branch and bound) on the
-site's scenario, free candidates and passages, then its sensors in turn.
+site's scenario, free candidates and passages, then its sensors in turn;
+``exhaustive``: the layout of largest score among all of ``k`` free
+candidates, by enumeration (the criterion's optimum; refused above 100,000
+layouts: for ArrayDesignSmall-v1, not ArrayDesign-v1).
+The native vector version offers ``random`` and ``greedy`` batched
+(:meth:`SiteDesignVectorEnv.baseline`), the teachers of behaviour cloning
+(``shipsense train placement --imitate greedy``).
 
 ## Version history
 
@@ -138,7 +144,7 @@ def _spaces(core):
 class SiteDesignEnv(ClosesItsFigure, gym.Env):
     __doc__ = __doc__
     metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 2}
-    BASELINES = ("random", "greedy", "convex")
+    BASELINES = ("random", "greedy", "convex", "exhaustive")
 
     def __init__(self, scenario="S1-P2", k=4, half_width=30.0, spacing=7.5, passages=4, stride=4,
                  ambiguity_penalty=2.0, ambiguity="mirror", max_steps=None, site=None, reward="terminal",
@@ -211,7 +217,8 @@ class SiteDesignEnv(ClosesItsFigure, gym.Env):
         """The policy ``name`` (one of :attr:`BASELINES`): a callable obs -> action that reads this env."""
         if name not in self.BASELINES:
             raise ValueError(f"policy {name!r} is not offered by ArrayDesign-v1 (offered: {', '.join(self.BASELINES)})")
-        return {"random": RandomPolicy, "greedy": GreedyPolicy, "convex": ConvexPolicy}[name](self)
+        return {"random": RandomPolicy, "greedy": GreedyPolicy, "convex": ConvexPolicy,
+                "exhaustive": ExhaustivePolicy}[name](self)
 
 
 class RandomPolicy:
@@ -232,27 +239,25 @@ class GreedyPolicy:
         self.env = env
 
     def __call__(self, obs):
-        return int(np.argmax(self.env.core.gain[0]))      # -inf where not free
+        return int(self.env.core.greedy_actions()[0])
 
 
-class ConvexPolicy:
-    """:func:`~shipsense.design.designer.design_array` on the site's scenario, free candidates and passages (the
-    episode's own, same stride), then its sensors one per step."""
+class LayoutPolicy:
+    """A policy that chooses a whole layout when a site starts (:meth:`layout`), then places its sensors one per
+    step (a taken or excluded one skipped)."""
 
     def __init__(self, env):
         self.env = env
         self.plan, self.for_site = [], None
 
-    def __call__(self, obs):
-        from shipsense.design.designer import design_array
+    def layout(self, core):
+        """The candidate indices to place on the current site of ``core``."""
+        raise NotImplementedError
 
+    def __call__(self, obs):
         core = self.env.core
         if self.for_site is not core.sites[0] or core.count[0] == 0 and not self.plan:
-            free = np.flatnonzero(core.free[0])
-            cands = self.env.candidates[free]
-            result = design_array(core.scenarios[0], core.k, candidates=cands, passages=core.P,
-                                  seed=int(core.passage_seeds[0]), stride=core.stride, random_layouts=1)
-            self.plan = [int(free[i]) for i in result.placement.chosen]
+            self.plan = [int(i) for i in self.layout(core)]
             self.for_site = core.sites[0]
         mask = core.masks()[0]
         while self.plan:
@@ -260,6 +265,29 @@ class ConvexPolicy:
             if mask[a]:
                 return a
         return int(np.flatnonzero(mask)[0])
+
+
+class ConvexPolicy(LayoutPolicy):
+    """:func:`~shipsense.design.designer.design_array` on the site's scenario, free candidates and passages (the
+    episode's own, same stride), then its sensors one per step."""
+
+    def layout(self, core):
+        from shipsense.design.designer import design_array
+
+        free = np.flatnonzero(core.free[0])
+        result = design_array(core.scenarios[0], core.k, candidates=self.env.candidates[free], passages=core.P,
+                              seed=int(core.passage_seeds[0]), stride=core.stride, random_layouts=1)
+        return free[result.placement.chosen]
+
+
+class ExhaustivePolicy(LayoutPolicy):
+    """The layout of largest score among all of ``k`` free candidates (:meth:`DesignCore.best_layout
+    <shipsense.envs.site_design_core.DesignCore.best_layout>`: the criterion's optimum, the reference no policy can
+    pass on the score), then its sensors one per step; for small tasks (ArrayDesignSmall-v1), a larger one is
+    refused."""
+
+    def layout(self, core):
+        return core.best_layout(0)[0]
 
 
 class SiteDesignVectorEnv(CoreVectorEnv):
@@ -280,6 +308,24 @@ class SiteDesignVectorEnv(CoreVectorEnv):
                           ambiguity, max_steps, site, reward)
         super().__init__(core, _spaces(core), render_mode)
 
+    BASELINES = ("random", "greedy")
+    """The baselines offered batched (:meth:`baseline`); ``convex`` (seconds per site) only by the single env."""
+
     def action_masks(self):
         """Boolean masks (num_envs, N) of the candidates each environment can take."""
         return self.core.masks().copy()
+
+    def baseline(self, name, seed=None):
+        """The batched baseline policy ``name`` (one of :attr:`BASELINES`): ``policy(obs) -> actions`` (num_envs,),
+        reading the environments' state (``obs`` unused): ``greedy`` the largest gain in each environment (as the
+        single env's), ``random`` a uniformly random free candidate from its own generator seeded with ``seed``
+        (the environments' generators are left alone).  Behaviour cloning takes its teacher here
+        (:func:`~shipsense.envs.training.imitate`)."""
+        if name not in self.BASELINES:
+            raise ValueError(f"policy {name!r} is not offered by ArrayDesign-v1's vector env (offered: "
+                             f"{', '.join(self.BASELINES)})")
+        core = self.core
+        if name == "greedy":
+            return lambda obs=None: core.greedy_actions()
+        rng = np.random.default_rng(seed)
+        return lambda obs=None: core.random_actions(rng)

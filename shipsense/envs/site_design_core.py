@@ -16,6 +16,9 @@ from shipsense.envs.sites import SITE_FEATURES, Site, sample_site
 
 SCREEN_PASSAGES = 2
 """Passages of an episode that the mirror screen of the ambiguity penalty checks (the first ones)."""
+EXHAUSTIVE_LIMIT = 100_000
+"""Most layouts :meth:`DesignCore.best_layout` enumerates (ArrayDesignSmall-v1: at most C(25, 3) = 2,300;
+ArrayDesign-v1: C(81, 4) = 1,663,740, refused)."""
 
 
 def _check_kwargs(scenario, k, half_width, spacing, passages, stride, ambiguity_penalty, ambiguity, max_steps, site,
@@ -167,8 +170,41 @@ class DesignCore:
         mask[list(chosen)] = True
         return float(self._scores(np.full(1, e), mask[None, None])[0, 0])
 
+    def best_layout(self, e, chunk=2048):
+        """The ``k`` free candidates of environment ``e`` with the largest score (the D-criterion of the episode),
+        by enumerating every layout: the criterion's optimum (the ambiguity penalty is not searched).  More than
+        :data:`EXHAUSTIVE_LIMIT` layouts raise one ``ValueError`` naming ``policy``.  Returns the candidate indices
+        (k,) and their score."""
+        import itertools
+
+        free = np.flatnonzero(self.free[e])
+        count = math.comb(len(free), self.k)
+        if count > EXHAUSTIVE_LIMIT:
+            raise ValueError(f"policy exhaustive: {count:,} layouts of {self.k} of {len(free)} free candidates, over "
+                             f"its limit of {EXHAUSTIVE_LIMIT:,} (e.g. ArrayDesignSmall-v1's are at most 2,300)")
+        layouts = np.array(list(itertools.combinations(free.tolist(), self.k)), dtype=int).reshape(-1, self.k)
+        best, top = None, -np.inf
+        for rows in np.array_split(layouts, -(-len(layouts) // chunk)):
+            sets = np.zeros((1, len(rows), self.N), dtype=bool)
+            sets[0, np.arange(len(rows))[:, None], rows] = True
+            scores = self._scores(np.full(1, e), sets)[0]
+            i = int(np.argmax(scores))
+            if scores[i] > top:
+                best, top = rows[i], float(scores[i])
+        return best, top
+
     def masks(self):
         return self.free & ~self.placed
+
+    def greedy_actions(self):
+        """Sequential greedy D-optimal, per environment (E,): the free candidate whose addition raises the score
+        most (the largest ``gain``; -inf where not free)."""
+        return np.argmax(self.gain, axis=1)
+
+    def random_actions(self, rng):
+        """A uniformly random free candidate per environment (E,), from the generator ``rng`` (one draw per
+        candidate and environment; an environment with no free candidate gets 0)."""
+        return np.argmax(np.where(self.masks(), rng.random((self.E, self.N)), -1.0), axis=1)
 
     def observe(self):
         return np.concatenate([self.features, self.free.astype(np.float32), self.placed.astype(np.float32),
@@ -261,4 +297,4 @@ class DesignCore:
         return figure_to_rgb(fig) if fig is not None else None
 
 
-__all__ = ["SCREEN_PASSAGES", "DesignCore"]
+__all__ = ["EXHAUSTIVE_LIMIT", "SCREEN_PASSAGES", "DesignCore"]

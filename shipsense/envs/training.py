@@ -75,9 +75,10 @@ def rollout_steps(timesteps, n_envs):
 
 DEFAULT_SHAPING = 1.0
 """The shaping weight when the environment declares a potential (Passage-v1; docs: Results, Trained agents)."""
-DEFAULT_IMITATION = {"scheduling": "greedy"}
+DEFAULT_IMITATION = {"scheduling": "greedy", "placement": "greedy"}
 """The baseline each kind's agent first clones when the environment offers it (docs: Results: on 100 held-out
-Passage-v1 passages PPO from the clone beats round-robin, PPO from scratch in the same budget does not)."""
+Passage-v1 passages PPO from the clone beats round-robin, PPO from scratch in the same budget does not; on
+ArrayDesign-v1 MaskablePPO from scratch trails greedy, from the clone it starts at greedy's level)."""
 
 
 def _env_class(env_id):
@@ -104,6 +105,19 @@ def training_defaults(kind, env_id, shaping=None, imitate_policy=None):
     elif imitate_policy == "none":
         imitate_policy = None
     return shaping, imitate_policy
+
+
+def agent_policy(env_id):
+    """The policy network of the agent for ``env_id``: ArrayDesign-v1's placement agent scores every candidate with
+    one shared network (:class:`~shipsense.envs.placement_policy.CandidatePolicy`: cloned from greedy it picks
+    greedy's candidate on unseen sites, a flat network learns the sites by heart), else SB3's ``"MlpPolicy"``."""
+    from shipsense.envs.site_design import SiteDesignEnv
+
+    if issubclass(_env_class(env_id), SiteDesignEnv):
+        from shipsense.envs.placement_policy import CandidatePolicy
+
+        return CandidatePolicy
+    return "MlpPolicy"
 
 
 def _check(kind, env_id, timesteps, seed, n_envs, eval_every, eval_episodes, env_kwargs):
@@ -196,43 +210,55 @@ def _eval_callback(env_id, env_kwargs, out, every, episodes, masked, progress, a
 def imitate(model, venv, teacher, steps, epochs=5, batch_size=256):
     """Behaviour cloning before PPO: the policy learns the ``teacher``'s actions and the value net the discounted
     training returns it earns, on ``steps`` environment steps of the teacher in ``venv`` (the SB3 vector env
-    training uses, shaping included).  Only completed episodes are kept (their returns are known).  Returns
-    the share of the teacher's actions the policy then picks (its deterministic action), over those steps.
+    training uses, shaping included).  Only completed episodes are kept (their returns are known).  A maskable
+    policy (MaskablePPO's) learns them under the environments' action masks (``venv.env_method("action_masks")``,
+    recorded with each step), as it acts: the log-likelihood of the teacher's action among the allowed ones.
+    Returns the share of the teacher's actions the policy then picks (its deterministic action, masked
+    likewise), over those steps.
     """
+    import inspect
+
     import torch
 
+    policy = model.policy
+    masked = "action_masks" in inspect.signature(policy.evaluate_actions).parameters
     obs, n = venv.reset(), venv.num_envs
-    rows, live = [], [[] for _ in range(n)]            # finished (obs, action, return) rows; open episodes
+    rows, live = [], [[] for _ in range(n)]            # finished (obs, action, return, mask) rows; open episodes
     for _ in range(-(-steps // n)):
+        masks = np.stack(venv.env_method("action_masks")) if masked else [None] * n
         actions = np.asarray(teacher(obs)).reshape(n)
         nxt, rewards, dones, _ = venv.step(actions)
         for i in range(n):
-            live[i].append((obs[i], actions[i], float(rewards[i])))
+            live[i].append((obs[i], actions[i], float(rewards[i]), masks[i]))
             if dones[i]:
                 ret = 0.0
-                for o, a, r in reversed(live[i]):
+                for o, a, r, m in reversed(live[i]):
                     ret = r + model.gamma * ret
-                    rows.append((o, a, ret))
+                    rows.append((o, a, ret, m))
                 live[i] = []
         obs = nxt
     if not rows:
         raise ValueError(f"imitation_steps: {steps} steps finished no episode; give more")
-    policy = model.policy
     X = torch.as_tensor(np.stack([r[0] for r in rows]), dtype=torch.float32)
     A = torch.as_tensor(np.array([r[1] for r in rows]))
     G = torch.as_tensor(np.array([r[2] for r in rows]), dtype=torch.float32)
+    M = np.stack([r[3] for r in rows]) if masked else None
+
+    def given(idx):          # the masks of rows ``idx``, for a maskable policy
+        return {"action_masks": M[idx.numpy()] if idx is not None else M} if masked else {}
+
     gen = torch.Generator().manual_seed(0)
     policy.set_training_mode(True)
     for _ in range(epochs):
         for idx in torch.randperm(len(rows), generator=gen).split(batch_size):
-            values, logp, _ = policy.evaluate_actions(X[idx], A[idx])
+            values, logp, _ = policy.evaluate_actions(X[idx], A[idx], **given(idx))
             loss = -logp.mean() + 0.5 * torch.nn.functional.mse_loss(values.flatten(), G[idx])
             policy.optimizer.zero_grad()
             loss.backward()
             policy.optimizer.step()
     policy.set_training_mode(False)
     with torch.no_grad():
-        agree = (policy.get_distribution(X).mode() == A).float().mean().item()
+        agree = (policy.get_distribution(X, **given(None)).mode() == A).float().mean().item()
     return agree
 
 
@@ -268,7 +294,8 @@ def train(kind, env_id=None, timesteps=None, out=None, seed=0, n_envs=8, eval_ev
     vector env offers, e.g. ``"greedy"``) first clones that policy's actions on ``imitation_steps`` steps
     (:func:`imitate`), and the held-out evaluation at step 0 scores the clone, so the best model is never worse
     than it on those seeds.  None (both): :func:`training_defaults`, the measured best (for Passage-v1: shaping
-    1 and a clone of greedy); ``imitate_policy="none"``: PPO from scratch.  Bad arguments raise one
+    1 and a clone of greedy; for ArrayDesign-v1: a clone of greedy, under the masks); ``imitate_policy="none"``:
+    PPO from scratch.  Bad arguments raise one
     ``ValueError`` naming the argument.  Returns the summary written to ``out/evaluation.json``; its
     ``frames_per_second`` is the agent's steps over the whole run (behaviour cloning and the held-out episodes
     included), ``own_frames_per_second`` over the time left to the agent's own steps and updates
@@ -283,8 +310,6 @@ def train(kind, env_id=None, timesteps=None, out=None, seed=0, n_envs=8, eval_ev
     if shaping and potential is None:
         raise ValueError(f"shaping: {env_id} declares no shaping potential (its class has no 'potential')")
     if imitate_policy is not None:
-        if kind != "scheduling":
-            raise ValueError("imitate_policy: behaviour cloning is offered for the scheduling agent (PPO) only")
         imitation_steps = number("imitation_steps", imitation_steps, 64, 10**8, integer=True)
     _require_rl()
     from stable_baselines3.common.vec_env import VecMonitor
@@ -312,14 +337,15 @@ def train(kind, env_id=None, timesteps=None, out=None, seed=0, n_envs=8, eval_ev
     else:
         from stable_baselines3 import PPO as Algo
     n_steps = rollout_steps(timesteps, n_envs)
-    model = Algo("MlpPolicy", venv, n_steps=n_steps, batch_size=min(256, n_steps * n_envs), seed=seed, gamma=GAMMA,
-                 device="cpu", verbose=0, tensorboard_log=str(out / "tensorboard"), policy_kwargs=POLICY_KWARGS)
+    model = Algo(agent_policy(env_id), venv, n_steps=n_steps, batch_size=min(256, n_steps * n_envs), seed=seed,
+                 gamma=GAMMA, device="cpu", verbose=0, tensorboard_log=str(out / "tensorboard"),
+                 policy_kwargs=POLICY_KWARGS)
     callback = _eval_callback(env_id, env_kwargs, out, eval_every, eval_episodes, masked, progress,
                               at_start=teacher is not None)
     t0 = time.perf_counter()
     agreement, imitation_seconds = None, 0.0
     if teacher is not None:
-        agreement = imitate(model, venv, teacher, imitation_steps)   # (PPO only: checked above)
+        agreement = imitate(model, venv, teacher, imitation_steps)
         venv.seed(seed)
         imitation_seconds = time.perf_counter() - t0
     model.learn(total_timesteps=timesteps, callback=callback, tb_log_name=ALGORITHMS[kind])

@@ -213,3 +213,65 @@ def test_vector_env_refuses_a_wrong_number_of_seeds():
     venv = SiteDesignVectorEnv(2, **SMALL)
     with pytest.raises(ValueError, match="seed"):
         venv.reset(seed=[1, 2, 3])
+
+
+def test_vector_baselines_act_as_the_single_envs_and_random_picks_free_candidates_reproducibly():
+    """The native vector env's batched greedy picks, in each environment, what the single env's greedy picks on
+    the same site; its random one only free candidates, the same ones under the same seed."""
+    kwargs = {**SMALL, "site": None, "passages": 1, "stride": 8}
+    venv = SiteDesignVectorEnv(2, **kwargs)
+    single = SiteDesignEnv(**kwargs)
+    greedy = venv.baseline("greedy")
+    venv.reset(seed=[3, 8])
+    picks = []
+    for _ in range(3):
+        a = greedy()
+        picks.append(a)
+        venv.step(a)
+    for i, s in enumerate((3, 8)):
+        single.reset(seed=s)
+        act = single.baseline("greedy")
+        for a in picks:
+            assert act(None) == a[i]
+            single.step(act(None))
+    draws = []
+    for _ in range(2):
+        venv.reset(seed=[3, 8])
+        rand, seq = venv.baseline("random", seed=4), []
+        for _ in range(3):
+            masks = venv.action_masks()
+            a = rand()
+            assert masks[np.arange(2), a].all()
+            seq.append(a)
+            venv.step(a)
+        draws.append(np.array(seq))
+    assert np.array_equal(*draws)
+    with pytest.raises(ValueError, match="'convex' is not offered.*random, greedy"):
+        venv.baseline("convex")
+
+
+def test_exhaustive_finds_the_best_layout_and_greedy_never_beats_it():
+    import itertools
+
+    env = SiteDesignEnv(**SMALL)
+    for seed in range(2):
+        scores = {}
+        for name in ("exhaustive", "greedy"):
+            act = env.baseline(name)
+            obs, _ = env.reset(seed=seed)
+            while True:
+                obs, _, term, trunc, info = env.step(act(obs))
+                if term or trunc:
+                    break
+            scores[name] = info["episode_metrics"]["score"]
+        free = np.flatnonzero(env.core.free[0])                       # (a fixed site: the same every episode)
+        best = max(env.score(c) for c in itertools.combinations(free, 3))
+        assert scores["exhaustive"] == pytest.approx(best, abs=1e-9) and scores["greedy"] <= best + 1e-9
+
+
+def test_exhaustive_refuses_a_task_with_too_many_layouts():
+    env = SiteDesignEnv(site=SITE, passages=1, stride=8)               # 4 of 81 candidates
+    act = env.baseline("exhaustive")
+    obs, _ = env.reset(seed=0)
+    with pytest.raises(ValueError, match="policy exhaustive: 1,663,740 layouts"):
+        act(obs)
