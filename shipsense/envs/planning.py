@@ -240,18 +240,20 @@ class Rollout:
     def __call__(self, obs=None):
         return int(self.decide(0))
 
-    def actions(self):
-        """The decision of every environment of the core (E,)."""
+    def actions(self, obs=None):
+        """The decision of every environment of the core (E,): a teacher of several environments at once
+        (``shipsense train scheduling --imitate rollout``)."""
         return np.array([self.decide(e) for e in range(self.core.E)])
 
     def describe(self):
         return {"horizon": self.horizon, "samples": self.samples, "tail": self.tail, "candidates": self.A}
 
     def decide(self, e):
-        """Environment ``e``'s action: greedy's while its observer has no track, else the action of the largest
-        mean rollout return (:meth:`values`)."""
+        """Environment ``e``'s action: greedy's while its observer has no track or its passage is over (a vector
+        environment's step before its autoreset), else the action of the largest mean rollout return
+        (:meth:`values`)."""
         core = self.core
-        if _blind(core, [e])[0]:
+        if _blind(core, [e])[0] or core.k[e] >= core.K - 1:
             return int(core.greedy_actions()[e])
         q = self.values(e)
         self.last_values = q

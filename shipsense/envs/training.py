@@ -193,6 +193,30 @@ def _eval_callback(env_id, env_kwargs, out, every, episodes, masked, progress, a
     return HeldOut()
 
 
+IMITABLE_PLANNERS = ("rollout",)
+"""Planning baselines (:mod:`shipsense.envs.planning`) that ``--imitate`` clones on a Passage vector env, besides
+its own baselines: ``rollout`` with ``shipsense evaluate``'s default horizon and futures (a teacher's decision costs
+a rollout decision per environment, so cloning it takes minutes, not seconds)."""
+
+
+def imitation_teacher(native, env_id, name, seed):
+    """The teacher ``teacher(obs) -> actions (num_envs,)`` that :func:`imitate` clones on the native vector env
+    ``native``: one of its baselines (``native.baseline(name)``) or, on a Passage vector env, one of
+    :data:`IMITABLE_PLANNERS` deciding for every environment of its core from the observer's belief.  A name it
+    does not offer raises one ``ValueError``."""
+    from shipsense.envs import planning
+
+    base = native.unwrapped
+    offered = tuple(getattr(base, "BASELINES", ())) if hasattr(base, "baseline") else ()
+    if name in offered:
+        return base.baseline(name, seed=seed)
+    planners = IMITABLE_PLANNERS if planning.offers(native) else ()
+    if name in planners:
+        return planning.Rollout(base.core, seed=seed).actions
+    raise ValueError(f"imitate_policy: {env_id}'s vector env offers {', '.join(offered + planners) or 'no baseline'}, "
+                     f"not {name!r}")
+
+
 def imitate(model, venv, teacher, steps, epochs=5, batch_size=256):
     """Behaviour cloning before PPO: the policy learns the ``teacher``'s actions and the value net the discounted
     training returns it earns, on ``steps`` environment steps of the teacher in ``venv`` (the SB3 vector env
@@ -296,12 +320,11 @@ def train(kind, env_id=None, timesteps=None, out=None, seed=0, n_envs=8, eval_ev
     native = make_vector_env(env_id, n_envs, env_kwargs)
     teacher = None
     if imitate_policy is not None:
-        offered = tuple(getattr(native.unwrapped, "BASELINES", ()))
-        if imitate_policy not in offered or not hasattr(native.unwrapped, "baseline"):
+        try:
+            teacher = imitation_teacher(native, env_id, imitate_policy, seed)
+        except ValueError:
             native.close()
-            raise ValueError(f"imitate_policy: {env_id}'s vector env offers {', '.join(offered) or 'no baseline'}, "
-                             f"not {imitate_policy!r}")
-        teacher = native.unwrapped.baseline(imitate_policy, seed=seed)
+            raise
     venv = VecMonitor(VectorEnvAdapter(native))
     if shaping:
         venv = PotentialShaping(venv, potential, shaping, GAMMA)

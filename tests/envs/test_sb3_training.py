@@ -244,3 +244,43 @@ def test_training_defaults_are_the_measured_best_where_the_environment_allows_th
     assert training_defaults("scheduling", "shipsense/Passage-v1", 0.0, "none") == (0.0, None)
     assert training_defaults("scheduling", "shipsense/ArrayDesign-v0") == (0.0, None)   # no potential, no greedy
     assert training_defaults("placement", "shipsense/ArrayDesign-v1") == (0.0, None)
+
+
+def test_train_scheduling_clones_the_rollout_planner_on_a_passage_vector_env(tmp_path):
+    """``--imitate rollout``: the teacher is the rollout planner deciding for every environment of the vector
+    env's core (an environment whose passage just ended gets greedy's action, the step before its autoreset);
+    the clone is scored first, as greedy's is."""
+    from shipsense.cli import main
+
+    out = tmp_path / "bc"
+    assert main(["--quiet", "train", "scheduling", "--env", "shipsense/Passage-v2", "--env-kwargs",
+                 json.dumps({"overrides": {"steps": 40}}), "--timesteps", "64", "--n-envs", "2",
+                 "--imitate", "rollout", "--imitation-steps", "80", "--eval-episodes", "1",
+                 "--out", str(out)]) == 0
+    summary = json.loads((out / "evaluation.json").read_text())
+    assert summary["imitate_policy"] == "rollout" and 0.0 <= summary["imitation_agreement"] <= 1.0
+    assert json.loads((out / "learning_curve.json").read_text())[0]["timesteps"] == 0
+
+
+def test_the_rollout_teacher_decides_as_the_rollout_planner_for_each_environment():
+    import gymnasium as gym
+
+    from shipsense.envs import register_envs
+    from shipsense.envs.planning import Rollout
+    from shipsense.envs.training import imitation_teacher
+
+    register_envs()
+    venv = gym.make_vec("shipsense/Passage-v2", num_envs=2, vectorization_mode="vector_entry_point",
+                        overrides={"steps": 40})
+    try:
+        venv.reset(seed=11)
+        core = venv.unwrapped.core
+        teacher = imitation_teacher(venv, "shipsense/Passage-v2", "rollout", seed=3)
+        planner = Rollout(core, seed=3)
+        assert teacher(None).tolist() == [planner.decide(0), planner.decide(1)]   # (the same draws, in order)
+        core.k[1] = core.K - 1                                    # a passage over: greedy's, no rollout
+        assert teacher(None)[1] == core.greedy_actions()[1]
+        with pytest.raises(ValueError, match="imitate_policy"):
+            imitation_teacher(venv, "shipsense/Passage-v2", "hindsight", seed=0)
+    finally:
+        venv.close()
