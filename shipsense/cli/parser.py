@@ -179,7 +179,7 @@ def build_parser() -> argparse.ArgumentParser:
                          "stable-baselines3 model file")
     ev.add_argument("--policy-kwargs", default=None, metavar="JSON",
                     help="a planning baseline's options, a JSON object: greedy-threshold {\"threshold\": nats} "
-                         "(default: fitted on training seeds), rollout {\"horizon\": 4, \"samples\": 32}, "
+                         "(default: fitted on training seeds), rollout {\"horizon\": 8, \"samples\": 32}, "
                          "hindsight {\"beam\": 256}")
     ev.add_argument("--episodes", type=whole_flag(1, 10**6), default=50, help="episodes (default: %(default)s)")
     ev.add_argument("--seed", type=whole_flag(0, 2**31 - 1), default=2_000_000,
