@@ -405,13 +405,24 @@ def plan_schedule(info0, J, Ainv, subsets, energy_cost, error_scale, beam=256, s
 
 
 class Hindsight:
-    """``hindsight`` (the module docstring) on a core's environment 0: plans at the first step of each episode,
-    then replays the schedule."""
+    """``hindsight`` (the module docstring) on a core's environments: plans at the first step of each episode, then
+    replays the schedule; ``policy(obs) -> action`` is environment 0's, ``actions()`` every environment's (a
+    teacher of a vector environment, ``shipsense train scheduling --imitate hindsight``)."""
 
     def __init__(self, core, beam=256):
         self.core = core
         self.beam = number("beam", beam, 1, 1_000_000, integer=True)
-        self.schedule, self.value = None, None
+        self.plans = {}                       # environment -> (its schedule, its linearised value)
+
+    @property
+    def schedule(self):
+        """Environment 0's schedule (action indices from its first step), or None before its first decision."""
+        return self.plans.get(0, (None, None))[0]
+
+    @property
+    def value(self):
+        """The linearised return of environment 0's schedule, or None."""
+        return self.plans.get(0, (None, None))[1]
 
     def problem(self, e=0):
         """Environment ``e``'s linearised problem: initial information (n, n), sensors' information (T, S, n, n),
@@ -421,15 +432,25 @@ class Hindsight:
         info0 = np.linalg.inv(0.5 * (P0 + P0.T))
         return info0, sensor_information(core, e), np.linalg.inv(core.model.A)
 
-    def __call__(self, obs=None):
+    def decide(self, e):
+        """Environment ``e``'s action: its schedule's at this step, planned at the episode's first step; greedy's
+        once its passage is over (a vector environment's step before its autoreset)."""
         core = self.core
-        k, start = int(core.k[0]), int(core.start[0])
-        if k == start or self.schedule is None:
-            info0, J, Ainv = self.problem(0)
-            self.schedule, self.value = plan_schedule(info0, J, Ainv, core.subsets, core.energy_cost,
-                                                      core.error_scale, beam=self.beam,
-                                                      costs=ScheduleCosts.of(core, 0))
-        return int(self.schedule[k - start])
+        k, start = int(core.k[e]), int(core.start[e])
+        if k >= core.K - 1:
+            return int(core.greedy_actions()[e])
+        if k == start or e not in self.plans:
+            info0, J, Ainv = self.problem(e)
+            self.plans[e] = plan_schedule(info0, J, Ainv, core.subsets, core.energy_cost, core.error_scale,
+                                          beam=self.beam, costs=ScheduleCosts.of(core, e))
+        return int(self.plans[e][0][k - start])
+
+    def __call__(self, obs=None):
+        return self.decide(0)
+
+    def actions(self, obs=None):
+        """The decision of every environment of the core (E,)."""
+        return np.array([self.decide(e) for e in range(self.core.E)])
 
     def describe(self):
         return {"beam": self.beam}

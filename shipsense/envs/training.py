@@ -193,10 +193,11 @@ def _eval_callback(env_id, env_kwargs, out, every, episodes, masked, progress, a
     return HeldOut()
 
 
-IMITABLE_PLANNERS = ("rollout",)
+IMITABLE_PLANNERS = ("rollout", "hindsight")
 """Planning baselines (:mod:`shipsense.envs.planning`) that ``--imitate`` clones on a Passage vector env, besides
-its own baselines: ``rollout`` with ``shipsense evaluate``'s default horizon and futures (a teacher's decision costs
-a rollout decision per environment, so cloning it takes minutes, not seconds)."""
+its own baselines, with ``shipsense evaluate``'s default options: ``rollout`` (a teacher's decision costs a rollout
+decision per environment, so cloning it takes minutes, not seconds) and the offline ``hindsight`` (a privileged
+teacher: it plans each passage knowing it, the clone sees only the observations)."""
 
 
 def imitation_teacher(native, env_id, name, seed):
@@ -212,15 +213,23 @@ def imitation_teacher(native, env_id, name, seed):
         return base.baseline(name, seed=seed)
     planners = IMITABLE_PLANNERS if planning.offers(native) else ()
     if name in planners:
-        return planning.Rollout(base.core, seed=seed).actions
+        return (planning.Rollout(base.core, seed=seed) if name == "rollout" else planning.Hindsight(base.core)).actions
     raise ValueError(f"imitate_policy: {env_id}'s vector env offers {', '.join(offered + planners) or 'no baseline'}, "
                      f"not {name!r}")
+
+
+IMITATION_UPDATES = 500
+"""Behaviour cloning's least number of gradient steps (minibatches): a short demonstration (a planner's few
+thousand steps) is passed over more often than :func:`imitate`'s ``epochs`` (30,000 steps of greedy, 5 epochs of
+minibatches of 256, are about 590); with a few hundred steps a clone of a teacher that reads on a third of the steps
+learns only its most frequent action (no read)."""
 
 
 def imitate(model, venv, teacher, steps, epochs=5, batch_size=256):
     """Behaviour cloning before PPO: the policy learns the ``teacher``'s actions and the value net the discounted
     training returns it earns, on ``steps`` environment steps of the teacher in ``venv`` (the SB3 vector env
-    training uses, shaping included).  Only completed episodes are kept (their returns are known).  Returns
+    training uses, shaping included), over ``epochs`` passes or as many as make :data:`IMITATION_UPDATES`
+    minibatches.  Only completed episodes are kept (their returns are known).  Returns
     the share of the teacher's actions the policy then picks (its deterministic action), over those steps.
     """
     import torch
@@ -247,7 +256,7 @@ def imitate(model, venv, teacher, steps, epochs=5, batch_size=256):
     G = torch.as_tensor(np.array([r[2] for r in rows]), dtype=torch.float32)
     gen = torch.Generator().manual_seed(0)
     policy.set_training_mode(True)
-    for _ in range(epochs):
+    for _ in range(max(int(epochs), -(-IMITATION_UPDATES // -(-len(rows) // batch_size)))):
         for idx in torch.randperm(len(rows), generator=gen).split(batch_size):
             values, logp, _ = policy.evaluate_actions(X[idx], A[idx])
             loss = -logp.mean() + 0.5 * torch.nn.functional.mse_loss(values.flatten(), G[idx])

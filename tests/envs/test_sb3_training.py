@@ -281,6 +281,39 @@ def test_the_rollout_teacher_decides_as_the_rollout_planner_for_each_environment
         core.k[1] = core.K - 1                                    # a passage over: greedy's, no rollout
         assert teacher(None)[1] == core.greedy_actions()[1]
         with pytest.raises(ValueError, match="imitate_policy"):
-            imitation_teacher(venv, "shipsense/Passage-v2", "hindsight", seed=0)
+            imitation_teacher(venv, "shipsense/Passage-v2", "greedy-threshold", seed=0)
+    finally:
+        venv.close()
+
+
+def test_the_hindsight_teacher_replays_each_environment_s_own_plan():
+    """``--imitate hindsight``: environment ``e`` of a vector env follows the schedule planned for its own passage
+    at its first step (the single environment's planner on environment ``e``'s problem)."""
+    import gymnasium as gym
+
+    from shipsense.envs import register_envs
+    from shipsense.envs.planning import Hindsight, ScheduleCosts, plan_schedule
+    from shipsense.envs.training import imitation_teacher
+
+    register_envs()
+    venv = gym.make_vec("shipsense/Passage-v2", num_envs=2, vectorization_mode="vector_entry_point",
+                        overrides={"steps": 60})
+    try:
+        venv.reset(seed=5)
+        core = venv.unwrapped.core
+        teacher = imitation_teacher(venv, "shipsense/Passage-v2", "hindsight", seed=0)
+        plans = []
+        for e in range(2):
+            info0, J, Ainv = Hindsight(core).problem(e)
+            plans.append(plan_schedule(info0, J, Ainv, core.subsets, core.energy_cost, core.error_scale, beam=256,
+                                       costs=ScheduleCosts.of(core, e))[0])
+        assert min(len(p) for p in plans) > 3 and plans[0].tolist() != plans[1].tolist()   # two passages, two plans
+        taken = [[], []]
+        for _ in range(3):
+            actions = teacher(None)
+            for e in range(2):
+                taken[e].append(int(actions[e]))
+            venv.step(actions)
+        assert taken == [plans[0][:3].tolist(), plans[1][:3].tolist()]
     finally:
         venv.close()
