@@ -83,7 +83,7 @@ PASSAGE_V2_VARIANTS = {
 }
 """Passage-v2's registered variants: id -> constructor kwargs."""
 
-PASSAGE_V2_THRESHOLDS = {PASSAGE_V2_ID: -9.2, "shipsense/PassageManoeuvring-v2": None}
+PASSAGE_V2_THRESHOLDS = {PASSAGE_V2_ID: -7.1, "shipsense/PassageManoeuvring-v2": None}
 """``reward_threshold`` per variant: the rollout planner's mean return on held-out seeds (docs: the environments
 guide), rounded down to 0.1: an agent that reaches it plans as well as rollout over greedy; None where that is
 not measured yet (the manoeuvring variant)."""
