@@ -161,7 +161,8 @@ def build_parser() -> argparse.ArgumentParser:
                          "(default: 1 where the environment declares a potential, else 0)")
     tr.add_argument("--imitate", default=None, metavar="BASELINE",
                     help="scheduling: clone this baseline by behaviour cloning, then train PPO from the clone "
-                         "('none': PPO from scratch; default: greedy where the environment offers it)")
+                         "(Passage environments also the planners rollout and hindsight; 'none': PPO from "
+                         "scratch; default: greedy where the environment offers it)")
     tr.add_argument("--imitation-steps", type=whole_flag(64, TIMESTEPS_MAX), default=30_000, metavar="STEPS",
                     help="environment steps of the baseline that --imitate clones (default: %(default)s)")
     tr.add_argument("--out", default=None, help="output directory (default: results/train-TASK)")
