@@ -161,7 +161,8 @@ def build_parser() -> argparse.ArgumentParser:
                          "(default: 1 where the environment declares a potential, else 0)")
     tr.add_argument("--imitate", default=None, metavar="BASELINE",
                     help="clone this baseline by behaviour cloning, then train (Maskable)PPO from the clone "
-                         "('none': from scratch; default: greedy where the environment offers it)")
+                         "(Passage environments also the planners rollout and hindsight; 'none': from "
+                         "scratch; default: greedy where the environment offers it)")
     tr.add_argument("--imitation-steps", type=whole_flag(64, TIMESTEPS_MAX), default=30_000, metavar="STEPS",
                     help="environment steps of the baseline that --imitate clones (default: %(default)s)")
     tr.add_argument("--out", default=None, help="output directory (default: results/train-TASK)")
@@ -179,7 +180,7 @@ def build_parser() -> argparse.ArgumentParser:
                          "stable-baselines3 model file")
     ev.add_argument("--policy-kwargs", default=None, metavar="JSON",
                     help="a planning baseline's options, a JSON object: greedy-threshold {\"threshold\": nats} "
-                         "(default: fitted on training seeds), rollout {\"horizon\": 4, \"samples\": 32}, "
+                         "(default: fitted on training seeds), rollout {\"horizon\": 8, \"samples\": 32}, "
                          "hindsight {\"beam\": 256}")
     ev.add_argument("--episodes", type=whole_flag(1, 10**6), default=50, help="episodes (default: %(default)s)")
     ev.add_argument("--seed", type=whole_flag(0, 2**31 - 1), default=2_000_000,

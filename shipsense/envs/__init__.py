@@ -98,7 +98,7 @@ PASSAGE_V2_VARIANTS = {
 }
 """Passage-v2's registered variants: id -> constructor kwargs."""
 
-PASSAGE_V2_THRESHOLDS = {PASSAGE_V2_ID: -9.2, "shipsense/PassageManoeuvring-v2": -43.9,
+PASSAGE_V2_THRESHOLDS = {PASSAGE_V2_ID: -7.1, "shipsense/PassageManoeuvring-v2": -43.9,
                          "shipsense/PassageHard-v2": -133.4}
 """``reward_threshold`` per variant: the rollout planner's mean return on held-out seeds (docs: the environments
 guide; the manoeuvring variant's on 100 passages, docs: Trained agents), rounded down to 0.1: an agent that

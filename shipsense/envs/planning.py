@@ -78,6 +78,13 @@ FIT_SEED = 3_000_000
 2,000,000 and up, and from ``shipsense train``'s held-out evaluations, 1,000,000 and up)."""
 FIT_EPISODES = 30
 """Training episodes of :func:`fit_threshold`."""
+ROLLOUT_HORIZON = 8
+"""Rollout's default horizon (steps), on every Passage environment: chosen on training passages of
+``shipsense/Passage-v2`` (seeds 4,200,000 and up, paired against greedy and against horizon 4, the earlier default;
+docs: Results), whose checkpoints are about 25 samples apart: a longer look ahead simulates more of the way from a
+read to the checkpoint it pays at."""
+ROLLOUT_SAMPLES = 32
+"""Rollout's default number of futures drawn from the observer's belief per decision."""
 TAILS = ("hold", "none")
 """What a rollout counts after its horizon: ``hold``, the last simulated step's error term for every step left
 in the passage (reads go on paying off after the horizon; without it, a short horizon sees a read's energy
@@ -225,7 +232,7 @@ class Rollout:
     """``rollout`` (the module docstring) on a core's environments: ``policy(obs) -> action`` (environment 0's;
     a core of several environments decides for each in turn, ``actions()``)."""
 
-    def __init__(self, core, horizon=4, samples=32, seed=None, tail="hold"):
+    def __init__(self, core, horizon=ROLLOUT_HORIZON, samples=ROLLOUT_SAMPLES, seed=None, tail="hold"):
         self.core = core
         self.horizon = number("horizon", horizon, 1, 10_000, integer=True)
         self.samples = number("samples", samples, 1, 100_000, integer=True)
@@ -240,18 +247,20 @@ class Rollout:
     def __call__(self, obs=None):
         return int(self.decide(0))
 
-    def actions(self):
-        """The decision of every environment of the core (E,)."""
+    def actions(self, obs=None):
+        """The decision of every environment of the core (E,): a teacher of several environments at once
+        (``shipsense train scheduling --imitate rollout``)."""
         return np.array([self.decide(e) for e in range(self.core.E)])
 
     def describe(self):
         return {"horizon": self.horizon, "samples": self.samples, "tail": self.tail, "candidates": self.A}
 
     def decide(self, e):
-        """Environment ``e``'s action: greedy's while its observer has no track, else the action of the largest
-        mean rollout return (:meth:`values`)."""
+        """Environment ``e``'s action: greedy's while its observer has no track or its passage is over (a vector
+        environment's step before its autoreset), else the action of the largest mean rollout return
+        (:meth:`values`)."""
         core = self.core
-        if _blind(core, [e])[0]:
+        if _blind(core, [e])[0] or core.k[e] >= core.K - 1:
             return int(core.greedy_actions()[e])
         q = self.values(e)
         self.last_values = q
@@ -396,13 +405,24 @@ def plan_schedule(info0, J, Ainv, subsets, energy_cost, error_scale, beam=256, s
 
 
 class Hindsight:
-    """``hindsight`` (the module docstring) on a core's environment 0: plans at the first step of each episode,
-    then replays the schedule."""
+    """``hindsight`` (the module docstring) on a core's environments: plans at the first step of each episode, then
+    replays the schedule; ``policy(obs) -> action`` is environment 0's, ``actions()`` every environment's (a
+    teacher of a vector environment, ``shipsense train scheduling --imitate hindsight``)."""
 
     def __init__(self, core, beam=256):
         self.core = core
         self.beam = number("beam", beam, 1, 1_000_000, integer=True)
-        self.schedule, self.value = None, None
+        self.plans = {}                       # environment -> (its schedule, its linearised value)
+
+    @property
+    def schedule(self):
+        """Environment 0's schedule (action indices from its first step), or None before its first decision."""
+        return self.plans.get(0, (None, None))[0]
+
+    @property
+    def value(self):
+        """The linearised return of environment 0's schedule, or None."""
+        return self.plans.get(0, (None, None))[1]
 
     def problem(self, e=0):
         """Environment ``e``'s linearised problem: initial information (n, n), sensors' information (T, S, n, n),
@@ -412,20 +432,31 @@ class Hindsight:
         info0 = np.linalg.inv(0.5 * (P0 + P0.T))
         return info0, sensor_information(core, e), np.linalg.inv(core.model.A)
 
-    def __call__(self, obs=None):
+    def decide(self, e):
+        """Environment ``e``'s action: its schedule's at this step, planned at the episode's first step; greedy's
+        once its passage is over (a vector environment's step before its autoreset)."""
         core = self.core
-        k, start = int(core.k[0]), int(core.start[0])
-        if k == start or self.schedule is None:
-            info0, J, Ainv = self.problem(0)
-            self.schedule, self.value = plan_schedule(info0, J, Ainv, core.subsets, core.energy_cost,
-                                                      core.error_scale, beam=self.beam,
-                                                      costs=ScheduleCosts.of(core, 0))
-        return int(self.schedule[k - start])
+        k, start = int(core.k[e]), int(core.start[e])
+        if k >= core.K - 1:
+            return int(core.greedy_actions()[e])
+        if k == start or e not in self.plans:
+            info0, J, Ainv = self.problem(e)
+            self.plans[e] = plan_schedule(info0, J, Ainv, core.subsets, core.energy_cost, core.error_scale,
+                                          beam=self.beam, costs=ScheduleCosts.of(core, e))
+        return int(self.plans[e][0][k - start])
+
+    def __call__(self, obs=None):
+        return self.decide(0)
+
+    def actions(self, obs=None):
+        """The decision of every environment of the core (E,)."""
+        return np.array([self.decide(e) for e in range(self.core.E)])
 
     def describe(self):
         return {"beam": self.beam}
 
 
-__all__ = ["FIT_EPISODES", "FIT_SEED", "PLANNERS", "THRESHOLDS", "GreedyThreshold", "Hindsight", "Rollout",
-           "ScheduleCosts", "belief_futures", "episode_seed", "fit_threshold", "linearised_rewards", "offers",
-           "plan_schedule", "planner", "run_batch", "sensor_information", "threshold_actions"]
+__all__ = ["FIT_EPISODES", "FIT_SEED", "PLANNERS", "ROLLOUT_HORIZON", "ROLLOUT_SAMPLES", "THRESHOLDS",
+           "GreedyThreshold", "Hindsight", "Rollout", "ScheduleCosts", "belief_futures", "episode_seed",
+           "fit_threshold", "linearised_rewards", "offers", "plan_schedule", "planner", "run_batch",
+           "sensor_information", "threshold_actions"]

@@ -207,14 +207,46 @@ def _eval_callback(env_id, env_kwargs, out, every, episodes, masked, progress, a
     return HeldOut()
 
 
+IMITABLE_PLANNERS = ("rollout", "hindsight")
+"""Planning baselines (:mod:`shipsense.envs.planning`) that ``--imitate`` clones on a Passage vector env, besides
+its own baselines, with ``shipsense evaluate``'s default options: ``rollout`` (a teacher's decision costs a rollout
+decision per environment, so cloning it takes minutes, not seconds) and the offline ``hindsight`` (a privileged
+teacher: it plans each passage knowing it, the clone sees only the observations)."""
+
+
+def imitation_teacher(native, env_id, name, seed):
+    """The teacher ``teacher(obs) -> actions (num_envs,)`` that :func:`imitate` clones on the native vector env
+    ``native``: one of its baselines (``native.baseline(name)``) or, on a Passage vector env, one of
+    :data:`IMITABLE_PLANNERS` deciding for every environment of its core from the observer's belief.  A name it
+    does not offer raises one ``ValueError``."""
+    from shipsense.envs import planning
+
+    base = native.unwrapped
+    offered = tuple(getattr(base, "BASELINES", ())) if hasattr(base, "baseline") else ()
+    if name in offered:
+        return base.baseline(name, seed=seed)
+    planners = IMITABLE_PLANNERS if planning.offers(native) else ()
+    if name in planners:
+        return (planning.Rollout(base.core, seed=seed) if name == "rollout" else planning.Hindsight(base.core)).actions
+    raise ValueError(f"imitate_policy: {env_id}'s vector env offers {', '.join(offered + planners) or 'no baseline'}, "
+                     f"not {name!r}")
+
+
+IMITATION_UPDATES = 500
+"""Behaviour cloning's least number of gradient steps (minibatches): a short demonstration (a planner's few
+thousand steps) is passed over more often than :func:`imitate`'s ``epochs`` (30,000 steps of greedy, 5 epochs of
+minibatches of 256, are about 590); with a few hundred steps a clone of a teacher that reads on a third of the steps
+learns only its most frequent action (no read)."""
+
+
 def imitate(model, venv, teacher, steps, epochs=5, batch_size=256):
     """Behaviour cloning before PPO: the policy learns the ``teacher``'s actions and the value net the discounted
     training returns it earns, on ``steps`` environment steps of the teacher in ``venv`` (the SB3 vector env
-    training uses, shaping included).  Only completed episodes are kept (their returns are known).  A maskable
-    policy (MaskablePPO's) learns them under the environments' action masks (``venv.env_method("action_masks")``,
-    recorded with each step), as it acts: the log-likelihood of the teacher's action among the allowed ones.
-    Returns the share of the teacher's actions the policy then picks (its deterministic action, masked
-    likewise), over those steps.
+    training uses, shaping included), over ``epochs`` passes or as many as make :data:`IMITATION_UPDATES`
+    minibatches.  Only completed episodes are kept (their returns are known).  A maskable policy (MaskablePPO's)
+    learns them under the environments' action masks (``venv.env_method("action_masks")``, recorded with each
+    step), as it acts: the log-likelihood of the teacher's action among the allowed ones.  Returns the share of
+    the teacher's actions the policy then picks (its deterministic action, masked likewise), over those steps.
     """
     import inspect
 
@@ -249,7 +281,7 @@ def imitate(model, venv, teacher, steps, epochs=5, batch_size=256):
 
     gen = torch.Generator().manual_seed(0)
     policy.set_training_mode(True)
-    for _ in range(epochs):
+    for _ in range(max(int(epochs), -(-IMITATION_UPDATES // -(-len(rows) // batch_size)))):
         for idx in torch.randperm(len(rows), generator=gen).split(batch_size):
             values, logp, _ = policy.evaluate_actions(X[idx], A[idx], **given(idx))
             loss = -logp.mean() + 0.5 * torch.nn.functional.mse_loss(values.flatten(), G[idx])
@@ -321,12 +353,11 @@ def train(kind, env_id=None, timesteps=None, out=None, seed=0, n_envs=8, eval_ev
     native = make_vector_env(env_id, n_envs, env_kwargs)
     teacher = None
     if imitate_policy is not None:
-        offered = tuple(getattr(native.unwrapped, "BASELINES", ()))
-        if imitate_policy not in offered or not hasattr(native.unwrapped, "baseline"):
+        try:
+            teacher = imitation_teacher(native, env_id, imitate_policy, seed)
+        except ValueError:
             native.close()
-            raise ValueError(f"imitate_policy: {env_id}'s vector env offers {', '.join(offered) or 'no baseline'}, "
-                             f"not {imitate_policy!r}")
-        teacher = native.unwrapped.baseline(imitate_policy, seed=seed)
+            raise
     venv = VecMonitor(VectorEnvAdapter(native))
     if shaping:
         venv = PotentialShaping(venv, potential, shaping, GAMMA)

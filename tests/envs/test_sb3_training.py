@@ -282,3 +282,77 @@ def test_a_cloned_maskable_policy_picks_the_teachers_action_within_the_masks():
     trained = imitate(model, venv, native.unwrapped.baseline("greedy"), 600, epochs=80, batch_size=64)
     after = agreement()
     assert before < 0.5 and trained > 0.75 and after > 0.6, (before, trained, after)   # (ties: near-equal gains)
+
+
+
+def test_train_scheduling_clones_the_rollout_planner_on_a_passage_vector_env(tmp_path):
+    """``--imitate rollout``: the teacher is the rollout planner deciding for every environment of the vector
+    env's core (an environment whose passage just ended gets greedy's action, the step before its autoreset);
+    the clone is scored first, as greedy's is."""
+    from shipsense.cli import main
+
+    out = tmp_path / "bc"
+    assert main(["--quiet", "train", "scheduling", "--env", "shipsense/Passage-v2", "--env-kwargs",
+                 json.dumps({"overrides": {"steps": 40}}), "--timesteps", "64", "--n-envs", "2",
+                 "--imitate", "rollout", "--imitation-steps", "80", "--eval-episodes", "1",
+                 "--out", str(out)]) == 0
+    summary = json.loads((out / "evaluation.json").read_text())
+    assert summary["imitate_policy"] == "rollout" and 0.0 <= summary["imitation_agreement"] <= 1.0
+    assert json.loads((out / "learning_curve.json").read_text())[0]["timesteps"] == 0
+
+
+def test_the_rollout_teacher_decides_as_the_rollout_planner_for_each_environment():
+    import gymnasium as gym
+
+    from shipsense.envs import register_envs
+    from shipsense.envs.planning import Rollout
+    from shipsense.envs.training import imitation_teacher
+
+    register_envs()
+    venv = gym.make_vec("shipsense/Passage-v2", num_envs=2, vectorization_mode="vector_entry_point",
+                        overrides={"steps": 40})
+    try:
+        venv.reset(seed=11)
+        core = venv.unwrapped.core
+        teacher = imitation_teacher(venv, "shipsense/Passage-v2", "rollout", seed=3)
+        planner = Rollout(core, seed=3)
+        assert teacher(None).tolist() == [planner.decide(0), planner.decide(1)]   # (the same draws, in order)
+        core.k[1] = core.K - 1                                    # a passage over: greedy's, no rollout
+        assert teacher(None)[1] == core.greedy_actions()[1]
+        with pytest.raises(ValueError, match="imitate_policy"):
+            imitation_teacher(venv, "shipsense/Passage-v2", "greedy-threshold", seed=0)
+    finally:
+        venv.close()
+
+
+def test_the_hindsight_teacher_replays_each_environment_s_own_plan():
+    """``--imitate hindsight``: environment ``e`` of a vector env follows the schedule planned for its own passage
+    at its first step (the single environment's planner on environment ``e``'s problem)."""
+    import gymnasium as gym
+
+    from shipsense.envs import register_envs
+    from shipsense.envs.planning import Hindsight, ScheduleCosts, plan_schedule
+    from shipsense.envs.training import imitation_teacher
+
+    register_envs()
+    venv = gym.make_vec("shipsense/Passage-v2", num_envs=2, vectorization_mode="vector_entry_point",
+                        overrides={"steps": 60})
+    try:
+        venv.reset(seed=5)
+        core = venv.unwrapped.core
+        teacher = imitation_teacher(venv, "shipsense/Passage-v2", "hindsight", seed=0)
+        plans = []
+        for e in range(2):
+            info0, J, Ainv = Hindsight(core).problem(e)
+            plans.append(plan_schedule(info0, J, Ainv, core.subsets, core.energy_cost, core.error_scale, beam=256,
+                                       costs=ScheduleCosts.of(core, e))[0])
+        assert min(len(p) for p in plans) > 3 and plans[0].tolist() != plans[1].tolist()   # two passages, two plans
+        taken = [[], []]
+        for _ in range(3):
+            actions = teacher(None)
+            for e in range(2):
+                taken[e].append(int(actions[e]))
+            venv.step(actions)
+        assert taken == [plans[0][:3].tolist(), plans[1][:3].tolist()]
+    finally:
+        venv.close()
