@@ -97,7 +97,7 @@ fixed site as a dict of :class:`~shipsense.envs.sites.Site` fields),
 
 ## Baselines
 
-``BASELINES = ("random", "greedy", "convex", "exhaustive")`` through :meth:`baseline`:
+``BASELINES = ("random", "greedy", "convex", "exhaustive")`` through :meth:`SiteDesignEnv.baseline`:
 uniform over the free candidates; sequential greedy D-optimal on the
 episode's own criterion; ``convex``: :func:`shipsense.design.designer.design_array`
 (relaxation, rounding, exchange, ambiguity cuts, branch and bound) on the
