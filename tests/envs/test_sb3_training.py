@@ -2,6 +2,7 @@
 points: short learns, refusals, bad arguments."""
 
 import json
+from contextlib import contextmanager
 
 import gymnasium as gym
 import numpy as np
@@ -301,19 +302,23 @@ def test_train_scheduling_clones_the_rollout_planner_on_a_passage_vector_env(tmp
     assert json.loads((out / "learning_curve.json").read_text())[0]["timesteps"] == 0
 
 
-def test_the_rollout_teacher_decides_as_the_rollout_planner_for_each_environment():
-    import gymnasium as gym
+@contextmanager
+def passage_v2_pair(steps, seed):
+    """Two native Passage-v2 environments of ``steps`` samples, reset with ``seed``: (vector env, its core)."""
+    venv = gym.make_vec("shipsense/Passage-v2", num_envs=2, vectorization_mode="vector_entry_point",
+                        overrides={"steps": steps})
+    try:
+        venv.reset(seed=seed)
+        yield venv, venv.unwrapped.core
+    finally:
+        venv.close()
 
-    from shipsense.envs import register_envs
+
+def test_the_rollout_teacher_decides_as_the_rollout_planner_for_each_environment():
     from shipsense.envs.planning import Rollout
     from shipsense.envs.training import imitation_teacher
 
-    register_envs()
-    venv = gym.make_vec("shipsense/Passage-v2", num_envs=2, vectorization_mode="vector_entry_point",
-                        overrides={"steps": 40})
-    try:
-        venv.reset(seed=11)
-        core = venv.unwrapped.core
+    with passage_v2_pair(40, 11) as (venv, core):
         teacher = imitation_teacher(venv, "shipsense/Passage-v2", "rollout", seed=3)
         planner = Rollout(core, seed=3)
         assert teacher(None).tolist() == [planner.decide(0), planner.decide(1)]   # (the same draws, in order)
@@ -321,25 +326,15 @@ def test_the_rollout_teacher_decides_as_the_rollout_planner_for_each_environment
         assert teacher(None)[1] == core.greedy_actions()[1]
         with pytest.raises(ValueError, match="imitate_policy"):
             imitation_teacher(venv, "shipsense/Passage-v2", "greedy-threshold", seed=0)
-    finally:
-        venv.close()
 
 
 def test_the_hindsight_teacher_replays_each_environment_s_own_plan():
     """``--imitate hindsight``: environment ``e`` of a vector env follows the schedule planned for its own passage
     at its first step (the single environment's planner on environment ``e``'s problem)."""
-    import gymnasium as gym
-
-    from shipsense.envs import register_envs
     from shipsense.envs.planning import Hindsight, ScheduleCosts, plan_schedule
     from shipsense.envs.training import imitation_teacher
 
-    register_envs()
-    venv = gym.make_vec("shipsense/Passage-v2", num_envs=2, vectorization_mode="vector_entry_point",
-                        overrides={"steps": 60})
-    try:
-        venv.reset(seed=5)
-        core = venv.unwrapped.core
+    with passage_v2_pair(60, 5) as (venv, core):
         teacher = imitation_teacher(venv, "shipsense/Passage-v2", "hindsight", seed=0)
         plans = []
         for e in range(2):
@@ -354,5 +349,3 @@ def test_the_hindsight_teacher_replays_each_environment_s_own_plan():
                 taken[e].append(int(actions[e]))
             venv.step(actions)
         assert taken == [plans[0][:3].tolist(), plans[1][:3].tolist()]
-    finally:
-        venv.close()
